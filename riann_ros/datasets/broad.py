@@ -1,0 +1,96 @@
+"""Reader for BROAD trials (Laidig et al. 2021, CC BY 4.0), ``.hdf5`` and ``.mat`` files.
+
+Keys: ``imu_acc`` (N,3) m/s², ``imu_gyr`` (N,3) rad/s, ``opt_quat`` (N,4) w,x,y,z sensor→ENU with NaN
+rows, ``movement`` (N,) scoring mask, ``sampling_rate`` (HDF5 attribute or .mat variable).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from riann_ros.recording import Recording
+
+SOURCE = (
+    "BROAD: D. Laidig, M. Caruso, A. Cereatti, T. Seel, Data 6(7):72, 2021, "
+    "https://doi.org/10.3390/data6070072 (CC BY 4.0)"
+)
+REQUIRED = ("imu_acc", "imu_gyr", "opt_quat", "movement")
+
+
+def _read_hdf5(path: Path) -> dict[str, np.ndarray]:
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        missing = [k for k in REQUIRED if k not in f]
+        if missing:
+            raise ValueError(f"{path}: missing BROAD key(s) {', '.join(missing)}")
+        data = {k: np.asarray(f[k][()]) for k in REQUIRED}
+        rate = f.attrs.get("sampling_rate", f["sampling_rate"][()] if "sampling_rate" in f else None)
+    if rate is None:
+        raise ValueError(f"{path}: no sampling_rate attribute")
+    data["sampling_rate"] = np.asarray(rate, dtype=float)
+    return data
+
+
+def _read_mat(path: Path) -> dict[str, np.ndarray]:
+    import scipy.io
+
+    m = scipy.io.loadmat(path)
+    missing = [k for k in (*REQUIRED, "sampling_rate") if k not in m]
+    if missing:
+        raise ValueError(f"{path}: missing BROAD variable(s) {', '.join(missing)}")
+    return {k: np.asarray(m[k]) for k in (*REQUIRED, "sampling_rate")}
+
+
+def read_broad(path: str | os.PathLike[str]) -> Recording:
+    """Read one BROAD trial file into a :class:`Recording` (stamps from the sampling rate)."""
+    path = Path(path)
+    if path.suffix.lower() in (".hdf5", ".h5"):
+        d = _read_hdf5(path)
+    elif path.suffix.lower() == ".mat":
+        d = _read_mat(path)
+    else:
+        raise ValueError(f"{path}: not a BROAD file (expected .hdf5 or .mat)")
+    acc = np.asarray(d["imu_acc"], dtype=np.float64)
+    gyr = np.asarray(d["imu_gyr"], dtype=np.float64)
+    q = np.asarray(d["opt_quat"], dtype=np.float64)
+    mask = np.asarray(d["movement"]).reshape(-1).astype(bool)
+    rate = float(np.asarray(d["sampling_rate"]).reshape(-1)[0])
+    n = len(acc)
+    if not (gyr.shape == (n, 3) and acc.shape == (n, 3) and q.shape == (n, 4) and mask.shape == (n,)):
+        raise ValueError(f"{path}: inconsistent array shapes acc {acc.shape} gyr {gyr.shape} quat {q.shape}")
+    stamps = np.round(np.arange(n) * (1e9 / rate)).astype(np.int64)
+    q = np.where(np.isfinite(q).all(axis=1, keepdims=True), q, np.nan)
+    return Recording(
+        stamps_ns=stamps,
+        acc=acc,
+        gyr=gyr,
+        quat_ref=q,
+        score_mask=mask,
+        name=path.stem,
+        dataset="broad",
+        source=SOURCE,
+        meta={"sampling_rate": repr(rate), "file": path.name},
+    )
+
+
+def find_broad_dir() -> Path | None:
+    """The BROAD folder from ``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``; None when absent."""
+    env = os.environ.get("RIANN_BROAD_DIR")
+    candidates = [Path(env)] if env else []
+    here = Path(__file__).resolve().parents[2]
+    candidates.append(here.parent / "shared" / "datasets" / "broad")
+    candidates.append(Path.cwd().parent / "shared" / "datasets" / "broad")
+    for c in candidates:
+        if c.is_dir() and any(c.glob("*.hdf5")) or c.is_dir() and any(c.glob("*.mat")):
+            return c
+    return None
+
+
+def broad_files(directory: str | os.PathLike[str]) -> list[Path]:
+    """BROAD trial files in ``directory`` sorted by trial number."""
+    d = Path(directory)
+    return sorted([*d.glob("*.hdf5"), *d.glob("*.mat")], key=lambda p: p.name)
