@@ -60,7 +60,7 @@ def from_rotvec(v: ArrayLike) -> Array:
 def rotate(q: ArrayLike, v: ArrayLike) -> Array:
     """Rotate vector(s) ``v`` by ``q``: ``q ⊗ [0, v] ⊗ q⁻¹``."""
     v = np.asarray(v, dtype=float)
-    qv = np.concatenate([np.zeros(v.shape[:-1] + (1,)), v], axis=-1)
+    qv = np.concatenate([np.zeros((*v.shape[:-1], 1)), v], axis=-1)
     return multiply(multiply(q, qv), conjugate(q))[..., 1:]
 
 

@@ -85,7 +85,7 @@ def find_broad_dir() -> Path | None:
     candidates.append(here.parent / "shared" / "datasets" / "broad")
     candidates.append(Path.cwd().parent / "shared" / "datasets" / "broad")
     for c in candidates:
-        if c.is_dir() and any(c.glob("*.hdf5")) or c.is_dir() and any(c.glob("*.mat")):
+        if c.is_dir() and (any(c.glob("*.hdf5")) or any(c.glob("*.mat"))):
             return c
     return None
 

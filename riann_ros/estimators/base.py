@@ -94,7 +94,7 @@ class AttitudeEstimator(ABC):
             self.params[key] = spec.validate(value)
         self._on_params_changed()
 
-    def _on_params_changed(self) -> None:  # pragma: no cover - default: nothing to do
+    def _on_params_changed(self) -> None:  # noqa: B027 - optional hook, default does nothing
         """Hook for subclasses that cache derived values of their parameters."""
 
     # -- estimation -----------------------------------------------------------------------------

@@ -200,5 +200,6 @@ class RiannEstimator(AttitudeEstimator):
                 self._prev = (acc[i], gyr[i])
             rows = np.asarray(row_list).reshape(-1, 7)
         self._prev = (acc[-1], gyr[-1])
-        net = np.concatenate([self._run(rows[i : i + BATCH_CHUNK]) for i in range(0, len(rows), BATCH_CHUNK)]) if len(rows) else np.empty((0, 4))
+        chunks = [self._run(rows[i : i + BATCH_CHUNK]) for i in range(0, len(rows), BATCH_CHUNK)]
+        net = np.concatenate(chunks) if chunks else np.empty((0, 4))
         return self._compose(net, idx, rot)

@@ -1,0 +1,262 @@
+"""Input checks and dt from stamps, shared by the ROS nodes and the offline evaluator (ROS-free).
+
+:class:`InputGate` decides, per incoming sample, whether it may reach the estimator and with which
+dt; :class:`EstimatorStream` couples a gate with an estimator. The node base feeds it one message at a
+time; the evaluator feeds whole sequences through :meth:`EstimatorStream.process_batch`, which gives
+the same numbers as the per-sample path. So an offline score is a score of what the node does.
+
+Decided behaviour (documented in the README, "Bad input"):
+
+* non-finite acc or gyr → rejected (``non_finite``), state untouched;
+* |acc| > ``max_acc`` or |gyr| > ``max_gyr`` → rejected (``out_of_range``), state untouched;
+* stamp equal to the previous accepted one → rejected (``stamp_repeat``);
+* stamp earlier than the previous one by at most ``max_dt`` → rejected (``stamp_backwards``);
+* stamp earlier by more than ``max_dt`` (a bag replayed in a loop, a restarted driver, the ROS clock
+  jumping back) → estimator reset (``clock_jump``), the sample re-initialises it;
+* stamp later than the previous one by more than ``max_dt`` (a gap) → estimator reset (``gap``), the
+  sample re-initialises it;
+* the first sample after a (re)start gets dt = 1 / ``nominal_rate``;
+* a zero stamp (drivers that do not stamp) → the receive time is used instead, warned once
+  (``zero_stamp``); with no receive time (offline) such a sample is rejected;
+* a median |acc| between 0.5 and 1.5 over the first accepted samples → warned once that the
+  accelerometer seems to report in g instead of m/s² (``acc_in_g``); samples are still used as they are.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from riann_ros.estimators.base import AttitudeEstimator
+
+# rejection reasons
+NON_FINITE = "non_finite"
+OUT_OF_RANGE = "out_of_range"
+STAMP_REPEAT = "stamp_repeat"
+STAMP_BACKWARDS = "stamp_backwards"
+NO_STAMP = "no_stamp"
+ESTIMATOR_FAULT = "estimator_fault"
+REJECT_REASONS = (NON_FINITE, OUT_OF_RANGE, STAMP_REPEAT, STAMP_BACKWARDS, NO_STAMP, ESTIMATOR_FAULT)
+# reset causes
+START = "start"
+GAP = "gap"
+CLOCK_JUMP = "clock_jump"
+RESET_CAUSES = (START, GAP, CLOCK_JUMP)
+# one-shot warnings
+ZERO_STAMP = "zero_stamp"
+ACC_IN_G = "acc_in_g"
+G_CHECK_SAMPLES = 50
+
+WARNING_TEXT = {
+    ZERO_STAMP: "IMU messages carry zero header stamps; using the receive time instead. dt will include "
+    "transport jitter: fix the driver's stamping if you can.",
+    ACC_IN_G: "the accelerometer magnitude is about 1 at rest: it seems to report in g, but "
+    "sensor_msgs/Imu (REP-145) requires m/s². Estimates will be wrong; scale the driver's output by 9.80665.",
+}
+
+
+@dataclass
+class GateConfig:
+    """Parameters of the input checks (the node exposes them as ROS parameters)."""
+
+    nominal_rate: float = 100.0  # Hz; dt of the first sample after a (re)start
+    max_dt: float = 0.5  # s; larger gaps, or jumps back larger than this, restart the estimator
+    max_acc: float = 2000.0  # m/s²; larger magnitudes are rejected as implausible
+    max_gyr: float = 200.0  # rad/s
+
+    def __post_init__(self) -> None:
+        if not (self.nominal_rate > 0 and math.isfinite(self.nominal_rate)):
+            raise ValueError(f"nominal_rate must be a positive number, got {self.nominal_rate}")
+        if not (self.max_dt > 0 and math.isfinite(self.max_dt)):
+            raise ValueError(f"max_dt must be a positive number, got {self.max_dt}")
+
+
+@dataclass
+class GateResult:
+    accepted: bool
+    dt: float = 0.0  # s, for accepted samples
+    stamp_ns: int = 0  # effective stamp (receive time for zero stamps)
+    reason: str | None = None  # rejection reason
+    reset: str | None = None  # reset cause when the estimator must restart before this sample
+    warnings: list[str] = field(default_factory=list)  # one-shot warnings raised by this sample
+
+
+class InputGate:
+    """Per-sample input checks and dt computation. Counters feed the node's diagnostics."""
+
+    def __init__(self, config: GateConfig | None = None) -> None:
+        self.config = config or GateConfig()
+        self.rejected: Counter[str] = Counter()
+        self.resets: Counter[str] = Counter()
+        self.accepted = 0
+        self._warned: set[str] = set()
+        self._g_norms: list[float] = []
+        self._dts: list[float] = []
+        self.restart()
+
+    def restart(self) -> None:
+        """Forget the previous stamp: the next accepted sample starts a new sequence."""
+        self._last_ns: int | None = None
+
+    def _warn(self, key: str, out: list[str]) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            out.append(key)
+
+    def check(self, stamp_ns: int, acc: ArrayLike, gyr: ArrayLike, receive_ns: int | None = None) -> GateResult:
+        warnings: list[str] = []
+        cfg = self.config
+        if stamp_ns == 0:
+            if receive_ns is None:
+                self.rejected[NO_STAMP] += 1
+                return GateResult(False, reason=NO_STAMP)
+            self._warn(ZERO_STAMP, warnings)
+            stamp_ns = receive_ns
+        a = np.asarray(acc, dtype=float)
+        g = np.asarray(gyr, dtype=float)
+        if not (np.isfinite(a).all() and np.isfinite(g).all()):
+            self.rejected[NON_FINITE] += 1
+            return GateResult(False, stamp_ns=stamp_ns, reason=NON_FINITE, warnings=warnings)
+        na = float(np.sqrt(a @ a))
+        if na > cfg.max_acc or float(np.sqrt(g @ g)) > cfg.max_gyr:
+            self.rejected[OUT_OF_RANGE] += 1
+            return GateResult(False, stamp_ns=stamp_ns, reason=OUT_OF_RANGE, warnings=warnings)
+        reset: str | None = None
+        max_dt_ns = cfg.max_dt * 1e9
+        if self._last_ns is None:
+            reset = START
+        else:
+            diff = stamp_ns - self._last_ns
+            if diff == 0:
+                self.rejected[STAMP_REPEAT] += 1
+                return GateResult(False, stamp_ns=stamp_ns, reason=STAMP_REPEAT, warnings=warnings)
+            if diff < 0:
+                if -diff <= max_dt_ns:
+                    self.rejected[STAMP_BACKWARDS] += 1
+                    return GateResult(False, stamp_ns=stamp_ns, reason=STAMP_BACKWARDS, warnings=warnings)
+                reset = CLOCK_JUMP
+            elif diff > max_dt_ns:
+                reset = GAP
+        if reset is None:
+            dt = (stamp_ns - self._last_ns) * 1e-9  # type: ignore[operator]
+        else:
+            dt = 1.0 / cfg.nominal_rate
+            self.resets[reset] += 1
+        self._last_ns = stamp_ns
+        self.accepted += 1
+        self._dts.append(dt)
+        if len(self._g_norms) < G_CHECK_SAMPLES:
+            self._g_norms.append(na)
+            if len(self._g_norms) == G_CHECK_SAMPLES and 0.5 < float(np.median(self._g_norms)) < 1.5:
+                self._warn(ACC_IN_G, warnings)
+        return GateResult(True, dt=dt, stamp_ns=stamp_ns, reset=reset, warnings=warnings)
+
+    def pop_dt_stats(self) -> dict[str, float]:
+        """dt statistics (s) since the last call: count, min, mean, max, std; then forget them."""
+        d = np.asarray(self._dts)
+        self._dts = []
+        if len(d) == 0:
+            return {"count": 0.0}
+        return {
+            "count": float(len(d)),
+            "min": float(d.min()),
+            "mean": float(d.mean()),
+            "max": float(d.max()),
+            "std": float(d.std()),
+        }
+
+
+class EstimatorStream:
+    """A gate in front of an estimator: what the node runs per message, and the evaluator per sequence."""
+
+    def __init__(self, estimator: AttitudeEstimator, config: GateConfig | None = None) -> None:
+        self.estimator = estimator
+        self.gate = InputGate(config)
+
+    def reset(self) -> None:
+        """Clear the estimator and restart the stamp sequence (the node's ~/reset service)."""
+        self.estimator.reset()
+        self.gate.restart()
+
+    def process(
+        self, stamp_ns: int, acc: ArrayLike, gyr: ArrayLike, receive_ns: int | None = None
+    ) -> tuple[NDArray[np.float64] | None, GateResult]:
+        """One sample → (quaternion wxyz or None when rejected, the gate's verdict)."""
+        r = self.gate.check(stamp_ns, acc, gyr, receive_ns)
+        if not r.accepted:
+            return None, r
+        if r.reset is not None:
+            self.estimator.reset()
+        q = self.estimator.update(acc, gyr, r.dt)
+        if not _is_unit(q):
+            return None, self._fault(r)
+        return q, r
+
+    def _fault(self, r: GateResult) -> GateResult:
+        # Never publish garbage: an estimator output that is not a finite unit quaternion restarts it.
+        self.estimator.reset()
+        self.gate.rejected[ESTIMATOR_FAULT] += 1
+        r.accepted = False
+        r.reason = ESTIMATOR_FAULT
+        return r
+
+    def process_batch(
+        self, stamps_ns: ArrayLike, acc: ArrayLike, gyr: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """A sequence → (quaternions (N, 4) with NaN rows for rejected samples, accepted mask).
+
+        Equal to calling :meth:`process` per sample (the gate runs per sample; the estimator runs
+        vectorised over each run of accepted samples between restarts).
+        """
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        acc = np.asarray(acc, dtype=float)
+        gyr = np.asarray(gyr, dtype=float)
+        n = len(stamps)
+        out = np.full((n, 4), np.nan)
+        accepted = np.zeros(n, dtype=bool)
+        dts = np.zeros(n)
+        starts: list[int] = []  # indices where the estimator restarts
+        for i in range(n):
+            r = self.gate.check(int(stamps[i]), acc[i], gyr[i])
+            if r.accepted:
+                accepted[i] = True
+                dts[i] = r.dt
+                if r.reset is not None:
+                    starts.append(i)
+        idx = np.flatnonzero(accepted)
+        if len(idx) == 0:
+            return out, accepted
+        bounds = [*(int(np.searchsorted(idx, s)) for s in starts), len(idx)]
+        if not bounds or bounds[0] != 0:
+            bounds.insert(0, 0)  # continuing a sequence begun by an earlier call
+        for lo, hi in itertools.pairwise(bounds):
+            seg = idx[lo:hi]
+            if len(seg) and seg[0] in starts:
+                self.estimator.reset()
+            while len(seg):
+                q = self.estimator.update_batch(acc[seg], gyr[seg], dts[seg])
+                bad = ~_rows_unit(q)
+                if not bad.any():
+                    out[seg] = q
+                    break
+                # as in process(): the faulty sample is dropped and the estimator restarts after it
+                first = int(np.argmax(bad))
+                out[seg[:first]] = q[:first]
+                accepted[seg[first]] = False
+                self.estimator.reset()
+                self.gate.rejected[ESTIMATOR_FAULT] += 1
+                seg = seg[first + 1 :]
+        return out, accepted
+
+
+def _is_unit(q: NDArray[np.float64]) -> bool:
+    return bool(np.isfinite(q).all() and abs(float(q @ q) - 1.0) < 1e-6)
+
+
+def _rows_unit(q: NDArray[np.float64]) -> NDArray[np.bool_]:
+    return np.isfinite(q).all(axis=1) & (np.abs(np.sum(q * q, axis=1) - 1.0) < 1e-6)
