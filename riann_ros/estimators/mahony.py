@@ -1,0 +1,147 @@
+"""Mahony's explicit complementary filter, IMU (6D) form, in plain Python (ROS-free).
+
+R. Mahony, T. Hamel, J.-M. Pflimlin, "Nonlinear complementary filters on the special orthogonal
+group", IEEE TAC 53(5), 2008; quaternion form as in ``ahrs.filters.Mahony.updateIMU``:
+
+    v = R(q)ᵀ e_z,   e = â × v,   b ← b − k_I e dt,   Ω = ω − b + k_P e,
+    q ← normalise(q + ½ q ⊗ [0, Ω] dt)
+
+with ``â`` the normalised accelerometer sample and ``b`` the gyro-bias estimate (integral term,
+starts at zero, cleared by :meth:`~MahonyEstimator.reset`). ``q`` is sensor → world, world z up (ENU).
+
+Initialisation, per-sample dt, degenerate input and the fast loop follow
+:mod:`riann_ros.estimators.madgwick`: initialised from the first usable accelerometer sample with
+:func:`riann_ros.quaternion.from_accelerometer`; a zero accelerometer sample gives a gyro-only step
+(bias integral frozen); the output is always a finite unit quaternion; :meth:`update` runs the same
+loop as :meth:`update_batch` with one sample.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
+from riann_ros.estimators.madgwick import as_array, initial_attitude, sanitize
+
+#: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
+DEFAULT_KP = 1.0
+DEFAULT_KI = 0.3
+
+Quat = tuple[float, float, float, float]
+Vec = tuple[float, float, float]
+
+
+def _mahony_run(
+    q: Quat | None, b: Vec, acc: list, gyr: list, dt: list, kp: float, ki: float
+) -> tuple[Quat | None, Vec, list]:
+    """Run the filter from state (q, bias) over the samples; (new q, new bias, outputs)."""
+    out: list = []
+    append = out.append
+    sqrt = math.sqrt
+    inf = math.inf
+    i = 0
+    n = len(acc)
+    while q is None and i < n:
+        q = initial_attitude(*acc[i])
+        append(q if q is not None else (1.0, 0.0, 0.0, 0.0))
+        i += 1
+    if q is None:
+        return None, b, out
+    qw, qx, qy, qz = q
+    bx, by, bz = b
+    for (ax, ay, az), (gx, gy, gz), h in zip(acc[i:], gyr[i:], dt[i:], strict=True):
+        an = sqrt(ax * ax + ay * ay + az * az)
+        if an > 0.0:
+            ax /= an
+            ay /= an
+            az /= an
+            # expected direction of "up" in the sensor frame: third row of R(q)
+            vx = 2.0 * (qx * qz - qw * qy)
+            vy = 2.0 * (qw * qx + qy * qz)
+            vz = 1.0 - 2.0 * (qx * qx + qy * qy)
+            ex = ay * vz - az * vy
+            ey = az * vx - ax * vz
+            ez = ax * vy - ay * vx
+            kih = ki * h
+            bx -= kih * ex
+            by -= kih * ey
+            bz -= kih * ez
+            gx = gx - bx + kp * ex
+            gy = gy - by + kp * ey
+            gz = gz - bz + kp * ez
+        else:
+            gx -= bx
+            gy -= by
+            gz -= bz
+        hh = 0.5 * h
+        nw = qw + (-qx * gx - qy * gy - qz * gz) * hh
+        nx = qx + (qw * gx + qy * gz - qz * gy) * hh
+        ny = qy + (qw * gy - qx * gz + qz * gx) * hh
+        nz = qz + (qw * gz + qx * gy - qy * gx) * hh
+        nn = sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+        if 0.0 < nn < inf:
+            qw = nw / nn
+            qx = nx / nn
+            qy = ny / nn
+            qz = nz / nn
+        append((qw, qx, qy, qz))
+    if not (math.isfinite(bx) and math.isfinite(by) and math.isfinite(bz)):
+        bx = by = bz = 0.0
+    return (qw, qx, qy, qz), (bx, by, bz), out
+
+
+class MahonyEstimator(AttitudeEstimator):
+    """Mahony IMU filter with proportional gain ``kp`` and integral (gyro-bias) gain ``ki``."""
+
+    name = "mahony"
+    PARAMS = (
+        ParamSpec(
+            "kp",
+            DEFAULT_KP,
+            "Proportional gain k_P (rad/s per unit error): weight of the accelerometer correction. Default 1.0 "
+            "= the ahrs 0.4.0 default; the BROAD authors' tuned 9D value is 0.74.",
+            min=0.0,
+            max=100.0,
+            runtime=True,
+        ),
+        ParamSpec(
+            "ki",
+            DEFAULT_KI,
+            "Integral gain k_I (rad/s² per unit error) of the gyro-bias estimate; 0 disables bias estimation "
+            "(the current estimate is then kept). Default 0.3 = the ahrs 0.4.0 default; the BROAD authors' "
+            "tuned 9D value is 0.0012.",
+            min=0.0,
+            max=10.0,
+            runtime=True,
+        ),
+    )
+
+    def __init__(self, **params: object) -> None:
+        super().__init__(**params)
+        self.reset()
+
+    def reset(self) -> None:
+        self._q: Quat | None = None
+        self._b: Vec = (0.0, 0.0, 0.0)
+
+    @property
+    def initialized(self) -> bool:
+        return self._q is not None
+
+    @property
+    def bias(self) -> Array:
+        """Current gyro-bias estimate (rad/s, sensor frame)."""
+        return np.array(self._b)
+
+    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
+        return self.update_batch(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])[0]
+
+    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
+        a, g, h = sanitize(acc, gyr, dt)
+        self._q, self._b, out = _mahony_run(
+            self._q, self._b, a, g, h, float(self.params["kp"]), float(self.params["ki"])
+        )
+        return as_array(out)

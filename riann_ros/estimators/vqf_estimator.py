@@ -1,0 +1,129 @@
+"""VQF (Laidig & Seel 2023) through the ``vqf`` package, 6D output (ROS-free).
+
+D. Laidig, T. Seel, "VQF: Highly accurate IMU orientation estimation with bias estimation and magnetic
+disturbance rejection", Information Fusion 91:187-204, 2023, https://doi.org/10.1016/j.inffus.2022.10.014.
+The C++ implementation of the ``vqf`` package (MIT) does the work; this class only adapts it to the
+:class:`~riann_ros.estimators.base.AttitudeEstimator` interface.
+
+* **output** — ``getQuat6D()`` / the ``quat6D`` batch result: gyroscope + accelerometer fusion, sensor
+  frame → VQF's 6D earth frame, whose z axis points up (the accelerometer at rest maps onto +z) and
+  whose heading is arbitrary: it starts at the sensor's initial heading and drifts with the remaining
+  gyro bias about z (no magnetometer). So it is sensor → world ENU up to a heading offset, like the
+  other 6D estimators here.
+* **dt** — VQF is built for a fixed sampling time ``Ts`` given at construction. The filter is created at
+  the first sample with ``Ts`` = that sample's dt (the stream gives the first sample ``1/nominal_rate``;
+  ``DEFAULT_TS`` if that dt is not positive). Every sample's gyroscope reading is then scaled by
+  ``dt / Ts`` before it goes in, so VQF's strapdown integration (angle = |ω|·Ts) integrates over the
+  sample's true dt, also across jitter and short gaps. The accelerometer low-pass and the rest
+  detector still count time in samples of ``Ts``: if the real rate differs persistently from the first
+  dt, ``tau_acc`` and the bias-estimation time constants scale with the ratio (``reset()`` re-picks Ts).
+  Because the scaling is per row, the batch path is ``updateBatch(gyr·dt/Ts, acc)``, which gives the
+  same numbers as per-sample ``update`` calls.
+* **degenerate input** — a zero (or non-finite) accelerometer sample is skipped by VQF (gyro-only
+  step); a non-finite gyro sample counts as zero rate; non-finite or negative dt counts as 0.
+* **parameters** — ``tau_acc`` (VQF ``tauAcc``), ``motion_bias_est`` (``motionBiasEstEnabled``) and
+  ``rest_bias_est`` (``restBiasEstEnabled``), defaults from ``vqf.VQF().params``; all three can change at
+  run time through VQF's own setters (``setTauAcc`` adapts the filter states to the new coefficients).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+from vqf import VQF
+
+from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
+from riann_ros.estimators.madgwick import sanitize_arrays
+
+DEFAULT_TS = 0.01  # s, used only when the first sample's dt is not positive
+
+# defaults of vqf 2.1.2 (VQFParams)
+DEFAULT_TAU_ACC = 3.0
+DEFAULT_MOTION_BIAS_EST = True
+DEFAULT_REST_BIAS_EST = True
+
+
+class VqfEstimator(AttitudeEstimator):
+    """VQF 6D (gyr + acc) with rest and motion gyro-bias estimation."""
+
+    name = "vqf"
+    PARAMS = (
+        ParamSpec(
+            "tau_acc",
+            DEFAULT_TAU_ACC,
+            "Time constant (s) of the accelerometer low-pass in the inclination correction (VQF tauAcc): "
+            "smaller trusts the accelerometer more. Default 3.0 = the vqf package default.",
+            min=0.01,
+            max=1000.0,
+            runtime=True,
+        ),
+        ParamSpec(
+            "motion_bias_est",
+            DEFAULT_MOTION_BIAS_EST,
+            "Estimate the gyro bias during motion (VQF motionBiasEstEnabled). Default true = vqf default.",
+            runtime=True,
+        ),
+        ParamSpec(
+            "rest_bias_est",
+            DEFAULT_REST_BIAS_EST,
+            "Detect rest and estimate the gyro bias at rest (VQF restBiasEstEnabled). Default true = vqf default.",
+            runtime=True,
+        ),
+    )
+
+    def __init__(self, **params: object) -> None:
+        super().__init__(**params)
+        self.reset()
+
+    def reset(self) -> None:
+        self._vqf: VQF | None = None
+        self._ts: float | None = None
+
+    @property
+    def initialized(self) -> bool:
+        return self._vqf is not None
+
+    @property
+    def sample_time(self) -> float | None:
+        """The ``Ts`` VQF was built with (None before the first sample)."""
+        return self._ts
+
+    @property
+    def bias(self) -> Array:
+        """VQF's current gyro-bias estimate (rad/s, in units of the dt-scaled gyro), zeros before start."""
+        if self._vqf is None:
+            return np.zeros(3)
+        return np.asarray(self._vqf.getBiasEstimate()[0], dtype=float)
+
+    def _on_params_changed(self) -> None:
+        if self._vqf is None:
+            return
+        self._vqf.setTauAcc(float(self.params["tau_acc"]))
+        self._vqf.setMotionBiasEstEnabled(bool(self.params["motion_bias_est"]))
+        self._vqf.setRestBiasEstEnabled(bool(self.params["rest_bias_est"]))
+
+    def _ensure(self, first_dt: float) -> VQF:
+        if self._vqf is None:
+            self._ts = float(first_dt) if first_dt > 0.0 else DEFAULT_TS
+            self._vqf = VQF(
+                self._ts,
+                tauAcc=float(self.params["tau_acc"]),
+                motionBiasEstEnabled=bool(self.params["motion_bias_est"]),
+                restBiasEstEnabled=bool(self.params["rest_bias_est"]),
+            )
+        return self._vqf
+
+    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
+        a, g, h = sanitize_arrays(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])
+        v = self._ensure(float(h[0]))
+        v.update(np.ascontiguousarray(g[0] * (h[0] / self._ts)), np.ascontiguousarray(a[0]))
+        return np.asarray(v.getQuat6D(), dtype=float).copy()
+
+    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
+        a, g, h = sanitize_arrays(acc, gyr, dt)
+        if len(a) == 0:
+            return np.empty((0, 4))
+        v = self._ensure(float(h[0]))
+        g = np.ascontiguousarray(g * (h / self._ts)[:, None])
+        out = v.updateBatch(g, np.ascontiguousarray(a))["quat6D"]
+        return np.array(out, dtype=float)
