@@ -405,6 +405,7 @@ class SequenceResult:
     series: dict[str, Any] | None = None
     estimates: dict[str, Any] | None = None  # label → (stamps_ns, quats) on the restrictive sequence
     seconds: float = 0.0
+    citation: str = ""
 
 
 _ESTIMATOR_CACHE: dict[EstimatorSpec, AttitudeEstimator] = {}
@@ -422,7 +423,9 @@ def evaluate_recording(rec: Recording, settings: EvalSettings, source: str = "")
     import time
 
     t0 = time.perf_counter()
-    res = SequenceResult(source=source or rec.name, name=rec.name, dataset=rec.dataset or "unknown")
+    res = SequenceResult(
+        source=source or rec.name, name=rec.name, dataset=rec.dataset or "unknown", citation=rec.source
+    )
     want_series = settings.series_for is not None and settings.series_for in ("*", rec.name)
     for rate in settings.rates:
         r = rec if rate is None else resample(rec, rate)
@@ -458,7 +461,8 @@ def evaluate_recording(rec: Recording, settings: EvalSettings, source: str = "")
                     res.series.setdefault("scored", {})[scenario] = srec.score_mask[::step]
                 if settings.keep_estimates and rate is None and scenario == settings.scenarios[0]:
                     if res.estimates is None:
-                        res.estimates = {"scenario": scenario, "offset": info.start_index, "quats": {}}
+                        stamps = rec.stamps_ns[info.start_index : info.start_index + len(srec)]
+                        res.estimates = {"scenario": scenario, "stamps": stamps, "quats": {}}
                     res.estimates["quats"][spec.label] = q
     res.seconds = time.perf_counter() - t0
     return res
@@ -564,7 +568,7 @@ def aggregate(rows: Iterable[dict[str, Any]], metric: str = "rmse_deg") -> list[
 DEFAULT_GRIDS: dict[str, dict[str, list[float]]] = {
     "madgwick": {"beta": [0.005, 0.01, 0.02, 0.033, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3]},
     "mahony": {"kp": [0.1, 0.2, 0.5, 1.0, 2.0, 5.0], "ki": [0.0, 0.01, 0.03, 0.1, 0.3]},
-    "vqf": {"tauacc": [0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0]},
+    "vqf": {"tau_acc": [0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0]},
 }
 
 

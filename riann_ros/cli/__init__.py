@@ -1,0 +1,1 @@
+"""Command-line tools (thin verbs over the ROS-free core)."""
