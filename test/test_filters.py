@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -173,6 +174,14 @@ def test_defaults() -> None:
         "motion_bias_est": p["motionBiasEstEnabled"],
         "rest_bias_est": p["restBiasEstEnabled"],
     }
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_config_yaml_lists_every_param_with_its_default(name: str) -> None:
+    yaml = pytest.importorskip("yaml")
+    path = Path(__file__).resolve().parents[1] / "config" / f"{name}.yaml"
+    params = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
+    assert params == {p.name: p.default for p in estimator_class(name).PARAMS}
 
 
 # ---------------------------------------------------------------------------------------------------
