@@ -1,0 +1,245 @@
+"""``riann-bag-convert``: IMU datasets → rosbag2 bags in the layout of :mod:`riann_ros.bagio`.
+
+Examples::
+
+    riann-bag-convert 02_undisturbed_slow_rotation_B.hdf5 -o broad02.mcap
+    riann-bag-convert ../shared/datasets/broad -o broad_bags/          # every BROAD file → one bag each
+    riann-bag-convert MH_01_easy/ -o mh01.mcap                        # EuRoC/ASL folder
+    riann-bag-convert --format csv imu.csv --time-unit ms --gyr-unit deg/s -o imu.mcap
+    riann-bag-convert --format synthetic --rate 200 --duration 60 --seed 1 -o bags/synthetic.mcap
+
+An output ending in ``.mcap`` is a single MCAP file; any other output is a rosbag2 directory. With
+several inputs (or a folder of BROAD/CSV files) the output is a folder receiving one bag per input,
+named after the input (``<stem>.mcap``, or ``<stem>/`` for sqlite3). Exit status 0 on success, 1 when
+any input failed, 2 on bad usage; messages go to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from riann_ros import bagio
+from riann_ros.datasets import FORMATS, detect_format, read_any
+from riann_ros.datasets.csvfile import (
+    ACC_UNITS,
+    DEFAULT_ACC,
+    DEFAULT_GYR,
+    DEFAULT_TIME,
+    GYR_UNITS,
+    QUAT_ORDERS,
+    TIME_UNITS,
+)
+from riann_ros.datasets.synthetic import MOTIONS
+
+
+def _cols(n: int):
+    def parse(text: str) -> tuple[str, ...]:
+        cols = tuple(c.strip() for c in text.split(","))
+        if len(cols) != n or not all(cols):
+            raise argparse.ArgumentTypeError(f"expected {n} comma-separated column names, got {text!r}")
+        return cols
+
+    return parse
+
+
+def _bias(text: str) -> float | tuple[float, float, float]:
+    parts = [p for p in text.replace(",", " ").split() if p]
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"bias must be a number or three numbers, got {text!r}") from None
+    if len(vals) == 1:
+        return vals[0]
+    if len(vals) == 3:
+        return (vals[0], vals[1], vals[2])
+    raise argparse.ArgumentTypeError(f"bias must be a number or three numbers, got {text!r}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="riann-bag-convert",
+        description="Convert IMU datasets (BROAD .hdf5/.mat, EuRoC/ASL folders, generic CSV, synthetic) "
+        "into rosbag2 bags (/imu/data_raw, /ground_truth/attitude, /ground_truth/scored, /dataset/info).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=__doc__.split("Examples::", 1)[1] if __doc__ else None,
+    )
+    p.add_argument("inputs", nargs="*", type=Path, help="input file(s) or folder (none for --format synthetic)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output bag (.mcap file or folder) or folder")
+    p.add_argument("--format", choices=("auto", *FORMATS), default="auto", help="input format (default: detect)")
+    p.add_argument("--storage", choices=bagio.STORAGES, default="mcap", help="bag storage (default mcap)")
+    p.add_argument("--compression", choices=("none", "zstd"), default="none", help="zstd compression")
+    p.add_argument("--frame-id", default="imu_link", help="IMU frame_id (default imu_link)")
+    p.add_argument("--name", help="sequence name (default: from the input)")
+    p.add_argument("--force", action="store_true", help="replace existing output bags")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+
+    c = p.add_argument_group("generic CSV")
+    c.add_argument("--time-col", default=DEFAULT_TIME, help=f"time column (default {DEFAULT_TIME})")
+    c.add_argument("--time-unit", default="s", help=f"{'|'.join(TIME_UNITS)} (default s)")
+    c.add_argument("--acc-cols", type=_cols(3), default=DEFAULT_ACC, help=f"default {','.join(DEFAULT_ACC)}")
+    c.add_argument("--acc-unit", default="m/s2", help=f"{'|'.join(ACC_UNITS)} (default m/s2)")
+    c.add_argument("--gyr-cols", type=_cols(3), default=DEFAULT_GYR, help=f"default {','.join(DEFAULT_GYR)}")
+    c.add_argument("--gyr-unit", default="rad/s", help=f"{'|'.join(GYR_UNITS)} (default rad/s)")
+    c.add_argument("--quat-cols", type=_cols(4), help="reference quaternion columns, in --quat-order order")
+    c.add_argument("--quat-order", choices=QUAT_ORDERS, default="wxyz", help="default wxyz")
+    c.add_argument("--mask-col", help="score-mask column (default: 'scored' if present)")
+    c.add_argument("--delimiter", help="column delimiter (default: detect , ; tab or blanks)")
+
+    e = p.add_argument_group("EuRoC/ASL")
+    e.add_argument("--ground-truth", type=Path, help="ground truth: ASL data.csv or TUM file (t tx ty tz qx qy qz qw)")
+    e.add_argument("--max-gap", type=float, default=0.1, help="no reference across ground-truth gaps > s (0.1)")
+
+    s = p.add_argument_group("synthetic")
+    s.add_argument("--rate", type=float, default=200.0, help="Hz (default 200)")
+    s.add_argument("--duration", type=float, default=60.0, help="s (default 60)")
+    s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    s.add_argument("--motion", choices=MOTIONS, default="combined", help="default combined")
+    s.add_argument("--bias", type=_bias, default=0.01, help="gyro bias rad/s: magnitude or 'bx,by,bz' (0.01)")
+    s.add_argument("--gyr-noise", type=float, default=0.004, help="gyro white noise std, rad/s (0.004)")
+    s.add_argument("--acc-noise", type=float, default=0.03, help="accelerometer white noise std, m/s² (0.03)")
+    s.add_argument("--max-tilt", type=float, default=60.0, help="roll/pitch amplitude scale, deg (60)")
+    s.add_argument("--speed", type=float, default=1.0, help="motion frequency scale (1)")
+    return p
+
+
+def _reader_opts(fmt: str, args: argparse.Namespace) -> dict:
+    common = {"frame_id": args.frame_id}
+    if args.name:
+        common["name"] = args.name
+    if fmt == "csv":
+        return {
+            **common,
+            "time_col": args.time_col,
+            "time_unit": args.time_unit,
+            "acc_cols": args.acc_cols,
+            "acc_unit": args.acc_unit,
+            "gyr_cols": args.gyr_cols,
+            "gyr_unit": args.gyr_unit,
+            "quat_cols": args.quat_cols,
+            "quat_order": args.quat_order,
+            "mask_col": args.mask_col,
+            "delimiter": args.delimiter,
+        }
+    if fmt == "euroc":
+        return {**common, "ground_truth": args.ground_truth, "max_gap_s": args.max_gap}
+    if fmt == "synthetic":
+        return {
+            **common,
+            "rate": args.rate,
+            "duration": args.duration,
+            "seed": args.seed,
+            "motion": args.motion,
+            "bias": args.bias,
+            "gyr_noise": args.gyr_noise,
+            "acc_noise": args.acc_noise,
+            "max_tilt_deg": args.max_tilt,
+            "speed": args.speed,
+        }
+    return {"frame_id": args.frame_id}  # broad
+
+
+def _expand(inputs: list[Path], fmt: str) -> list[tuple[Path, str]]:
+    """(input, format) jobs; a folder that is not an EuRoC folder expands to its BROAD/CSV files."""
+    from riann_ros.datasets.broad import broad_files
+    from riann_ros.datasets.euroc import is_euroc
+
+    jobs = []
+    for inp in inputs:
+        if not inp.exists():
+            raise FileNotFoundError(f"{inp}: no such file or directory")
+        if inp.is_dir() and fmt in ("auto", "broad", "csv") and not is_euroc(inp):
+            files = broad_files(inp) if fmt in ("auto", "broad") else sorted(inp.glob("*.csv"))
+            if not files and fmt == "auto":
+                files = sorted(inp.glob("*.csv"))
+            if not files:
+                raise ValueError(f"{inp}: folder holds no BROAD (.hdf5/.mat) or CSV files and is not an EuRoC folder")
+            jobs += [(f, detect_format(f) if fmt == "auto" else fmt) for f in files]
+        else:
+            jobs.append((inp, detect_format(inp) if fmt == "auto" else fmt))
+    return jobs
+
+
+def _bag_name(inp: Path, storage: str) -> str:
+    stem = inp.name if inp.is_dir() else inp.stem
+    return f"{stem}.mcap" if storage == "mcap" else stem
+
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    if not args.quiet:
+        print(text, file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    compression = None if args.compression == "none" else args.compression
+    out: Path = args.output
+
+    if args.format == "synthetic":
+        if args.inputs:
+            parser.error("--format synthetic takes no inputs")
+        jobs: list[tuple[Path | None, str]] = [(None, "synthetic")]
+    else:
+        if not args.inputs:
+            parser.error("no input given (or use --format synthetic)")
+        try:
+            jobs = list(_expand(args.inputs, args.format))
+        except (OSError, ValueError) as e:
+            print(f"riann-bag-convert: error: {e}", file=sys.stderr)
+            return 1
+
+    many = len(jobs) > 1 or (
+        args.inputs and len(args.inputs) == 1 and args.inputs[0].is_dir() and jobs[0][1] != "euroc"
+    )
+    if many:
+        if out.suffix == ".mcap" or (out.exists() and not out.is_dir()):
+            print(f"riann-bag-convert: error: {out}: several inputs need an output folder", file=sys.stderr)
+            return 1
+        if args.name:
+            print("riann-bag-convert: error: --name only works with one input", file=sys.stderr)
+            return 1
+    if not many and out.suffix == ".mcap" and args.storage != "mcap":
+        print(f"riann-bag-convert: error: {out}: a .mcap output needs --storage mcap", file=sys.stderr)
+        return 1
+
+    failures = 0
+    for inp, fmt in jobs:
+        target = out / _bag_name(inp, args.storage) if many and inp is not None else out
+        label = str(inp) if inp is not None else "synthetic"
+        t0 = time.perf_counter()
+        try:
+            if target.exists() and not args.force:
+                raise FileExistsError(f"{target}: output exists, not overwriting (use --force to replace it)")
+            rec = read_any(inp, fmt, **_reader_opts(fmt, args))
+            if args.name and fmt == "broad":
+                rec.name = args.name
+            bagio.write_recording(target, rec, storage=args.storage, compression=compression, force=args.force)
+        except KeyboardInterrupt:
+            print(f"riann-bag-convert: interrupted while converting {label}; no partial bag left", file=sys.stderr)
+            return 130
+        except (OSError, ValueError, bagio.BagError) as e:
+            failures += 1
+            print(
+                f"riann-bag-convert: error: {label}: {e}"
+                if str(label) not in str(e)
+                else f"riann-bag-convert: error: {e}",
+                file=sys.stderr,
+            )
+            continue
+        n_ref = 0 if rec.quat_ref is None else int((~(rec.quat_ref != rec.quat_ref).any(axis=1)).sum())
+        _say(
+            args,
+            f"{label} → {target}: {len(rec)} samples at {rec.rate_hz:.6g} Hz, {n_ref} reference, "
+            f"{int(rec.score_mask.sum())} scored ({time.perf_counter() - t0:.1f} s)",
+        )
+    if failures:
+        print(f"riann-bag-convert: {failures} of {len(jobs)} input(s) failed", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,242 @@
+"""Generic CSV IMU files → :class:`Recording`.
+
+Format: one header row with column names, then one row per sample. Lines that are empty or start
+with ``#`` *before* the header are skipped (so ``#t,acc_x,...`` headers also work: a leading ``#`` is
+stripped from the header). The delimiter is detected from the header (``,``, ``;``, tab, or blanks).
+
+Columns (names and units by option; defaults in brackets):
+
+* time [``t``], unit ``s`` | ``ms`` | ``us`` | ``ns`` [``s``]; parsed exactly (decimal → integer ns);
+  must be strictly increasing;
+* accelerometer [``acc_x,acc_y,acc_z``], unit ``m/s2`` | ``g`` [``m/s2``] (1 g = 9.80665 m/s²);
+* gyroscope [``gyr_x,gyr_y,gyr_z``], unit ``rad/s`` | ``deg/s`` [``rad/s``];
+* optional reference quaternion [``qw,qx,qy,qz``], listed in the order given by ``quat_order``
+  (``wxyz`` | ``xyzw``) [``wxyz``], sensor → world (z up); empty or NaN cells mark a missing reference
+  (NaN row); non-empty rows are normalised (norm must be within 10 % of 1);
+* optional score mask [``scored``]: 1/0, true/false.
+
+The optional columns are used when all their default names are present; when given explicitly
+they are required. IMU cells must be finite numbers. Errors name the file and line.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Sequence
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+
+import numpy as np
+
+from riann_ros.recording import Recording
+
+TIME_UNITS = {"s": 10**9, "ms": 10**6, "us": 10**3, "µs": 10**3, "ns": 1}
+ACC_UNITS = {"m/s2": 1.0, "m/s^2": 1.0, "m/s²": 1.0, "g": 9.80665}
+GYR_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0, "dps": np.pi / 180.0}
+QUAT_ORDERS = ("wxyz", "xyzw")
+DEFAULT_TIME = "t"
+DEFAULT_ACC = ("acc_x", "acc_y", "acc_z")
+DEFAULT_GYR = ("gyr_x", "gyr_y", "gyr_z")
+DEFAULT_QUAT = ("qw", "qx", "qy", "qz")
+DEFAULT_MASK = "scored"
+_TRUE = {"1", "true", "yes", "y", "t", "1.0"}
+_FALSE = {"0", "false", "no", "n", "f", "0.0"}
+
+
+class InputError(ValueError):
+    """Bad input data; the message names the file and the line or sample index."""
+
+
+def unit_factor(kind: str, unit: str, table: dict) -> float | int:
+    if unit not in table:
+        raise InputError(f"unknown {kind} unit {unit!r}; expected one of {', '.join(table)}")
+    return table[unit]
+
+
+def parse_time_ns(values: Sequence[str], unit: str, where: str, lines: Sequence[int]) -> np.ndarray:
+    """Exact conversion of decimal time strings in ``unit`` to int64 nanoseconds."""
+    scale = unit_factor("time", unit, TIME_UNITS)
+    out = np.empty(len(values), dtype=np.int64)
+    for i, v in enumerate(values):
+        try:
+            if v.isdigit():
+                out[i] = int(v) * scale
+            else:
+                d = Decimal(v) * scale
+                if not d.is_finite():
+                    raise InvalidOperation
+                out[i] = int(d.to_integral_value())
+        except (InvalidOperation, ValueError, OverflowError):
+            raise InputError(f"{where}:{lines[i]}: bad time value {v!r}") from None
+    return out
+
+
+def check_stamps(stamps: np.ndarray, where: str, lines: Sequence[int] | None = None) -> None:
+    """Strictly increasing stamps, else InputError naming the line (or sample index)."""
+    d = np.diff(stamps)
+    bad = np.flatnonzero(d <= 0)
+    if len(bad):
+        i = int(bad[0]) + 1
+        loc = f"{where}:{lines[i]}" if lines is not None else f"{where}: sample {i}"
+        what = "duplicated" if d[bad[0]] == 0 else "non-monotonic (goes back in time)"
+        raise InputError(f"{loc}: {what} time stamp {int(stamps[i])} ns after {int(stamps[i - 1])} ns")
+
+
+def read_table(path: Path, delimiter: str | None = None) -> tuple[list[str], list[list[str]], list[int]]:
+    """Header names, rows of cell strings and their 1-based line numbers."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise InputError(f"{path}: not a text file ({e})") from None
+    lines = text.splitlines()
+    k = 0
+    while k < len(lines) and (
+        not lines[k].strip()
+        or (lines[k].lstrip().startswith("#") and "," not in lines[k] and ";" not in lines[k] and "\t" not in lines[k])
+    ):
+        k += 1
+    if k >= len(lines):
+        raise InputError(f"{path}: empty file (no header row)")
+    header_line = lines[k].strip().lstrip("#").strip()
+    if delimiter is None:
+        delimiter = next((d for d in (",", ";", "\t") if d in header_line), None)
+    split = (lambda s: s.split()) if delimiter is None else (lambda s: [c.strip() for c in s.split(delimiter)])
+    header = [h.strip() for h in split(header_line)]
+    rows, numbers = [], []
+    for j in range(k + 1, len(lines)):
+        s = lines[j].strip()
+        if not s or s.startswith("#"):
+            continue
+        cells = split(s)
+        if len(cells) != len(header):
+            raise InputError(f"{path}:{j + 1}: {len(cells)} cells, the header has {len(header)} columns")
+        rows.append(cells)
+        numbers.append(j + 1)
+    if not rows:
+        raise InputError(f"{path}: no data rows after the header (line {k + 1})")
+    return header, rows, numbers
+
+
+def column_index(header: list[str], names: Sequence[str], path: Path, what: str) -> list[int]:
+    missing = [n for n in names if n not in header]
+    if missing:
+        close = []
+        for m in missing:
+            low = [h for h in header if h.lower() == m.lower() or re.sub(r"\W", "", h) == re.sub(r"\W", "", m)]
+            close += low
+        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        raise InputError(
+            f"{path}: line 1 header lacks {what} column(s) {', '.join(missing)}{hint}; columns are: {', '.join(header)}"
+        )
+    return [header.index(n) for n in names]
+
+
+def float_columns(
+    rows: list[list[str]], idx: list[int], path: Path, lines: list[int], what: str, allow_nan: bool = False
+) -> np.ndarray:
+    out = np.empty((len(rows), len(idx)))
+    for r, cells in enumerate(rows):
+        for c, i in enumerate(idx):
+            v = cells[i]
+            try:
+                out[r, c] = float(v) if v != "" else np.nan
+            except ValueError:
+                raise InputError(f"{path}:{lines[r]}: {what} value {v!r} is not a number") from None
+    if not allow_nan:
+        bad = ~np.isfinite(out).all(axis=1)
+        if bad.any():
+            r = int(np.flatnonzero(bad)[0])
+            raise InputError(f"{path}:{lines[r]}: NaN/missing {what} value (row {r}, sample index {r})")
+    return out
+
+
+def normalise_quats(q: np.ndarray, path: Path, lines: Sequence[int]) -> np.ndarray:
+    """Normalise finite rows (NaN where any component is missing); reject non-unit quaternions."""
+    ok = np.isfinite(q).all(axis=1)
+    q = np.where(ok[:, None], q, np.nan)
+    norm = np.linalg.norm(q, axis=1)
+    bad = ok & (np.abs(norm - 1.0) > 0.1)
+    if bad.any():
+        r = int(np.flatnonzero(bad)[0])
+        raise InputError(f"{path}:{lines[r]}: reference quaternion norm {norm[r]:.3g} is not ≈ 1")
+    return q / norm[:, None]
+
+
+def read_csv(
+    path: str | os.PathLike[str],
+    *,
+    time_col: str = DEFAULT_TIME,
+    time_unit: str = "s",
+    acc_cols: Sequence[str] = DEFAULT_ACC,
+    acc_unit: str = "m/s2",
+    gyr_cols: Sequence[str] = DEFAULT_GYR,
+    gyr_unit: str = "rad/s",
+    quat_cols: Sequence[str] | None = None,
+    quat_order: str = "wxyz",
+    mask_col: str | None = None,
+    delimiter: str | None = None,
+    name: str | None = None,
+    frame_id: str = "imu_link",
+) -> Recording:
+    """Read a generic CSV file (format in the module docstring)."""
+    path = Path(path)
+    t_scale = unit_factor("time", time_unit, TIME_UNITS)  # validate units before reading
+    a_scale = unit_factor("accelerometer", acc_unit, ACC_UNITS)
+    g_scale = unit_factor("gyroscope", gyr_unit, GYR_UNITS)
+    del t_scale
+    if quat_order not in QUAT_ORDERS:
+        raise InputError(f"unknown quaternion order {quat_order!r}; expected wxyz or xyzw")
+    for what, cols in (("accelerometer", acc_cols), ("gyroscope", gyr_cols)):
+        if len(cols) != 3:
+            raise InputError(f"{what} needs 3 column names, got {len(cols)}: {', '.join(cols)}")
+    if quat_cols is not None and len(quat_cols) != 4:
+        raise InputError(f"quaternion needs 4 column names, got {len(quat_cols)}: {', '.join(quat_cols)}")
+    header, rows, lines = read_table(path, delimiter)
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise InputError(f"{path}: duplicated column name(s) {', '.join(dup)} in the header")
+    (ti,) = column_index(header, [time_col], path, "time")
+    ai = column_index(header, list(acc_cols), path, "accelerometer")
+    gi = column_index(header, list(gyr_cols), path, "gyroscope")
+    if quat_cols is None:
+        default = DEFAULT_QUAT if quat_order == "wxyz" else (*DEFAULT_QUAT[1:], DEFAULT_QUAT[0])
+        quat_cols = default if all(c in header for c in default) else None
+    if mask_col is None and DEFAULT_MASK in header:
+        mask_col = DEFAULT_MASK
+
+    stamps = parse_time_ns([r[ti] for r in rows], time_unit, str(path), lines)
+    check_stamps(stamps, str(path), lines)
+    acc = float_columns(rows, ai, path, lines, "accelerometer") * a_scale
+    gyr = float_columns(rows, gi, path, lines, "gyroscope") * g_scale
+    quat = None
+    if quat_cols is not None:
+        qi = column_index(header, list(quat_cols), path, "quaternion")
+        q = float_columns(rows, qi, path, lines, "quaternion", allow_nan=True)
+        if quat_order == "xyzw":
+            q = q[:, [3, 0, 1, 2]]
+        quat = normalise_quats(q, path, lines)
+    mask = None
+    if mask_col is not None:
+        (mi,) = column_index(header, [mask_col], path, "score mask")
+        mask = np.empty(len(rows), dtype=bool)
+        for r, cells in enumerate(rows):
+            v = cells[mi].strip().lower()
+            if v in _TRUE:
+                mask[r] = True
+            elif v in _FALSE:
+                mask[r] = False
+            else:
+                raise InputError(f"{path}:{lines[r]}: score mask value {cells[mi]!r} is not 1/0/true/false")
+    return Recording(
+        stamps_ns=stamps,
+        acc=acc,
+        gyr=gyr,
+        quat_ref=quat,
+        score_mask=mask,
+        name=name or path.stem,
+        dataset="csv",
+        source=f"CSV file {path.name}",
+        frame_id=frame_id,
+        meta={"file": path.name, "time_unit": time_unit, "acc_unit": acc_unit, "gyr_unit": gyr_unit},
+    )
