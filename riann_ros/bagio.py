@@ -691,11 +691,16 @@ def write_estimates(
                 if key in cmap.values():
                     cmap[c.id] = next(v for k, v in cmap.items() if v == key)
                     continue
+                known = c.msgtype in typestore().types
+                use_store = known and not (c.digest and c.msgdef.data)
+                if not use_store and not (c.digest and c.msgdef.data):
+                    raise BagError(src, f"topic {c.topic}: type {c.msgtype} has no definition or hash to copy")
                 cmap[c.id] = writer.add_connection(
                     c.topic,
                     c.msgtype,
-                    msgdef=c.msgdef.data,
-                    rihs01=c.digest,
+                    typestore=typestore() if use_store else None,
+                    msgdef=None if use_store else c.msgdef.data,
+                    rihs01=None if use_store else c.digest,
                     serialization_format=getattr(c.ext, "serialization_format", "cdr"),
                     offered_qos_profiles=getattr(c.ext, "offered_qos_profiles", []),
                 )

@@ -1,0 +1,333 @@
+"""Bag layout, round trips, atomic writes and BagError cases of riann_ros.bagio (no BROAD needed)."""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from riann_ros import bagio
+from riann_ros.datasets.synthetic import generate
+from riann_ros.recording import Recording
+
+
+def _rec(n: int = 500, seed: int = 0, with_ref: bool = True) -> Recording:
+    rng = np.random.default_rng(seed)
+    stamps = 1_700_000_000_000_000_000 // 1000 + np.cumsum(rng.integers(4_000_000, 6_000_000, n))
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[rng.random(n) < 0.1] = np.nan
+    mask = np.zeros(n, dtype=bool)
+    mask[n // 5 : n // 2] = True
+    mask[3 * n // 4 :] = True
+    return Recording(
+        stamps_ns=stamps,
+        acc=rng.normal(size=(n, 3)) * 5,
+        gyr=rng.normal(size=(n, 3)),
+        quat_ref=q if with_ref else None,
+        score_mask=mask,
+        name="test_seq",
+        dataset="unit",
+        source="made by test_bagio",
+        frame_id="my_imu",
+        meta={"k": "v", "n": str(n)},
+    )
+
+
+def _same(a: Recording, b: Recording) -> None:
+    assert np.array_equal(a.stamps_ns, b.stamps_ns)
+    assert np.array_equal(a.acc, b.acc)
+    assert np.array_equal(a.gyr, b.gyr)
+    if a.quat_ref is None:
+        assert b.quat_ref is None
+    else:
+        assert np.array_equal(a.quat_ref, b.quat_ref, equal_nan=True)
+    assert np.array_equal(a.score_mask, b.score_mask)
+    assert (a.name, a.dataset, a.source, a.frame_id, a.meta) == (b.name, b.dataset, b.source, b.frame_id, b.meta)
+
+
+@pytest.mark.parametrize(
+    ("name", "storage", "compression"),
+    [
+        ("x.mcap", "mcap", None),
+        ("x.mcap", "mcap", "zstd"),
+        ("xdir", "mcap", None),
+        ("xdb", "sqlite3", None),
+        ("xdbz", "sqlite3", "zstd"),
+    ],
+)
+def test_round_trip(tmp_path: Path, name: str, storage: str, compression: str | None) -> None:
+    rec = _rec()
+    out = bagio.write_recording(tmp_path / name, rec, storage=storage, compression=compression)
+    assert out.is_file() == name.endswith(".mcap")
+    back = bagio.read_recording(out)
+    _same(rec, back)
+    assert [p.name for p in tmp_path.iterdir()] == [name]  # no temp left
+
+
+def test_no_reference_and_all_scored(tmp_path: Path) -> None:
+    rec = _rec(with_ref=False)
+    rec.score_mask[:] = True
+    back = bagio.read_recording(bagio.write_recording(tmp_path / "n.mcap", rec))
+    assert back.quat_ref is None
+    assert back.score_mask.all()
+
+
+def test_chunks_equal_whole(tmp_path: Path) -> None:
+    rec = _rec(n=1003)
+    p = bagio.write_recording(tmp_path / "c.mcap", rec)
+    chunks = list(bagio.iter_imu_chunks(p, chunk=100))
+    assert [len(c) for c in chunks] == [100] * 10 + [3]
+    _same(rec, bagio.concat(chunks))
+
+
+def test_mcap_reader_sees_topics_and_schemas(tmp_path: Path) -> None:
+    from mcap.reader import make_reader
+
+    p = bagio.write_recording(tmp_path / "m.mcap", _rec(n=100), compression="zstd")
+    with p.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert reader.get_header().profile == "ros2"
+        topics = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+        counts = {c.topic: summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()}
+        assert topics == {
+            bagio.IMU_TOPIC: "sensor_msgs/msg/Imu",
+            bagio.REF_TOPIC: "geometry_msgs/msg/QuaternionStamped",
+            bagio.SCORED_TOPIC: "std_msgs/msg/Bool",
+            bagio.INFO_TOPIC: "std_msgs/msg/String",
+        }
+        assert counts[bagio.IMU_TOPIC] == 100
+        assert all(c.message_encoding == "cdr" for c in summary.channels.values())
+        # log time = header stamp on the IMU topic
+        for _, _channel, msg in reader.iter_messages(topics=[bagio.IMU_TOPIC]):
+            stamps, _, _, frame = bagio.parse_imu([msg.data])
+            assert stamps[0] == msg.log_time
+            assert frame == "my_imu"
+
+
+def test_imu_message_fields(tmp_path: Path) -> None:
+    from rosbags.rosbag2 import Reader
+
+    rec = _rec(n=5)
+    p = bagio.write_recording(tmp_path / "f.mcap", rec)
+    ts = bagio.typestore()
+    with Reader(p) as r:
+        conns = [c for c in r.connections if c.topic == bagio.IMU_TOPIC]
+        for i, (_, t, raw) in enumerate(r.messages(connections=conns)):
+            m = ts.deserialize_cdr(raw, bagio.IMU_TYPE)
+            assert m.orientation_covariance[0] == -1.0
+            assert m.header.frame_id == "my_imu"
+            assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == t == rec.stamps_ns[i]
+            assert (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z) == tuple(rec.gyr[i])
+            assert (m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z) == tuple(rec.acc[i])
+    info = bagio.read_info(p)
+    assert info["format"] == bagio.INFO_FORMAT and info["name"] == "test_seq" and info["samples"] == 5
+
+
+def test_refuses_existing_and_force(tmp_path: Path) -> None:
+    p = bagio.write_recording(tmp_path / "e.mcap", _rec(seed=1))
+    with pytest.raises(FileExistsError, match="exists"):
+        bagio.write_recording(p, _rec(seed=2))
+    rec2 = _rec(seed=2)
+    bagio.write_recording(p, rec2, force=True)
+    _same(rec2, bagio.read_recording(p))
+    # a directory bag can be replaced, an unrelated non-empty folder never
+    d = bagio.write_recording(tmp_path / "dirbag", _rec(seed=1), storage="sqlite3")
+    bagio.write_recording(d, rec2, storage="sqlite3", force=True)
+    _same(rec2, bagio.read_recording(d))
+    other = tmp_path / "important"
+    other.mkdir()
+    (other / "thesis.tex").write_text("x")
+    with pytest.raises(FileExistsError, match="not a rosbag2 bag"):
+        bagio.write_recording(other, rec2, force=True)
+    assert (other / "thesis.tex").exists()
+
+
+@pytest.mark.parametrize("exc", [RuntimeError, KeyboardInterrupt])
+def test_failure_half_way_leaves_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, exc: type) -> None:
+    from rosbags.rosbag2 import Writer
+
+    calls = {"n": 0}
+    real = Writer.write
+
+    def flaky(self, conn, t, data):
+        calls["n"] += 1
+        if calls["n"] == 300:
+            raise exc("boom")
+        return real(self, conn, t, data)
+
+    monkeypatch.setattr(Writer, "write", flaky)
+    for name, storage in (("h.mcap", "mcap"), ("hdir", "sqlite3")):
+        calls["n"] = 0
+        with pytest.raises(exc):
+            bagio.write_recording(tmp_path / name, _rec(), storage=storage)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_failure_keeps_existing_bag_on_force(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from rosbags.rosbag2 import Writer
+
+    rec = _rec(seed=5)
+    p = bagio.write_recording(tmp_path / "k.mcap", rec)
+
+    def broken(self, conn, t, data):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(Writer, "write", broken)
+    with pytest.raises(OSError, match="disk full"):
+        bagio.write_recording(p, _rec(seed=6), force=True)
+    monkeypatch.undo()
+    _same(rec, bagio.read_recording(p))
+    assert [x.name for x in tmp_path.iterdir()] == ["k.mcap"]
+
+
+def test_write_recording_rejects_bad_recordings(tmp_path: Path) -> None:
+    rec = _rec(n=10)
+    rec.stamps_ns[4] = rec.stamps_ns[3]
+    with pytest.raises(ValueError, match="sample 4"):
+        bagio.write_recording(tmp_path / "b.mcap", rec)
+    rec = _rec(n=10)
+    rec.gyr[7, 1] = np.nan
+    with pytest.raises(ValueError, match="sample 7"):
+        bagio.write_recording(tmp_path / "b.mcap", rec)
+    with pytest.raises(ValueError, match="storage"):
+        bagio.write_recording(tmp_path / "b", _rec(n=10), storage="rosbag1")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_write_estimates(tmp_path: Path) -> None:
+    rec = _rec(n=300)
+    src = bagio.write_recording(tmp_path / "src.mcap", rec)
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (300, 1))
+    q[:, 3] = np.linspace(0, 0.5, 300)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[10] = np.nan
+    est = {"/riann/attitude": (rec.stamps_ns, q), "/vqf/attitude": (rec.stamps_ns[::2], q[::2])}
+    dst = bagio.write_estimates(src, tmp_path / "dst.mcap", est)
+    _same(rec, bagio.read_recording(dst))
+    from rosbags.rosbag2 import Reader
+
+    with Reader(dst) as r:
+        topics = {c.topic: c.msgtype for c in r.connections}
+        assert topics["/riann/attitude"] == bagio.QUAT_TYPE
+        conns = [c for c in r.connections if c.topic == "/riann/attitude"]
+        raws = [raw for _, _, raw in r.messages(connections=conns)]
+        all_t = [t for _, t, _ in r.messages()]
+    assert all_t == sorted(all_t)
+    st, back = bagio.parse_quats(raws)
+    ok = np.isfinite(q).all(axis=1)
+    assert np.array_equal(st, rec.stamps_ns[ok]) and np.array_equal(back, q[ok])
+    with pytest.raises(FileExistsError):
+        bagio.write_estimates(src, dst, est)
+    with pytest.raises(FileExistsError, match="input"):
+        bagio.write_estimates(src, src, est, force=True)
+    bagio.write_estimates(src, dst, {"/x": (rec.stamps_ns, q)}, force=True)
+    # to sqlite3 directory from an mcap file
+    d = bagio.write_estimates(src, tmp_path / "dstdir", est, storage="sqlite3")
+    _same(rec, bagio.read_recording(d))
+
+
+# ---- BagError cases -------------------------------------------------------------------------------
+
+
+def _foreign_bag(path: Path, topics: dict[str, tuple[str, list[tuple[int, object]]]], storage: str = "mcap") -> Path:
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    ts = bagio.typestore()
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=9, storage_plugin=plugin) as w:
+        for topic, (msgtype, msgs) in topics.items():
+            c = w.add_connection(topic, msgtype, typestore=ts)
+            for t, m in msgs:
+                w.write(c, t, bytes(ts.serialize_cdr(m, msgtype)))
+    return path
+
+
+def _string(text: str):
+    return bagio.typestore().types["std_msgs/msg/String"](data=text)
+
+
+def test_bag_errors(tmp_path: Path) -> None:
+    with pytest.raises(bagio.BagError, match="no such file"):
+        bagio.read_recording(tmp_path / "missing.mcap")
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"definitely not an mcap file" * 10)
+    with pytest.raises(bagio.BagError, match=r"junk\.mcap"):
+        bagio.read_recording(junk)
+    txt = tmp_path / "notes.txt"
+    txt.write_text("hello")
+    with pytest.raises(bagio.BagError, match="not a bag"):
+        bagio.read_recording(txt)
+    (tmp_path / "emptydir").mkdir()
+    with pytest.raises(bagio.BagError, match=r"metadata\.yaml"):
+        bagio.read_recording(tmp_path / "emptydir")
+
+
+def test_truncated_mcap(tmp_path: Path) -> None:
+    p = bagio.write_recording(tmp_path / "t.mcap", _rec(n=3000))
+    data = p.read_bytes()
+    for cut in (len(data) // 2, len(data) - 100, 40):
+        bad = tmp_path / f"cut{cut}.mcap"
+        bad.write_bytes(data[:cut])
+        with pytest.raises(bagio.BagError, match=f"cut{cut}.mcap"):
+            bagio.read_recording(bad)
+
+
+def test_sqlite_missing_table(tmp_path: Path) -> None:
+    d = bagio.write_recording(tmp_path / "s", _rec(n=50), storage="sqlite3")
+    (db,) = d.glob("*.db3")
+    con = sqlite3.connect(db)
+    con.execute("DROP TABLE messages")
+    con.commit()
+    con.close()
+    with pytest.raises(bagio.BagError, match=str(d.name)):
+        bagio.read_recording(d)
+
+
+def test_missing_and_wrong_imu_topic(tmp_path: Path) -> None:
+    p = _foreign_bag(tmp_path / "noimu", {"/chatter": ("std_msgs/msg/String", [(1, _string("hi"))])})
+    with pytest.raises(bagio.BagError, match="no /imu/data_raw topic"):
+        bagio.read_recording(p)
+    p = _foreign_bag(tmp_path / "wrongtype", {bagio.IMU_TOPIC: ("std_msgs/msg/String", [(1, _string("hi"))])})
+    with pytest.raises(bagio.BagError, match="std_msgs/msg/String, expected sensor_msgs/msg/Imu"):
+        bagio.read_recording(p)
+
+
+def test_foreign_bag_generic_path_and_stamp_order(tmp_path: Path) -> None:
+    """Messages of varying frame_id go through the generic deserialiser; stamps must increase."""
+    ts = bagio.typestore()
+    t_ = ts.types
+    v3 = t_["geometry_msgs/msg/Vector3"]
+
+    def imu(sec: int, frame: str):
+        return t_[bagio.IMU_TYPE](
+            header=t_["std_msgs/msg/Header"](
+                stamp=t_["builtin_interfaces/msg/Time"](sec=sec, nanosec=5), frame_id=frame
+            ),
+            orientation=t_["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=np.zeros(9),
+            angular_velocity=v3(x=0.1 * sec, y=0.0, z=0.0),
+            angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=v3(x=0.0, y=0.0, z=9.81),
+            linear_acceleration_covariance=np.zeros(9),
+        )
+
+    msgs = [(s * 10**9 + 5, imu(s, "a" * (s % 3 + 1))) for s in range(1, 6)]
+    p = _foreign_bag(tmp_path / "foreign", {bagio.IMU_TOPIC: (bagio.IMU_TYPE, msgs)})
+    rec = bagio.read_recording(p)
+    assert rec.quat_ref is None and rec.score_mask.all() and rec.name == "foreign"
+    assert np.array_equal(rec.stamps_ns, [s * 10**9 + 5 for s in range(1, 6)])
+    assert np.allclose(rec.gyr[:, 0], [0.1 * s for s in range(1, 6)])
+    # header stamps going back in time (log times increasing) → BagError naming the sample
+    msgs = [(k * 10**9, imu(s, "x")) for k, s in enumerate([1, 2, 3, 3, 4], start=1)]
+    p = _foreign_bag(tmp_path / "dup", {bagio.IMU_TOPIC: (bagio.IMU_TYPE, msgs)})
+    with pytest.raises(bagio.BagError, match="sample 3"):
+        bagio.read_recording(p)
+
+
+def test_synthetic_bag_round_trip(tmp_path: Path) -> None:
+    rec = generate(rate=100, duration=20, seed=4)
+    _same(rec, bagio.read_recording(bagio.write_recording(tmp_path / "syn.mcap", rec, compression="zstd")))
