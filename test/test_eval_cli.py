@@ -1,0 +1,267 @@
+"""riann-bag-eval end to end: bags in, table and files out, bad input, and the BROAD acceptance check."""
+
+from __future__ import annotations
+
+import importlib.resources
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_evaluation import synthetic
+
+from riann_ros import evaluation as ev
+from riann_ros.cli.evaluate import main, topic_for
+
+bagio = pytest.importorskip("riann_ros.bagio")
+
+
+def make_bag(tmp: Path, name: str, **kw) -> Path:
+    rec = synthetic(name=name, t0_ns=1_700_000_000_000_000_000, **kw)
+    return bagio.write_recording(tmp / f"{name}.mcap", rec)
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory) -> list[Path]:
+    d = tmp_path_factory.mktemp("bags")
+    return [make_bag(d, "seq_a"), make_bag(d, "seq_b", gyr_bias=(-0.01, 0.0, 0.02))]
+
+
+def test_offline_run_writes_table_and_files(bags, tmp_path, capsys):
+    out = tmp_path / "out"
+    rc = main(
+        [
+            *map(str, bags),
+            "--estimators",
+            "riann,madgwick:beta=0.033,madgwick:beta=0.1",
+            "--out",
+            str(out),
+            "--heading",
+            "-q",
+        ]
+    )
+    assert rc == 0
+    text = capsys.readouterr().out
+    for word in ("realistic", "partially-restrictive", "restrictive", "madgwick(beta=0.1)", "mean", "median", "max"):
+        assert word in text
+    for f in (
+        "results.csv",
+        "results.json",
+        "report.md",
+        "rmse_boxplots.png",
+        "rmse_boxplots.svg",
+        "error_over_time.png",
+        "error_over_time.svg",
+    ):
+        assert (out / f).is_file(), f
+    data = json.loads((out / "results.json").read_text())
+    assert len(data["results"]) == 2 * 3 * 3
+    assert data["settings"]["seed"] == 0
+    assert data["versions"]["riann_model"]["sha256"]
+    seq = {s["name"]: s for s in data["sequences"]}
+    bias = seq["seq_a"]["scenarios"]["realistic"]["bias_added_dps"]
+    np.testing.assert_allclose(bias, np.degrees(ev.random_bias(0, "seq_a")), atol=1e-5)
+    assert seq["seq_a"]["scenarios"]["restrictive"]["bias_removed_dps"] != [0.0, 0.0, 0.0]
+    row = data["results"][0]
+    assert {"rmse_deg", "heading_rmse_deg", "total_rmse_deg", "n_scored"} <= set(row)
+    assert "heading_rmse_deg" in (out / "results.csv").read_text().splitlines()[0]
+    assert "| realistic |" in (out / "report.md").read_text()
+
+
+def test_same_seed_same_numbers_parallel_or_not(bags, tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    args = ["--estimators", "madgwick", "--scenarios", "partially-restrictive", "--no-plots", "-q"]
+    assert main([*map(str, bags), *args, "--out", str(a)]) == 0
+    assert main([*map(str, bags), *args, "--out", str(b), "--jobs", "2"]) == 0
+    ra = json.loads((a / "results.json").read_text())["results"]
+    rb = json.loads((b / "results.json").read_text())["results"]
+    assert [r["rmse_deg"] for r in ra] == [r["rmse_deg"] for r in rb]
+
+
+def test_bad_inputs_are_named_and_others_still_evaluated(bags, tmp_path, capsys):
+    garbage = tmp_path / "garbage.mcap"
+    garbage.write_bytes(b"not a bag at all")
+    truncated = tmp_path / "truncated.mcap"
+    truncated.write_bytes(bags[0].read_bytes()[:5000])
+    rec = synthetic(name="noref", t0_ns=10**18)
+    rec.quat_ref = None
+    noref = bagio.write_recording(tmp_path / "noref.mcap", rec)
+    rec = synthetic(name="unscored", t0_ns=10**18)
+    rec.score_mask[:] = False
+    unscored = bagio.write_recording(tmp_path / "unscored.mcap", rec)
+    missing = tmp_path / "missing.mcap"
+    rc = main(
+        [
+            str(bags[0]),
+            str(garbage),
+            str(truncated),
+            str(noref),
+            str(unscored),
+            str(missing),
+            "--estimators",
+            "madgwick",
+            "--scenarios",
+            "realistic",
+            "-q",
+        ]
+    )
+    assert rc == 1
+    cap = capsys.readouterr()
+    assert "1 of 6 input(s) evaluated" in cap.out
+    assert "seq_a" not in cap.err
+    for p in (garbage, truncated, noref, unscored, missing):
+        assert str(p) in cap.err, p
+    assert "no reference" in cap.err
+    assert "no scored samples" in cap.err
+
+
+def test_usage_errors_exit_2(bags, capsys):
+    assert main([str(bags[0]), "--estimators", "riann,kalman"]) == 2
+    assert "unknown estimator 'kalman'" in capsys.readouterr().err
+    assert main([str(bags[0]), "--estimators", "madgwick:gain=1"]) == 2
+    assert "unknown parameter 'gain'" in capsys.readouterr().err
+    assert main([str(bags[0]), "--scenarios", "easy"]) == 2
+    assert main([str(bags[0]), "--rates", "0"]) == 2
+
+
+def test_rates_plot(bags, tmp_path):
+    out = tmp_path / "rates"
+    rc = main(
+        [
+            *map(str, bags),
+            "--estimators",
+            "madgwick",
+            "--scenarios",
+            "realistic",
+            "--rates",
+            "50,100",
+            "--out",
+            str(out),
+            "-q",
+        ]
+    )
+    assert rc == 0
+    rows = json.loads((out / "results.json").read_text())["results"]
+    assert sorted({r["rate_hz"] for r in rows}) == [50.0, 100.0]
+    assert (out / "rmse_vs_rate.png").is_file()
+
+
+def test_write_estimates(bags, tmp_path):
+    out = tmp_path / "est"
+    rc = main(
+        [
+            str(bags[0]),
+            "--estimators",
+            "riann,madgwick:beta=0.1",
+            "--scenarios",
+            "realistic",
+            "--write-estimates",
+            str(out),
+            "-q",
+        ]
+    )
+    assert rc == 0
+    dst = out / bags[0].name
+    assert dst.exists()
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([dst]) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    t1 = topic_for("realistic", "madgwick(beta=0.1)")
+    assert t1 == "/eval/realistic/madgwick_beta_0_1"
+    assert topics[t1] == "geometry_msgs/msg/QuaternionStamped"
+    assert topics["/eval/realistic/riann"] == "geometry_msgs/msg/QuaternionStamped"
+    rec = bagio.read_recording(bags[0])
+    assert counts[t1] == len(rec) - ev.first_scored_index(rec)  # realistic: from the motion onset
+    # the copy still holds the original recording
+    rec2 = bagio.read_recording(dst)
+    np.testing.assert_array_equal(rec2.stamps_ns, rec.stamps_ns)
+
+
+def test_tune_adds_the_best_filter(bags, tmp_path, capsys):
+    out = tmp_path / "tune"
+    rc = main(
+        [
+            *map(str, bags),
+            "--estimators",
+            "madgwick",
+            "--tune",
+            "madgwick:beta=0.0/0.1",
+            "--scenarios",
+            "realistic",
+            "--out",
+            str(out),
+            "--no-plots",
+            "-q",
+        ]
+    )
+    assert rc == 0
+    data = json.loads((out / "results.json").read_text())
+    assert data["tuning"][0]["best"]["params"] == {"beta": 0.1}
+    assert "madgwick(beta=0.1) tuned" in capsys.readouterr().out
+
+
+def test_live_is_reported_as_missing(bags, capsys):
+    assert main([str(bags[0]), "--live"]) == 2
+    assert "not implemented" in capsys.readouterr().err
+
+
+# -- BROAD acceptance ---------------------------------------------------------------------------------
+ACCEPT_TRIALS = ("06", "07", "21")  # fast motions: the realistic scenario separates the estimators
+
+
+def direct_onnx_rmse(rec) -> float:
+    """RMSE of the published model run directly with ONNX Runtime over the realistic-scenario arrays."""
+    import onnxruntime as ort
+
+    srec, _ = ev.make_scenario(rec, ev.REALISTIC, seed=0)
+    sess = ort.InferenceSession(
+        str(importlib.resources.files("riann") / "riann.onnx"), providers=["CPUExecutionProvider"]
+    )
+    dt = np.full((len(srec), 1), 1.0 / float(rec.meta.get("sampling_rate", rec.rate_hz)))
+    x = np.concatenate([srec.acc, srec.gyr, dt], axis=1).astype(np.float32)[None]
+    out = sess.run(["output"], {"input": x, "h0": np.zeros((2, 1, 1, 200), np.float32)})[0][0]
+    return ev.score(srec, out.astype(np.float64))["rmse_deg"]
+
+
+@pytest.mark.broad
+@pytest.mark.slow
+def test_broad_acceptance(broad_dir, tmp_path):
+    files = [p for p in sorted(broad_dir.iterdir()) if p.name[:2] in ACCEPT_TRIALS and p.suffix in (".hdf5", ".mat")]
+    assert len(files) == len(ACCEPT_TRIALS)
+    have = ev.available_estimators()
+    specs = ["riann"] + [
+        s for n, s in (("madgwick", "madgwick:beta=0.033"), ("mahony", "mahony:kp=1:ki=0.3")) if n in have
+    ]
+    out = tmp_path / "broad"
+    rc = main(
+        [
+            *map(str, files),
+            "--estimators",
+            ",".join(specs),
+            "--scenarios",
+            "realistic",
+            "--seed",
+            "0",
+            "--jobs",
+            "2",
+            "--out",
+            str(out),
+            "--no-plots",
+            "-q",
+        ]
+    )
+    assert rc == 0
+    rows = json.loads((out / "results.json").read_text())["results"]
+    riann = {r["sequence"]: r["rmse_deg"] for r in rows if r["estimator"] == "riann"}
+    from riann_ros.datasets.broad import read_broad
+
+    for f in files:
+        rec = read_broad(f)
+        assert riann[rec.name] == pytest.approx(direct_onnx_rmse(rec), abs=0.01), rec.name
+    mean_riann = np.mean(list(riann.values()))
+    for label in ("madgwick(beta=0.033)", "mahony(kp=1, ki=0.3)"):
+        other = [r["rmse_deg"] for r in rows if r["estimator"] == label]
+        if other:
+            assert mean_riann < np.mean(other), label
