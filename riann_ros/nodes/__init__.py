@@ -1,0 +1,1 @@
+"""ROS 2 nodes: a thin layer over the core (see node_base.py)."""

@@ -1,0 +1,286 @@
+"""The one ROS 2 node base behind riann_node, madgwick_node, mahony_node and vqf_node.
+
+It owns everything ROS: the ``imu/data_raw`` subscription and its QoS, parameters (node parameters
+plus every :class:`~riann_ros.estimators.base.ParamSpec` of the estimator), the ``~/reset`` service,
+publishing ``QuaternionStamped`` and ``sensor_msgs/Imu``, and ``/diagnostics``. What to do with a
+sample (dt from stamps, input checks, resets) is decided by the ROS-free
+:class:`~riann_ros.stream.EstimatorStream`, the same code the offline evaluator runs.
+
+A concrete node only names its estimator and its default output topics.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections import Counter
+from typing import Any, ClassVar
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import QuaternionStamped
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu
+from std_srvs.srv import Trigger
+
+from riann_ros import stream as st
+from riann_ros.estimators import create, estimator_class
+from riann_ros.estimators.base import ParamSpec
+
+INPUT_TOPIC = "imu/data_raw"
+QOS_CHOICES = ("sensor_data", "reliable", "best_effort")
+THROTTLE_S = 5.0  # at most one warning per rejection reason in this many seconds
+
+# Node parameters: name -> (default, description, min, max, read_only)
+NODE_PARAMS: dict[str, tuple[Any, str, float | None, float | None]] = {
+    "nominal_rate": (100.0, "Hz; dt assumed for the first sample after a (re)start, when no previous stamp exists.",
+                     1.0, 100000.0),
+    "max_dt": (0.5, "s; a stamp gap larger than this, or a jump back larger than this (bag loop, clock reset), "
+               "restarts the estimator from the next sample.", 0.001, 3600.0),
+    "max_acc": (2000.0, "m/s²; samples with a larger acceleration magnitude are rejected as implausible.",
+                1.0, 1.0e6),
+    "max_gyr": (200.0, "rad/s; samples with a larger angular rate magnitude are rejected as implausible.",
+                0.1, 1.0e6),
+    "input_qos": ("sensor_data", "Input QoS: sensor_data (best effort, connects to reliable and best-effort "
+                  "drivers), best_effort, or reliable.", None, None),
+    "input_depth": (100, "Input queue depth (keep last).", 1, 100000),
+    "output_depth": (100, "Output queue depth (keep last, reliable).", 1, 100000),
+    "roll_pitch_stddev_deg": (2.0, "deg; standard deviation written to the roll and pitch entries of the "
+                              "orientation covariance of imu/data.", 0.0, 180.0),
+    "yaw_stddev_deg": (180.0, "deg; standard deviation written to the yaw entry of the orientation covariance "
+                       "(yaw is unobservable without a magnetometer).", 0.0, 1.0e6),
+    "diagnostics_period": (1.0, "s; period of /diagnostics messages.", 0.05, 3600.0),
+}
+# node parameters that only take effect at start-up
+STARTUP_ONLY = {"input_qos", "input_depth", "output_depth", "diagnostics_period"}
+
+
+def _descriptor(description: str, lo: float | None, hi: float | None, default: Any, read_only: bool
+                ) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=description, read_only=read_only)
+    if lo is not None and hi is not None:
+        if isinstance(default, bool):
+            pass
+        elif isinstance(default, int):
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+        elif isinstance(default, float):
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    return d
+
+
+def input_qos(kind: str, depth: int) -> QoSProfile:
+    if kind not in QOS_CHOICES:
+        raise ValueError(f"input_qos must be one of {', '.join(QOS_CHOICES)}, got {kind!r}")
+    reliability = ReliabilityPolicy.RELIABLE if kind == "reliable" else ReliabilityPolicy.BEST_EFFORT
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=reliability,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+class EstimatorNode(Node):
+    """Subscribe IMU samples, estimate attitude, publish it. Subclasses set the class attributes."""
+
+    ESTIMATOR: ClassVar[str] = ""
+    NODE_NAME: ClassVar[str] = ""
+    ATTITUDE_TOPIC: ClassVar[str] = "imu/attitude"
+    IMU_TOPIC: ClassVar[str] = "imu/data"
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(self.NODE_NAME, **kwargs)
+        cls = estimator_class(self.ESTIMATOR)
+        self._specs: dict[str, ParamSpec] = {p.name: p for p in cls.PARAMS}
+        for name, (default, desc, lo, hi) in NODE_PARAMS.items():
+            self.declare_parameter(name, default, _descriptor(desc, lo, hi, default, name in STARTUP_ONLY))
+        for spec in cls.PARAMS:
+            self.declare_parameter(spec.name, spec.default,
+                                   _descriptor(spec.description, spec.min, spec.max, spec.default, not spec.runtime))
+        p = {name: self.get_parameter(name).value for name in [*NODE_PARAMS, *self._specs]}
+        est_params = {k: self._as_spec_type(k, p[k]) for k in self._specs}
+        self.stream = st.EstimatorStream(create(self.ESTIMATOR, **est_params), self._gate_config(p))
+        self._covariance = self._orientation_covariance(p["roll_pitch_stddev_deg"], p["yaw_stddev_deg"])
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(p["output_depth"]),
+                             reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+        self._pub_att = self.create_publisher(QuaternionStamped, self.ATTITUDE_TOPIC, out_qos)
+        self._pub_imu = self.create_publisher(Imu, self.IMU_TOPIC, out_qos)
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(Imu, INPUT_TOPIC, self._on_imu, input_qos(p["input_qos"], int(p["input_depth"])))
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_timer(float(p["diagnostics_period"]), self._publish_diagnostics)
+
+        self._att_msg = QuaternionStamped()
+        self._last_warn: dict[str, float] = {}
+        self._period_start = time.monotonic()
+        self._period_in = 0
+        self._period_rejected: Counter[str] = Counter()
+        self._proc_us: list[float] = []
+        self._frame_id = ""
+        self.get_logger().info(
+            f"{self.ESTIMATOR} estimator on '{self.resolve_topic_name(INPUT_TOPIC)}' -> "
+            f"'{self.resolve_topic_name(self.ATTITUDE_TOPIC)}', '{self.resolve_topic_name(self.IMU_TOPIC)}'; "
+            f"parameters: " + ", ".join(f"{k}={v}" for k, v in p.items())
+        )
+
+    # -- parameters -----------------------------------------------------------------------------
+    def _as_spec_type(self, name: str, value: Any) -> Any:
+        spec = self._specs[name]
+        if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        return value
+
+    @staticmethod
+    def _gate_config(p: dict[str, Any]) -> st.GateConfig:
+        return st.GateConfig(nominal_rate=float(p["nominal_rate"]), max_dt=float(p["max_dt"]),
+                             max_acc=float(p["max_acc"]), max_gyr=float(p["max_gyr"]))
+
+    @staticmethod
+    def _orientation_covariance(rp_deg: float, yaw_deg: float) -> list[float]:
+        rp = math.radians(rp_deg) ** 2
+        yaw = math.radians(yaw_deg) ** 2
+        return [rp, 0.0, 0.0, 0.0, rp, 0.0, 0.0, 0.0, yaw]
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        est_changes: dict[str, Any] = {}
+        gate = dict(self.stream.gate.config.__dict__)
+        cov = None
+        try:
+            for prm in params:
+                if prm.name in self._specs:
+                    spec = self._specs[prm.name]
+                    if not spec.runtime:
+                        return SetParametersResult(successful=False, reason=f"{prm.name} is read-only at run time")
+                    est_changes[prm.name] = spec.validate(self._as_spec_type(prm.name, prm.value))
+                elif prm.name in ("nominal_rate", "max_dt", "max_acc", "max_gyr"):
+                    gate[prm.name] = float(prm.value)
+                elif prm.name in ("roll_pitch_stddev_deg", "yaw_stddev_deg"):
+                    cur = {n: self.get_parameter(n).value for n in ("roll_pitch_stddev_deg", "yaw_stddev_deg")}
+                    cur[prm.name] = float(prm.value)
+                    cov = self._orientation_covariance(cur["roll_pitch_stddev_deg"], cur["yaw_stddev_deg"])
+            new_gate = st.GateConfig(**gate)
+            if est_changes:
+                self.stream.estimator.set_params(**est_changes)
+        except (ValueError, TypeError) as e:
+            return SetParametersResult(successful=False, reason=str(e))
+        self.stream.gate.config = new_gate
+        if cov is not None:
+            self._covariance = cov
+        if est_changes or cov is not None:
+            self.get_logger().info("parameters changed: " + ", ".join(f"{p.name}={p.value}" for p in params))
+        return SetParametersResult(successful=True)
+
+    # -- data path ------------------------------------------------------------------------------
+    def _on_imu(self, msg: Imu) -> None:
+        t0 = time.perf_counter_ns()
+        stamp = msg.header.stamp
+        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        la, av = msg.linear_acceleration, msg.angular_velocity
+        acc = (la.x, la.y, la.z)
+        gyr = (av.x, av.y, av.z)
+        receive_ns = self.get_clock().now().nanoseconds if stamp_ns == 0 else None
+        self._period_in += 1
+        q, r = self.stream.process(stamp_ns, acc, gyr, receive_ns)
+        for w in r.warnings:
+            self.get_logger().warning(st.WARNING_TEXT[w])
+        if r.reset in (st.GAP, st.CLOCK_JUMP):
+            self.get_logger().info(f"{r.reset.replace('_', ' ')} at stamp {r.stamp_ns * 1e-9:.6f} s: estimator "
+                                   "restarted, re-initialised from this sample")
+        if q is None:
+            self._period_rejected[r.reason or "?"] += 1
+            self._warn_throttled(r.reason or "?", f"sample rejected ({r.reason}) at stamp {r.stamp_ns * 1e-9:.6f} s")
+            return
+        if stamp_ns == 0:  # publish with the receive time we used
+            stamp.sec, stamp.nanosec = divmod(r.stamp_ns, 1_000_000_000)
+        self._frame_id = msg.header.frame_id
+        att = self._att_msg
+        att.header = msg.header
+        o = att.quaternion
+        o.w, o.x, o.y, o.z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+        self._pub_att.publish(att)
+        msg.orientation = o
+        msg.orientation_covariance = self._covariance
+        self._pub_imu.publish(msg)
+        self._proc_us.append((time.perf_counter_ns() - t0) * 1e-3)
+
+    def _warn_throttled(self, key: str, text: str) -> None:
+        now = time.monotonic()
+        if now - self._last_warn.get(key, -math.inf) >= THROTTLE_S:
+            self._last_warn[key] = now
+            self.get_logger().warning(text + " (throttled: one message per reason every 5 s; counts in /diagnostics)")
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self.stream.reset()
+        self.get_logger().info("reset requested: estimator state cleared")
+        response.success = True
+        response.message = f"{self.ESTIMATOR} estimator reset; re-initialising from the next sample"
+        return response
+
+    # -- diagnostics ----------------------------------------------------------------------------
+    def _publish_diagnostics(self) -> None:
+        now = time.monotonic()
+        period = max(now - self._period_start, 1e-9)
+        gate = self.stream.gate
+        dts = gate.pop_dt_stats()
+        proc = np.asarray(self._proc_us)
+        rate = self._period_in / period
+        status = DiagnosticStatus()
+        status.name = f"{self.get_name()}: {self.ESTIMATOR} attitude estimator"
+        status.hardware_id = self._frame_id
+        if self._period_in == 0:
+            status.level, status.message = DiagnosticStatus.WARN, "no input on " + self.resolve_topic_name(INPUT_TOPIC)
+        elif sum(self._period_rejected.values()):
+            status.level = DiagnosticStatus.WARN
+            status.message = "samples rejected: " + ", ".join(f"{k}={v}" for k, v in self._period_rejected.items())
+        else:
+            status.level, status.message = DiagnosticStatus.OK, "ok"
+        values = {
+            "input rate (Hz)": f"{rate:.2f}",
+            "dt min (ms)": f"{dts.get('min', math.nan) * 1e3:.3f}",
+            "dt mean (ms)": f"{dts.get('mean', math.nan) * 1e3:.3f}",
+            "dt max (ms)": f"{dts.get('max', math.nan) * 1e3:.3f}",
+            "dt std (ms)": f"{dts.get('std', math.nan) * 1e3:.3f}",
+            "samples accepted (total)": str(gate.accepted),
+            "processing time mean (us)": f"{proc.mean():.1f}" if len(proc) else "nan",
+            "processing time p99 (us)": f"{np.percentile(proc, 99):.1f}" if len(proc) else "nan",
+            "processing time max (us)": f"{proc.max():.1f}" if len(proc) else "nan",
+        }
+        for reason in st.REJECT_REASONS:
+            values[f"rejected {reason} (total)"] = str(gate.rejected[reason])
+        for cause in (st.GAP, st.CLOCK_JUMP):
+            values[f"restarts {cause} (total)"] = str(gate.resets[cause])
+        status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [status]
+        self._pub_diag.publish(arr)
+        self._period_start = now
+        self._period_in = 0
+        self._period_rejected.clear()
+        self._proc_us = []
+
+
+def run(node_cls: type[EstimatorNode], args: list[str] | None = None) -> int:
+    """Entry point shared by all node executables: init, spin until Ctrl-C / shutdown, clean up."""
+    rclpy.init(args=args if args is not None else sys.argv)
+    node = None
+    try:
+        node = node_cls()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception as e:  # start-up errors: a clear message, non-zero exit
+        print(f"{node_cls.NODE_NAME}: error: {e}", file=sys.stderr)
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0

@@ -1,0 +1,20 @@
+"""riann_node: RIANN neural network (no tuning) attitude from imu/data_raw (all behaviour lives in node_base)."""
+
+from __future__ import annotations
+
+from riann_ros.nodes.node_base import EstimatorNode, run
+
+
+class RiannNode(EstimatorNode):
+    ESTIMATOR = "riann"
+    NODE_NAME = "riann_node"
+    ATTITUDE_TOPIC = "imu/attitude"
+    IMU_TOPIC = "imu/data"
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(RiannNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

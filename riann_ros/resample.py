@@ -1,0 +1,41 @@
+"""Resampling of recordings to another rate, as in the paper (ROS-free).
+
+IMU signals: FFT-based (``scipy.signal.resample``), acc and gyr independently; the reference
+quaternion: slerp between the two neighbouring samples (NaN where either neighbour is missing); the
+score mask: nearest sample.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import resample as fft_resample
+
+from riann_ros import quaternion as quat
+from riann_ros.recording import Recording
+
+
+def resample_recording(rec: Recording, rate_hz: float) -> Recording:
+    """``rec`` resampled to ``rate_hz`` over the same time span (uniform stamps from the first one)."""
+    if rate_hz <= 0:
+        raise ValueError(f"rate must be positive, got {rate_hz}")
+    f0 = rec.rate_hz
+    n0 = len(rec)
+    n1 = max(2, round(n0 * rate_hz / f0))
+    t0 = rec.t
+    t1 = np.arange(n1) / rate_hz
+    acc = fft_resample(rec.acc, n1, axis=0)
+    gyr = fft_resample(rec.gyr, n1, axis=0)
+    pos = np.clip(np.interp(t1, t0, np.arange(n0)), 0, n0 - 1)
+    i0 = np.minimum(np.floor(pos).astype(int), n0 - 2)
+    s = pos - i0
+    ref = None
+    if rec.quat_ref is not None:
+        a, b = rec.quat_ref[i0], rec.quat_ref[i0 + 1]
+        ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+        ref = np.full((n1, 4), np.nan)
+        ref[ok] = quat.slerp(a[ok], b[ok], s[ok])
+    mask = rec.score_mask[np.clip(np.round(pos).astype(int), 0, n0 - 1)]
+    stamps = rec.stamps_ns[0] + np.round(t1 * 1e9).astype(np.int64)
+    meta = dict(rec.meta, resampled_from_hz=repr(f0), sampling_rate=repr(rate_hz))
+    return Recording(stamps_ns=stamps, acc=acc, gyr=gyr, quat_ref=ref, score_mask=mask, name=rec.name,
+                     dataset=rec.dataset, source=rec.source, frame_id=rec.frame_id, meta=meta)

@@ -1,0 +1,109 @@
+"""Shared fixtures: DDS isolation, BROAD access, starting node executables."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+# DDS traffic stays on this machine and in a domain of this test session's own, so concurrent runs
+# (CI, other developers, the Makefile's demo) never see each other.
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("RIANN_TEST_DOMAIN_ID", str(100 + os.getpid() % 100))
+os.environ["ROS_DOMAIN_ID"] = os.environ["RIANN_TEST_DOMAIN_ID"]
+os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+
+from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad
+from riann_ros.recording import Recording
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+
+@pytest.fixture(scope="session")
+def broad_dir() -> Path:
+    d = find_broad_dir()
+    if d is None:
+        pytest.skip("BROAD trials not found (set RIANN_BROAD_DIR or place them in ../shared/datasets/broad)")
+    return d
+
+
+@pytest.fixture(scope="session")
+def broad_trial(broad_dir: Path):
+    """Load a BROAD trial by its two-digit number (cached)."""
+    cache: dict[str, Recording] = {}
+
+    def load(number: str) -> Recording:
+        if number not in cache:
+            files = [p for p in broad_files(broad_dir) if p.name.startswith(number + "_")]
+            if not files:
+                pytest.skip(f"BROAD trial {number} not in {broad_dir}")
+            cache[number] = read_broad(files[0])
+        return cache[number]
+
+    return load
+
+
+def executable(name: str) -> Path:
+    """A console script installed beside the running Python (the venv's bin)."""
+    p = BIN / name
+    if not p.exists():
+        found = shutil.which(name)
+        if found is None:
+            pytest.fail(f"{name} is not installed (run make setup)")
+        p = Path(found)
+    return p
+
+
+class NodeProcess:
+    """A node executable running as a child process; its output is kept for assertions."""
+
+    def __init__(self, cmd: list[str], log: Path) -> None:
+        self.log = log
+        self._fh = log.open("w")
+        self.proc = subprocess.Popen(cmd, stdout=self._fh, stderr=subprocess.STDOUT, env=os.environ.copy())
+
+    def output(self) -> str:
+        self._fh.flush()
+        return self.log.read_text()
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(2)  # SIGINT, like Ctrl-C
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._fh.close()
+        return self.proc.returncode
+
+
+@pytest.fixture
+def start_node(tmp_path: Path) -> Iterator:
+    procs: list[NodeProcess] = []
+
+    def start(name: str, *ros_args: str, cmd: list[str] | None = None) -> NodeProcess:
+        full = (cmd or [str(executable(name))]) + (["--ros-args", *ros_args] if ros_args else [])
+        p = NodeProcess(full, tmp_path / f"{name}-{len(procs)}.log")
+        procs.append(p)
+        return p
+
+    yield start
+    for p in procs:
+        p.stop()
+
+
+def wait_for(cond, timeout: float, what: str, period: float = 0.01) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return
+        time.sleep(period)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")

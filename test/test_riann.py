@@ -1,0 +1,131 @@
+"""The RIANN estimator core: streaming = batch, accuracy on BROAD, rate adaptation."""
+
+from __future__ import annotations
+
+import importlib.resources
+
+import numpy as np
+import onnxruntime as ort
+import pytest
+
+from riann_ros import quaternion as quat
+from riann_ros.estimators import create
+from riann_ros.estimators.riann import RiannEstimator, default_model_path
+from riann_ros.metrics import rmse_deg
+from riann_ros.resample import resample_recording
+
+
+def test_weights_come_from_the_riann_package():
+    assert default_model_path() == importlib.resources.files("riann") / "riann.onnx"
+    assert default_model_path().is_file()
+
+
+def test_unknown_parameter_and_bad_model_path_are_rejected(tmp_path):
+    with pytest.raises(ValueError, match="unknown parameter"):
+        create("riann", beta=0.1)
+    with pytest.raises(FileNotFoundError):
+        create("riann", model_path=str(tmp_path / "missing.onnx"))
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(b"not a model")
+    with pytest.raises(Exception):  # noqa: B017 - onnxruntime's own error type
+        create("riann", model_path=str(bad))
+
+
+def test_rest_gives_level_attitude_and_unit_quaternions():
+    est = create("riann")
+    n = 400
+    acc = np.tile([0.0, 0.0, 9.81], (n, 1))
+    q = est.update_batch(acc, np.zeros((n, 3)), np.full(n, 0.005))
+    assert np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-9)
+    err = np.degrees(quat.inclination_error(quat.IDENTITY, q[-1]))
+    assert err < 1.0
+
+
+def test_tilted_rest_is_recognised():
+    est = create("riann")
+    q_true = quat.from_rotvec([np.radians(30.0), 0.0, 0.0])
+    acc = quat.rotate(quat.conjugate(q_true), [0.0, 0.0, 9.81])  # gravity reaction in the sensor frame
+    n = 600
+    q = est.update_batch(np.tile(acc, (n, 1)), np.zeros((n, 3)), np.full(n, 0.005))
+    assert np.degrees(quat.inclination_error(q_true, q[-1])) < 2.0
+
+
+def test_streaming_equals_batch_on_broad(broad_trial):
+    rec = broad_trial("02").slice(0, 4000)
+    est = create("riann")
+    qb = est.update_batch(rec.acc, rec.gyr, rec.dt)
+    est.reset()
+    qs = np.array([est.update(a, g, d) for a, g, d in zip(rec.acc, rec.gyr, rec.dt, strict=True)])
+    assert np.abs(qs - qb).max() < 1e-5
+    # batch continues from the state left by an earlier call
+    est.reset()
+    q1 = est.update_batch(rec.acc[:1500], rec.gyr[:1500], rec.dt[:1500])
+    q2 = est.update_batch(rec.acc[1500:], rec.gyr[1500:], rec.dt[1500:])
+    assert np.abs(np.vstack([q1, q2]) - qb).max() < 1e-5
+
+
+def test_reset_clears_the_hidden_state(broad_trial):
+    rec = broad_trial("02").slice(20000, 21000)
+    est = create("riann")
+    a = est.update_batch(rec.acc, rec.gyr, rec.dt)
+    b = est.update_batch(rec.acc, rec.gyr, rec.dt)
+    est.reset()
+    c = est.update_batch(rec.acc, rec.gyr, rec.dt)
+    assert np.abs(a - c).max() < 1e-9
+    assert np.abs(a - b).max() > 1e-4  # without reset the state carries over
+
+
+def test_batch_equals_a_direct_onnxruntime_run(broad_trial):
+    rec = broad_trial("07")
+    sess = ort.InferenceSession(str(default_model_path()))
+    x = np.column_stack([rec.acc, rec.gyr, rec.dt]).astype(np.float32)[None]
+    out, _ = sess.run(None, {"input": x, "h0": np.zeros((2, 1, 1, 200), np.float32)})
+    q = create("riann").update_batch(rec.acc, rec.gyr, rec.dt)
+    ref = out[0] / np.linalg.norm(out[0], axis=1, keepdims=True)
+    assert np.abs(q - ref).max() < 1e-5
+
+
+@pytest.mark.slow
+def test_inclination_rmse_on_all_broad_trials(broad_dir, broad_trial):
+    from riann_ros.datasets.broad import broad_files
+
+    est = create("riann")
+    rmses = {}
+    for f in broad_files(broad_dir):
+        rec = broad_trial(f.name[:2])
+        est.reset()
+        rmses[f.name] = rmse_deg(rec.quat_ref, est.update_batch(rec.acc, rec.gyr, rec.dt), rec.score_mask)
+    assert all(0.2 < v < 3.0 for v in rmses.values()), rmses
+    if len(rmses) == 12:  # the 12-trial subset: measured mean 1.03 deg
+        assert 1.0 <= np.mean(list(rmses.values())) <= 2.5, rmses
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("trial", ["02", "07", "15"])
+def test_rates_outside_the_trained_range_stay_accurate(broad_trial, trial):
+    rec = broad_trial(trial)
+    native = rmse_deg(rec.quat_ref, create("riann").update_batch(rec.acc, rec.gyr, rec.dt), rec.score_mask)
+    fast = resample_recording(rec, 1000.0)
+    slow = resample_recording(rec, 25.0)
+    e_fast = rmse_deg(fast.quat_ref, create("riann").update_batch(fast.acc, fast.gyr, fast.dt), fast.score_mask)
+    e_slow = rmse_deg(slow.quat_ref, create("riann").update_batch(slow.acc, slow.gyr, slow.dt), slow.score_mask)
+    assert e_fast <= 1.2 * native, (native, e_fast)
+    assert e_slow <= 2.0 * native, (native, e_slow)
+    # and the adaptation is what makes the difference: fed straight in, 1000 Hz is far worse
+    raw = create("riann", rate_adaptation=False)
+    e_raw = rmse_deg(fast.quat_ref, raw.update_batch(fast.acc, fast.gyr, fast.dt), fast.score_mask)
+    assert e_raw > 3 * native
+
+
+def test_rate_adaptation_streaming_equals_batch_with_mixed_rates():
+    rng = np.random.default_rng(1)
+    n = 600
+    dt = rng.choice([0.001, 0.0015, 0.005, 0.01, 0.04, 0.1], size=n)
+    acc = np.array([0.0, 0.0, 9.81]) + rng.normal(0, 0.5, (n, 3))
+    gyr = rng.normal(0, 0.3, (n, 3))
+    est = RiannEstimator()
+    qb = est.update_batch(acc, gyr, dt)
+    est.reset()
+    qs = np.array([est.update(acc[i], gyr[i], dt[i]) for i in range(n)])
+    assert np.abs(qs - qb).max() < 1e-5
+    assert np.allclose(np.linalg.norm(qb, axis=1), 1.0)
