@@ -1,0 +1,212 @@
+"""EuRoC/ASL folders and generic CSV files written by the tests themselves; bad-input messages."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from riann_ros import bagio
+from riann_ros import quaternion as quat
+from riann_ros.datasets import detect_format, read_any
+from riann_ros.datasets.csvfile import InputError, read_csv
+from riann_ros.datasets.euroc import interpolate, read_euroc
+
+IMU_HEADER = (
+    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"
+)
+GT_HEADER = (
+    "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], "
+    "v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1]"
+)
+T0 = 1403636579758555392  # an EuRoC-like epoch stamp (does not fit a float64 exactly)
+
+
+def _yaw(a: np.ndarray) -> np.ndarray:
+    return np.stack([np.cos(a / 2), 0 * a, 0 * a, np.sin(a / 2)], axis=1)
+
+
+def _euroc(tmp_path: Path, n: int = 200, gt: bool = True) -> tuple[Path, np.ndarray, np.ndarray]:
+    root = tmp_path / "MH_test"
+    imu = root / "mav0" / "imu0"
+    imu.mkdir(parents=True)
+    stamps = T0 + np.arange(n, dtype=np.int64) * 5_000_000  # 200 Hz
+    rng = np.random.default_rng(0)
+    data = rng.normal(size=(n, 6))
+    lines = [IMU_HEADER] + [f"{s},{','.join(repr(float(v)) for v in row)}" for s, row in zip(stamps, data, strict=True)]
+    (imu / "data.csv").write_text("\n".join(lines) + "\n")
+    if gt:
+        g = root / "mav0" / "state_groundtruth_estimate0"
+        g.mkdir(parents=True)
+        gt_st = T0 + 50_000_000 + np.arange(0, 150) * 5_000_000 + 1_000_000  # starts 50 ms late, offset 1 ms
+        q = _yaw(np.linspace(0, 1.0, len(gt_st)))
+        rows = [GT_HEADER] + [
+            f"{s},0,0,0," + ",".join(repr(float(v)) for v in q[i]) + ",0,0,0" for i, s in enumerate(gt_st)
+        ]
+        (g / "data.csv").write_text("\n".join(rows) + "\n")
+    return root, stamps, data
+
+
+def test_euroc_folder(tmp_path: Path) -> None:
+    root, stamps, data = _euroc(tmp_path)
+    assert detect_format(root) == "euroc"
+    rec = read_any(root)
+    assert np.array_equal(rec.stamps_ns, stamps)
+    assert np.array_equal(rec.gyr, data[:, :3]) and np.array_equal(rec.acc, data[:, 3:])
+    gt_t0, gt_t1 = T0 + 51_000_000, T0 + 51_000_000 + 149 * 5_000_000
+    inside = (stamps >= gt_t0) & (stamps <= gt_t1)
+    assert np.isnan(rec.quat_ref[~inside]).all() and np.isfinite(rec.quat_ref[inside]).all()
+    # yaw is linear in time, so slerp gives exactly the yaw at the IMU stamps
+    yaw = (stamps[inside] - gt_t0) / (gt_t1 - gt_t0) * 1.0
+    assert np.allclose(rec.quat_ref[inside], _yaw(yaw), atol=1e-12)
+    # round trip through a bag
+    back = bagio.read_recording(bagio.write_recording(tmp_path / "e.mcap", rec))
+    assert np.array_equal(back.quat_ref, rec.quat_ref, equal_nan=True) and np.array_equal(back.stamps_ns, stamps)
+
+
+def test_euroc_tum_ground_truth_and_no_gt(tmp_path: Path) -> None:
+    root, _, _ = _euroc(tmp_path, gt=False)
+    assert read_euroc(root).quat_ref is None
+    tum = tmp_path / "gt.txt"
+    t_ns = T0 + np.arange(0, 200, 10) * 5_000_000
+    t = [f"{int(x) // 10**9}.{int(x) % 10**9:09d}" for x in t_ns]  # exact decimal seconds
+    q = _yaw(np.linspace(0, 0.5, len(t)))
+    lines = ["# timestamp tx ty tz qx qy qz qw"] + [
+        f"{ti} 1 2 3 " + " ".join(repr(float(v)) for v in qi[[1, 2, 3, 0]]) for ti, qi in zip(t, q, strict=True)
+    ]
+    tum.write_text("\n".join(lines) + "\n")
+    rec = read_euroc(root, ground_truth=tum)
+    ok = np.isfinite(rec.quat_ref).all(axis=1)
+    assert ok.sum() >= 180 and np.isnan(rec.quat_ref[-5:]).all()
+    assert np.allclose(rec.quat_ref[::10][:19], q[:19], atol=1e-12)  # exact at the ground-truth stamps
+    assert quat.total_error(rec.quat_ref[ok][-1:], q[-1:])[0] < 1e-9
+
+
+def test_euroc_bad_inputs(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="not an EuRoC"):
+        read_euroc(tmp_path)
+    root, _, _ = _euroc(tmp_path, n=20, gt=False)
+    f = root / "mav0" / "imu0" / "data.csv"
+    text = f.read_text().splitlines()
+    f.write_text("\n".join([text[0].replace("w_RS_S_y", "w_RS_S_Y"), *text[1:]]) + "\n")
+    with pytest.raises(InputError, match=r"data\.csv: line 1 header lacks column\(s\) w_RS_S_y"):
+        read_euroc(root)
+    text[5], text[6] = text[6], text[5]
+    f.write_text("\n".join(text) + "\n")
+    with pytest.raises(InputError, match=r"data\.csv:7: non-monotonic"):
+        read_euroc(root)
+
+
+def test_interpolate_gaps() -> None:
+    gt = np.array([0, 10, 20, 500, 510], dtype=np.int64) * 1_000_000
+    q = _yaw(np.array([0.0, 0.1, 0.2, 0.3, 0.4]))
+    st = np.array([-5, 0, 5, 20, 100, 505, 510, 600], dtype=np.int64) * 1_000_000
+    out = interpolate(gt, q, st, max_gap_s=0.1)
+    ok = np.isfinite(out).all(axis=1)
+    assert ok.tolist() == [False, True, True, True, False, True, True, False]
+    assert np.allclose(out[2], _yaw(np.array([0.05]))[0])
+
+
+# ---- generic CSV -----------------------------------------------------------------------------------
+
+GOOD = "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,qw,qx,qy,qz,scored\n"
+
+
+def _write(tmp_path: Path, text: str, name: str = "in.csv") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_csv_defaults_and_round_trip(tmp_path: Path) -> None:
+    rows = [GOOD.strip()]
+    for k in range(20):
+        q = "1,0,0,0" if k != 5 else ",,,"
+        rows.append(f"{1700000000 + k / 100:.2f},0.1,0.2,9.8,0.01,0.02,{k * 0.1!r},{q},{int(k >= 10)}")
+    p = _write(tmp_path, "\n".join(rows) + "\n")
+    assert detect_format(p) == "csv"
+    rec = read_csv(p)
+    assert rec.stamps_ns[0] == 1_700_000_000_000_000_000 and rec.stamps_ns[3] == 1_700_000_000_030_000_000
+    assert np.isnan(rec.quat_ref[5]).all() and np.isfinite(np.delete(rec.quat_ref, 5, axis=0)).all()
+    assert rec.score_mask.tolist() == [False] * 10 + [True] * 10
+    back = bagio.read_recording(bagio.write_recording(tmp_path / "c.mcap", rec))
+    assert np.array_equal(back.gyr, rec.gyr) and np.array_equal(back.quat_ref, rec.quat_ref, equal_nan=True)
+    assert np.array_equal(back.score_mask, rec.score_mask)
+
+
+def test_csv_units(tmp_path: Path) -> None:
+    p = _write(tmp_path, "T\tax\tay\taz\tgx\tgy\tgz\n1000\t0\t0\t1\t90\t0\t0\n2000\t0\t0\t-1\t0\t180\t0\n")
+    opts = {"time_col": "T", "acc_cols": ("ax", "ay", "az"), "gyr_cols": ("gx", "gy", "gz")}
+    for unit, step in (("ns", 1000), ("us", 10**6), ("ms", 10**9)):
+        rec = read_csv(p, time_unit=unit, acc_unit="g", gyr_unit="deg/s", **opts)
+        assert rec.stamps_ns[1] - rec.stamps_ns[0] == step
+    assert np.allclose(rec.acc[:, 2], [9.80665, -9.80665])
+    assert np.allclose(rec.gyr[:, :2], [[np.pi / 2, 0], [0, np.pi]])
+    assert rec.quat_ref is None and rec.score_mask.all()
+
+
+@pytest.mark.parametrize(
+    ("text", "opts", "pattern"),
+    [
+        (
+            "t,acc_x,acc_y,acc_z,gyr_x,gyr_y\n0,0,0,1,0,0\n",
+            {},
+            r"in\.csv: line 1 header lacks gyroscope column\(s\) gyr_z",
+        ),
+        ("time,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n", {}, r"lacks time column\(s\) t;"),
+        ("t,Acc_X,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n", {}, r"did you mean Acc_X"),
+        (
+            "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n",
+            {"quat_cols": ("w", "x", "y", "z")},
+            r"quaternion column\(s\) w, x, y, z",
+        ),
+        (
+            "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n1,0,0,1,0,0,0\n0.5,0,0,1,0,0,0\n",
+            {},
+            r"in\.csv:4: non-monotonic",
+        ),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n0,0,0,1,0,0,0\n", {}, r"in\.csv:3: duplicated"),
+        (
+            "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n1,nan,0,1,0,0,0\n",
+            {},
+            r"in\.csv:3: NaN/missing accelerometer value \(row 1, sample index 1\)",
+        ),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n1,0,0,1,,0,0\n", {}, r"in\.csv:3: NaN/missing gyro"),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n1,0,0,1,abc,0,0\n", {}, r"in\.csv:3: .*'abc'"),
+        (
+            "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n",
+            {"time_unit": "fortnight"},
+            r"unknown time unit 'fortnight'",
+        ),
+        (
+            "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n",
+            {"acc_unit": "ft/s2"},
+            r"unknown accelerometer unit",
+        ),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n", {"gyr_unit": "rpm"}, r"unknown gyroscope unit"),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0\n", {}, r"in\.csv:2: 6 cells, the header has 7"),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n", {}, r"no data rows"),
+        ("", {}, r"empty file"),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,qw,qx,qy,qz\n0,0,0,1,0,0,0,2,0,0,0\n", {}, r"in\.csv:2: .*norm 2"),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,scored\n0,0,0,1,0,0,0,maybe\n", {}, r"in\.csv:2: score mask"),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\nx1,0,0,1,0,0,0\n", {}, r"in\.csv:2: bad time value 'x1'"),
+        ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,t\n0,0,0,1,0,0,0,0\n", {}, r"duplicated column name\(s\) t"),
+    ],
+)
+def test_csv_bad_inputs(tmp_path: Path, text: str, opts: dict, pattern: str) -> None:
+    p = _write(tmp_path, text)
+    with pytest.raises(InputError, match=pattern):
+        read_csv(p, **opts)
+
+
+def test_detect_format(tmp_path: Path) -> None:
+    assert detect_format(_write(tmp_path, "", "x.hdf5")) == "broad"
+    assert detect_format(_write(tmp_path, "", "x.mat")) == "broad"
+    with pytest.raises(ValueError, match="--format"):
+        detect_format(_write(tmp_path, "", "x.bin"))
+    with pytest.raises(ValueError, match="--format"):
+        detect_format(tmp_path)
+    with pytest.raises(FileNotFoundError):
+        detect_format(tmp_path / "nothing.csv")
