@@ -1,0 +1,8 @@
+#!/usr/bin/env bash
+# Regenerate the example bags in bags/ (run from the repository root; needs the .venv from `make setup`).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+CONVERT="${CONVERT:-.venv/bin/riann-bag-convert}"
+$CONVERT --format synthetic --motion combined    --rate 200 --duration 60 --seed 1 --compression zstd --force -o bags/synthetic_combined_200hz.mcap
+$CONVERT --format synthetic --motion rotation    --rate 100 --duration 60 --seed 2 --compression zstd --force -o bags/synthetic_rotation_100hz.mcap
+$CONVERT --format synthetic --motion translation --rate 200 --duration 60 --seed 3 --compression zstd --force -o bags/synthetic_translation_200hz.mcap
