@@ -51,6 +51,7 @@ SCENARIOS = (RESTRICTIVE, PARTIAL, REALISTIC)
 BIAS_STD_DPS = 0.5  # °/s, paper: N(0, 0.5 °/s) per axis
 STAMP_OFFSET_NS = 1_000_000_000  # added when a recording starts at stamp 0 (the gate rejects stamp 0)
 BAG_SUFFIXES = (".mcap", ".db3")
+SERIES_POINTS = 6000  # points per curve kept for the error-over-time plot
 BROAD_SUFFIXES = (".hdf5", ".h5", ".mat")
 
 
@@ -248,45 +249,15 @@ def make_scenario(rec: Recording, scenario: str, seed: int = 0) -> tuple[Recordi
     return out, info
 
 
-def slerp_reference(t_src: NDArray, q_src: NDArray, t_new: NDArray) -> NDArray[np.float64]:
-    """Reference quaternions at ``t_new`` by slerp between neighbours; NaN if either neighbour is NaN
-    or ``t_new`` lies outside ``t_src``."""
-    n = len(t_src)
-    j = np.clip(np.searchsorted(t_src, t_new, side="right") - 1, 0, max(n - 2, 0))
-    if n < 2:
-        return np.full((len(t_new), 4), np.nan)
-    t0, t1 = t_src[j], t_src[j + 1]
-    s = np.clip((t_new - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0, 1.0)
-    q0, q1 = q_src[j], q_src[j + 1]
-    ok = np.isfinite(q0).all(axis=1) & np.isfinite(q1).all(axis=1) & (t_new >= t_src[0]) & (t_new <= t_src[-1])
-    out = np.full((len(t_new), 4), np.nan)
-    if ok.any():
-        out[ok] = quat.slerp(q0[ok], q1[ok], s[ok])
-    return out
-
-
 def resample(rec: Recording, rate: float) -> Recording:
-    """The recording at ``rate`` Hz: FFT resampling (``scipy.signal.resample``) of acc and gyr over the
-    whole sequence (as in the paper), slerp of the reference, nearest neighbour for the score mask."""
-    from scipy.signal import resample as fft_resample
+    """The recording at ``rate`` Hz (:func:`riann_ros.resample.resample_recording`, shared with the rest of
+    the project): FFT resampling (``scipy.signal.resample``) of acc and gyr over the whole sequence (as in
+    the paper), slerp of the reference, nearest neighbour for the score mask."""
+    from riann_ros.resample import resample_recording
 
     if not (rate > 0 and math.isfinite(rate)):
         raise ValueError(f"rate must be positive, got {rate}")
-    n = len(rec)
-    duration = (rec.stamps_ns[-1] - rec.stamps_ns[0]) * 1e-9
-    src_rate = (n - 1) / duration if duration > 0 else rec.rate_hz
-    m = max(2, round(n * rate / src_rate))
-    acc = fft_resample(rec.acc, m, axis=0)
-    gyr = fft_resample(rec.gyr, m, axis=0)
-    t_src = (rec.stamps_ns - rec.stamps_ns[0]) * 1e-9
-    t_new = np.arange(m) / rate
-    stamps = rec.stamps_ns[0] + np.round(t_new * 1e9).astype(np.int64)
-    qref = None if rec.quat_ref is None else slerp_reference(t_src, rec.quat_ref, t_new)
-    near = np.clip(np.round(t_new * src_rate).astype(np.int64), 0, n - 1)
-    mask = rec.score_mask[near]
-    meta = dict(rec.meta)
-    meta["resampled_from_hz"] = f"{src_rate:.6g}"
-    return Recording(stamps, acc, gyr, qref, mask, rec.name, rec.dataset, rec.source, rec.frame_id, meta)
+    return resample_recording(rec, rate)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -390,7 +361,7 @@ class EvalSettings:
     rates: list[float | None] = field(default_factory=lambda: [None])  # None = the recording's own rate
     with_heading: bool = False
     series_for: str | None = None  # sequence name whose error-over-time series is kept ("*" = first)
-    series_step: int = 1  # keep every n-th sample of the series
+    series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
     keep_estimates: bool = False  # return the estimates (for --write-estimates)
 
 
@@ -453,8 +424,8 @@ def evaluate_recording(rec: Recording, settings: EvalSettings, source: str = "")
                 res.rows.append(row)
                 if want_series and rate is None:
                     if res.series is None:
-                        res.series = {"sequence": rec.name, "step": settings.series_step, "curves": {}}
-                    step = max(1, settings.series_step)
+                        res.series = {"sequence": rec.name, "curves": {}}
+                    step = settings.series_step if settings.series_step > 0 else -(-len(srec) // SERIES_POINTS)
                     e = error_series(srec, q)[::step]
                     res.series["curves"].setdefault(scenario, {})[spec.label] = e.astype(np.float32)
                     res.series.setdefault("t", {})[scenario] = srec.t[::step].astype(np.float32)

@@ -313,7 +313,9 @@ def plot_boxes(rows: Sequence[dict[str, Any]], out_dir: Path, stem: str = "rmse_
         ax.set_title(scn)
         ax.grid(axis="y", alpha=0.3)
         ax.set_yscale("log")
-    axes[0, 0].legend(loc="upper left", fontsize="small", ncol=min(len(ests), 4))
+    axes[0, 0].legend(
+        loc="lower left", bbox_to_anchor=(0.0, 1.12), fontsize="small", ncol=min(len(ests), 4), frameon=False
+    )
     fig.tight_layout()
     return _save(fig, out_dir, stem)
 
@@ -339,10 +341,10 @@ def plot_error_over_time(series: dict[str, Any], out_dir: Path, stem: str = "err
             ax.plot(t, e, lw=0.8, label=label)
         ax.set_title(f"{series['sequence']} — {scn} (grey: rest / not scored)")
         ax.set_ylabel("e_α (°)")
-        ax.set_yscale("symlog", linthresh=1.0)
+        ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("time since start of the scenario sequence (s)")
-    axes[0, 0].legend(loc="upper right", fontsize="small", ncol=2)
+    axes[0, 0].legend(loc="lower left", bbox_to_anchor=(0.0, 1.12), fontsize="small", ncol=4, frameon=False)
     fig.tight_layout()
     return _save(fig, out_dir, stem)
 

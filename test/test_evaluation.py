@@ -150,15 +150,6 @@ def test_resample_signals_reference_and_mask():
     np.testing.assert_allclose(r.acc, 9.81 + smooth[::4][: len(r)], atol=1e-9)
 
 
-def test_slerp_reference_propagates_gaps():
-    t = np.array([0.0, 1.0, 2.0, 3.0])
-    q = quat.from_rotvec(np.array([[0, 0, 0], [0.2, 0, 0], [np.nan] * 3, [0.6, 0, 0]], dtype=float))
-    q[2] = np.nan
-    out = ev.slerp_reference(t, q, np.array([0.5, 1.5, 2.5, 3.5]))
-    np.testing.assert_allclose(out[0], quat.from_rotvec([0.1, 0, 0]), atol=1e-12)
-    assert np.isnan(out[1:]).all()
-
-
 # -- scoring ------------------------------------------------------------------------------------------
 def test_score_inclination_ignores_heading():
     rec = synthetic()

@@ -206,7 +206,6 @@ def main(argv: list[str] | None = None) -> int:
         rates=rates,
         with_heading=args.heading,
         series_for=None if args.no_plots or not args.out else (args.plot_sequence or "*"),
-        series_step=1,
         keep_estimates=args.write_estimates is not None,
     )
     tuning: list[dict[str, Any]] = []

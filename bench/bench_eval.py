@@ -1,0 +1,96 @@
+"""Benchmark of riann-bag-eval: the 12 BROAD trials × 4 estimators × 3 scenarios, offline, ``--jobs 2``.
+
+Usage::
+
+    .venv/bin/python bench/bench_eval.py [--jobs 2] [--bags DIR_OR_FILES...] [--out DIR]
+
+Without ``--bags`` the BROAD trial files (``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``) are
+read directly (same numbers as their converted bags). Prints the wall time, the summary table and the
+samples per second per estimator (CPU time of each estimator run through the node's EstimatorStream,
+input gate included, summed over all runs) as markdown for BENCHMARKS.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from riann_ros.cli.evaluate import main as eval_main
+from riann_ros.datasets.broad import broad_files, find_broad_dir
+from riann_ros.report import format_markdown_table
+
+ESTIMATORS = "riann,madgwick:beta=0.033,mahony:kp=1:ki=0.3,vqf"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--bags", nargs="*", default=None, help="inputs (default: the BROAD trial files)")
+    ap.add_argument("--estimators", default=ESTIMATORS)
+    ap.add_argument("--out", type=Path, default=None, help="keep the evaluator's output here")
+    args = ap.parse_args()
+    if args.bags:
+        inputs = [str(p) for p in args.bags]
+    else:
+        d = find_broad_dir()
+        if d is None:
+            print("BROAD not found (set RIANN_BROAD_DIR)", file=sys.stderr)
+            return 1
+        inputs = [str(p) for p in broad_files(d)]
+    out = args.out or Path(tempfile.mkdtemp(prefix="bench_eval_"))
+    argv = [
+        *inputs,
+        "--estimators",
+        args.estimators,
+        "--scenarios",
+        "all",
+        "--seed",
+        "0",
+        "--jobs",
+        str(args.jobs),
+        "--out",
+        str(out),
+        "--no-plots",
+        "-q",
+    ]
+    load_before = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = eval_main(argv)
+    wall = time.perf_counter() - t0
+    data = json.loads((out / "results.json").read_text())
+    rows = data["results"]
+    per: dict[str, list[float]] = {}
+    for r in rows:
+        acc = per.setdefault(r["estimator"], [0.0, 0.0])
+        acc[0] += r["seconds"]
+        acc[1] += r["n_samples"]
+    cmd = "riann-bag-eval <12 BROAD trials> " + " ".join(argv[len(inputs) :])
+    print(f"## riann-bag-eval, {len(inputs)} inputs, jobs {args.jobs}\n")
+    print(f"- command: `{cmd}` (exit {rc})")
+    print(
+        f"- wall time: **{wall:.1f} s** on {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, "
+        f"1-min load average before/after: {load_before:.2f} / {os.getloadavg()[0]:.2f}"
+    )
+    print(f"- runs: {len(rows)} (sequence × scenario × estimator), samples: {sum(v[1] for v in per.values()):.0f}")
+    print("\n| estimator | runs CPU s | samples/s (gate + estimator) |\n|---|---:|---:|")
+    for k, (secs, n) in per.items():
+        print(f"| {k} | {secs:.1f} | {n / secs:,.0f} |")
+    print()
+    print(format_markdown_table(data["summary"]))
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())
