@@ -413,6 +413,7 @@ def evaluate_recording(rec: Recording, settings: EvalSettings, source: str = "")
                     "dataset": res.dataset,
                     "source": res.source,
                     "scenario": scenario,
+                    "rate": NATIVE if rate is None else float(rate),
                     "rate_hz": rate_val,
                     "resampled": rate is not None,
                     "estimator": spec.label,
@@ -494,6 +495,12 @@ def evaluate_sources(
 # aggregation
 # ---------------------------------------------------------------------------------------------------
 ALL_DATASETS = "all"
+NATIVE = "native"  # rate key of rows at the recording's own rate
+
+
+def rate_order(rate: str | float) -> tuple[int, float]:
+    """Sort key for rate keys: native first, then ascending Hz."""
+    return (0, 0.0) if rate == NATIVE else (1, float(rate))
 
 
 def aggregate(rows: Iterable[dict[str, Any]], metric: str = "rmse_deg") -> list[dict[str, Any]]:
@@ -506,14 +513,19 @@ def aggregate(rows: Iterable[dict[str, Any]], metric: str = "rmse_deg") -> list[
     for r in rows:
         keys = [r["dataset"]] + ([ALL_DATASETS] if len(datasets) > 1 else [])
         for d in keys:
-            groups.setdefault((r["estimator"], r["scenario"], d, r["rate_hz"]), []).append(float(r[metric]))
+            groups.setdefault((r["estimator"], r["scenario"], d, r.get("rate", NATIVE)), []).append(float(r[metric]))
     order_est = list(dict.fromkeys(r["estimator"] for r in rows))
     order_scn = [s for s in SCENARIOS if any(r["scenario"] == s for r in rows)]
     order_ds = [*datasets, ALL_DATASETS]
     out = []
     for (est, scn, ds, rate), vals in sorted(
         groups.items(),
-        key=lambda kv: (order_scn.index(kv[0][1]), order_ds.index(kv[0][2]), kv[0][3], order_est.index(kv[0][0])),
+        key=lambda kv: (
+            order_scn.index(kv[0][1]),
+            order_ds.index(kv[0][2]),
+            rate_order(kv[0][3]),
+            order_est.index(kv[0][0]),
+        ),
     ):
         v = np.asarray(vals)
         out.append(
@@ -521,7 +533,7 @@ def aggregate(rows: Iterable[dict[str, Any]], metric: str = "rmse_deg") -> list[
                 "estimator": est,
                 "scenario": scn,
                 "dataset": ds,
-                "rate_hz": rate,
+                "rate": rate,
                 "n": len(v),
                 "mean": float(v.mean()),
                 "median": float(np.median(v)),

@@ -14,12 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from riann_ros.evaluation import ALL_DATASETS, SCENARIOS
+from riann_ros.evaluation import ALL_DATASETS, NATIVE, SCENARIOS, rate_order
 
 CSV_FIELDS = (
     "sequence",
     "dataset",
     "scenario",
+    "rate",
     "rate_hz",
     "estimator",
     "rmse_deg",
@@ -62,19 +63,19 @@ class Progress:
         self.stream.flush()
 
 
-def _rate_label(rate: float) -> str:
-    return f"{rate:g}"
+def _rate_label(rate: str | float) -> str:
+    return rate if rate == NATIVE else f"{float(rate):g}"
 
 
 def format_table(agg: Sequence[dict[str, Any]], title: str = "attitude RMSE e_α (°) per sequence") -> str:
     """Estimator × scenario × dataset (× rate when several): n, mean / median / max RMSE."""
     if not agg:
         return "(no results)"
-    rates = sorted({a["rate_hz"] for a in agg})
+    rates = {a["rate"] for a in agg}
     headers = [
         "scenario",
         "dataset",
-        *(["rate Hz"] if len(rates) > 1 else []),
+        *(["rate"] if len(rates) > 1 else []),
         "estimator",
         "n",
         "mean",
@@ -87,7 +88,7 @@ def format_table(agg: Sequence[dict[str, Any]], title: str = "attitude RMSE e_α
             [
                 a["scenario"],
                 a["dataset"],
-                *([_rate_label(a["rate_hz"])] if len(rates) > 1 else []),
+                *([_rate_label(a["rate"])] if len(rates) > 1 else []),
                 a["estimator"],
                 str(a["n"]),
                 f"{a['mean']:.2f}",
@@ -96,7 +97,7 @@ def format_table(agg: Sequence[dict[str, Any]], title: str = "attitude RMSE e_α
             ]
         )
     widths = [max(len(h), *(len(r[i]) for r in lines)) for i, h in enumerate(headers)]
-    numeric = {"n", "mean", "median", "max", "rate Hz"}
+    numeric = {"n", "mean", "median", "max", "rate"}
 
     def fmt(row: list[str]) -> str:
         return "  ".join(
@@ -106,7 +107,7 @@ def format_table(agg: Sequence[dict[str, Any]], title: str = "attitude RMSE e_α
     out = [title, fmt(headers), "  ".join("-" * w for w in widths)]
     prev = None
     for row, a in zip(lines, agg, strict=True):
-        key = (a["scenario"], a["dataset"], a["rate_hz"])
+        key = (a["scenario"], a["dataset"], a["rate"])
         if prev is not None and key != prev:
             out.append("")
         prev = key
@@ -115,13 +116,13 @@ def format_table(agg: Sequence[dict[str, Any]], title: str = "attitude RMSE e_α
 
 
 def format_markdown_table(agg: Sequence[dict[str, Any]]) -> str:
-    rates = sorted({a["rate_hz"] for a in agg})
+    rates = {a["rate"] for a in agg}
     multi = len(rates) > 1
     head = "| scenario | dataset | " + ("rate Hz | " if multi else "") + "estimator | n | mean ° | median ° | max ° |"
     sep = "|---|---|" + ("---:|" if multi else "") + "---|---:|---:|---:|---:|"
     out = [head, sep]
     for a in agg:
-        rate = f"{_rate_label(a['rate_hz'])} | " if multi else ""
+        rate = f"{_rate_label(a['rate'])} | " if multi else ""
         out.append(
             f"| {a['scenario']} | {a['dataset']} | {rate}{a['estimator']} | {a['n']} | {a['mean']:.2f} | "
             f"{a['median']:.2f} | {a['max']:.2f} |"
@@ -223,8 +224,12 @@ def write_markdown(
     lines += ["## Per sequence", ""]
     ests = list(dict.fromkeys(r["estimator"] for r in rows))
     for scn in [s for s in SCENARIOS if any(r["scenario"] == s for r in rows)]:
-        for rate in sorted({r["rate_hz"] for r in rows if r["scenario"] == scn}):
-            lines += [f"### {scn}, {rate:g} Hz", "", "| sequence | " + " | ".join(ests) + " |"]
+        for rate in sorted({r["rate"] for r in rows if r["scenario"] == scn}, key=rate_order):
+            lines += [
+                f"### {scn}, {_rate_label(rate)}{'' if rate == NATIVE else ' Hz'}",
+                "",
+                "| sequence | " + " | ".join(ests) + " |",
+            ]
             lines.append("|---|" + "---:|" * len(ests))
             seqs = list(dict.fromkeys(r["sequence"] for r in rows if r["scenario"] == scn))
             for seq in seqs:
@@ -233,10 +238,7 @@ def write_markdown(
                     v = [
                         r["rmse_deg"]
                         for r in rows
-                        if r["sequence"] == seq
-                        and r["scenario"] == scn
-                        and r["estimator"] == e
-                        and r["rate_hz"] == rate
+                        if r["sequence"] == seq and r["scenario"] == scn and r["estimator"] == e and r["rate"] == rate
                     ]
                     cells.append(f"{v[0]:.2f}" if v else "–")
                 lines.append(f"| {seq} | " + " | ".join(cells) + " |")
