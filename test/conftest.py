@@ -107,3 +107,60 @@ def wait_for(cond, timeout: float, what: str, period: float = 0.01) -> None:
             return
         time.sleep(period)
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+class RosHarness:
+    """The test side of the ROS graph: one rclpy node spun in a background thread."""
+
+    def __init__(self) -> None:
+        import threading
+
+        import rclpy
+        from rclpy.executors import MultiThreadedExecutor
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node("riann_test_harness", context=self.context)
+        self.executor = MultiThreadedExecutor(num_threads=2, context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self._thread.start()
+
+    def qos(self, reliable: bool = True, depth: int = 10000):
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, durability=DurabilityPolicy.VOLATILE,
+                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT)
+
+    def publisher(self, msg_type, topic: str, reliable: bool = True, depth: int = 10000):
+        return self.node.create_publisher(msg_type, topic, self.qos(reliable, depth))
+
+    def collect(self, msg_type, topic: str, reliable: bool = True) -> Collector:
+        c = Collector()
+        c.sub = self.node.create_subscription(msg_type, topic, c.messages.append, self.qos(reliable))
+        return c
+
+    def destroy(self, *entities) -> None:
+        for e in entities:
+            if hasattr(e, "sub"):
+                self.node.destroy_subscription(e.sub)
+            else:
+                self.node.destroy_publisher(e)
+
+    def shutdown(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+class Collector:
+    def __init__(self) -> None:
+        self.messages: list = []
+        self.sub = None
+
+
+@pytest.fixture(scope="session")
+def ros() -> Iterator[RosHarness]:
+    h = RosHarness()
+    yield h
+    h.shutdown()

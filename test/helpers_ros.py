@@ -1,0 +1,39 @@
+"""Helpers for node tests: IMU messages from arrays, flow-controlled publishing."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from sensor_msgs.msg import Imu
+
+
+def imu_msg(stamp_ns: int, acc, gyr, frame_id: str = "imu_link") -> Imu:
+    m = Imu()
+    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    m.header.frame_id = frame_id
+    m.orientation_covariance[0] = -1.0
+    m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z = (float(v) for v in acc)
+    m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z = (float(v) for v in gyr)
+    return m
+
+
+def stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def publish_paced(pub, msgs: list[Imu], received, expected_out, window: int = 100, timeout: float = 120.0) -> None:
+    """Publish ``msgs`` keeping at most ``window`` in flight: ``expected_out(i)`` = outputs due after i sent."""
+    end = time.monotonic() + timeout
+    for i, m in enumerate(msgs):
+        while i - len(received) >= window:
+            if time.monotonic() > end:
+                raise AssertionError(f"node stalled: {len(received)} outputs after {i} inputs")
+            time.sleep(0.0002)
+        pub.publish(m)
+    while len(received) < expected_out and time.monotonic() < end:
+        time.sleep(0.01)
+
+
+def quats(msgs) -> np.ndarray:
+    return np.array([[m.quaternion.w, m.quaternion.x, m.quaternion.y, m.quaternion.z] for m in msgs])
