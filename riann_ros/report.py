@@ -273,6 +273,14 @@ def _save(fig, out_dir: Path, stem: str) -> list[Path]:
     return paths
 
 
+def _fig_legend(fig, ax, ncol: int) -> None:
+    """One legend above all panels (after tight_layout, so it does not squeeze the axes)."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(
+        handles, labels, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=ncol, fontsize="small", frameon=False
+    )
+
+
 def plot_boxes(rows: Sequence[dict[str, Any]], out_dir: Path, stem: str = "rmse_boxplots") -> list[Path]:
     """Figure 8 of the paper: RMSE distribution per estimator, one panel per scenario, grouped by dataset
     (native rates only)."""
@@ -284,11 +292,15 @@ def plot_boxes(rows: Sequence[dict[str, Any]], out_dir: Path, stem: str = "rmse_
     datasets = list(dict.fromkeys(r["dataset"] for r in rows))
     ests = list(dict.fromkeys(r["estimator"] for r in rows))
     colors = plt.get_cmap("tab10").colors
-    fig, axes = plt.subplots(
-        len(scenarios), 1, figsize=(max(6, 1.2 * len(datasets) * len(ests)), 3.2 * len(scenarios)), squeeze=False
-    )
+    panel_w = max(3.2, 0.9 * len(datasets) * len(ests))
+    if len(datasets) <= 2:  # few groups: scenarios side by side, one y axis
+        fig, axes = plt.subplots(1, len(scenarios), figsize=(panel_w * len(scenarios), 4.0), squeeze=False, sharey=True)
+        panels = axes[0]
+    else:
+        fig, axes = plt.subplots(len(scenarios), 1, figsize=(max(6, panel_w), 3.2 * len(scenarios)), squeeze=False)
+        panels = axes[:, 0]
     width = 0.8 / len(ests)
-    for ax, scn in zip(axes[:, 0], scenarios, strict=True):
+    for ax, scn in zip(panels, scenarios, strict=True):
         for j, est in enumerate(ests):
             data = [
                 [r["rmse_deg"] for r in rows if r["scenario"] == scn and r["dataset"] == d and r["estimator"] == est]
@@ -311,14 +323,13 @@ def plot_boxes(rows: Sequence[dict[str, Any]], out_dir: Path, stem: str = "rmse_
                 box.set_alpha(0.75)
             ax.plot([], [], "s", color=colors[j % len(colors)], label=est)
         ax.set_xticks(range(len(datasets)), datasets)
-        ax.set_ylabel("RMSE e_α (°)")
+        if ax is panels[0] or len(datasets) > 2:
+            ax.set_ylabel("RMSE e_α (°) per sequence")
         ax.set_title(scn)
         ax.grid(axis="y", alpha=0.3)
         ax.set_yscale("log")
-    axes[0, 0].legend(
-        loc="lower left", bbox_to_anchor=(0.0, 1.12), fontsize="small", ncol=min(len(ests), 4), frameon=False
-    )
     fig.tight_layout()
+    _fig_legend(fig, axes[0, 0], min(len(ests), 4))
     return _save(fig, out_dir, stem)
 
 
@@ -346,8 +357,8 @@ def plot_error_over_time(series: dict[str, Any], out_dir: Path, stem: str = "err
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("time since start of the scenario sequence (s)")
-    axes[0, 0].legend(loc="lower left", bbox_to_anchor=(0.0, 1.12), fontsize="small", ncol=4, frameon=False)
     fig.tight_layout()
+    _fig_legend(fig, axes[0, 0], 4)
     return _save(fig, out_dir, stem)
 
 
