@@ -32,6 +32,24 @@ from riann_ros.report import format_markdown_table
 ESTIMATORS = "riann,madgwick:beta=0.033,mahony:kp=1:ki=0.3,vqf"
 
 
+def gate_rate() -> float:
+    """Samples/s of the node's per-sample input gate alone, which every estimator run goes through."""
+    from riann_ros.stream import GateConfig, InputGate
+
+    d = find_broad_dir()
+    if d is None:
+        return float("nan")
+    from riann_ros.datasets.broad import read_broad
+
+    rec = read_broad(broad_files(d)[0])
+    gate = InputGate(GateConfig(nominal_rate=rec.rate_hz))
+    stamps = rec.stamps_ns + 1_000_000_000
+    t = time.perf_counter()
+    for i in range(len(rec)):
+        gate.check(int(stamps[i]), rec.acc[i], rec.gyr[i])
+    return len(rec) / (time.perf_counter() - t)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--jobs", type=int, default=2)
@@ -87,6 +105,7 @@ def main() -> int:
     print("\n| estimator | runs CPU s | samples/s (gate + estimator) |\n|---|---:|---:|")
     for k, (secs, n) in per.items():
         print(f"| {k} | {secs:.1f} | {n / secs:,.0f} |")
+    print(f"\ninput gate alone (InputGate.check per sample, in-process, one trial): {gate_rate():,.0f} samples/s")
     print()
     print(format_markdown_table(data["summary"]))
     return rc
