@@ -49,7 +49,8 @@ NODE_PARAMS: dict[str, tuple[Any, str, float | None, float | None]] = {
                 0.1, 1.0e6),
     "input_qos": ("sensor_data", "Input QoS: sensor_data (best effort, connects to reliable and best-effort "
                   "drivers), best_effort, or reliable.", None, None),
-    "input_depth": (100, "Input queue depth (keep last).", 1, 100000),
+    "input_depth": (1000, "Input queue depth (keep last): a burst larger than this loses its oldest "
+                    "messages in DDS before the node sees them.", 1, 100000),
     "output_depth": (100, "Output queue depth (keep last, reliable).", 1, 100000),
     "roll_pitch_stddev_deg": (2.0, "deg; standard deviation written to the roll and pitch entries of the "
                               "orientation covariance of imu/data.", 0.0, 180.0),
