@@ -17,7 +17,7 @@ Bag layout (the evaluator reads exactly this; see README "Bags"):
   same JSON is in ``metadata.yaml`` ``custom_data["riann_ros.info"]`` for directory bags.
 
 A "bag" is a rosbag2 directory (``metadata.yaml`` + one storage file) or, for a target path ending in
-``.mcap``, a single self-contained MCAP file (``ros2 bag play x.mcap`` and the ``mcap`` tools read it).
+``.mcap``, a single self-contained MCAP file (ROS 2 profile; the ``mcap`` tools and ``rosbags`` read it).
 """
 
 from __future__ import annotations
@@ -642,7 +642,7 @@ def concat(chunks: list[Recording]) -> Recording:
 
 def read_recording(path: str | os.PathLike[str]) -> Recording:
     """Read a whole bag (the exact inverse of :func:`write_recording`)."""
-    return concat(list(iter_imu_chunks(path, chunk=1 << 62)))
+    return concat(list(iter_imu_chunks(path, chunk=100_000)))  # chunks keep the raw-bytes buffer small
 
 
 # --------------------------------------------------------------------------------------------------

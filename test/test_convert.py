@@ -134,3 +134,24 @@ def test_cli_folder_continues_after_failure(tmp_path: Path, capsys: pytest.Captu
     err = capsys.readouterr().err
     assert "b.csv" in err and "gyr_z" in err and "1 of 2" in err
     assert [p.name for p in out.iterdir()] == ["a.mcap"]
+
+
+def test_cli_failure_half_way_leaves_no_bag(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from rosbags.rosbag2 import Writer
+
+    real = Writer.write
+    count = {"n": 0}
+
+    def failing(self, conn, t, data):
+        count["n"] += 1
+        if count["n"] > 1000:
+            raise OSError(28, "No space left on device")
+        return real(self, conn, t, data)
+
+    monkeypatch.setattr(Writer, "write", failing)
+    out = tmp_path / "half.mcap"
+    assert main(["--format", "synthetic", "--duration", "20", "-o", str(out)]) == 1
+    assert "No space left on device" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
