@@ -1,8 +1,9 @@
 """Generic CSV IMU files → :class:`Recording`.
 
-Format: one header row with column names, then one row per sample. Lines that are empty or start
-with ``#`` *before* the header are skipped (so ``#t,acc_x,...`` headers also work: a leading ``#`` is
-stripped from the header). The delimiter is detected from the header (``,``, ``;``, tab, or blanks).
+Format: one header row with column names, then one row per sample. Before the header, blank lines
+and ``#`` comment lines without a delimiter are skipped; a ``#`` line that contains ``,``, ``;`` or a tab
+is the header, with the ``#`` stripped (as in EuRoC's ``#timestamp [ns],...``). After the header, blank
+and ``#`` lines are skipped. The delimiter is detected from the header (``,``, ``;``, tab, or blanks).
 
 Columns (names and units by option; defaults in brackets):
 
