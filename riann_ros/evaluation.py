@@ -389,11 +389,31 @@ def _estimator(spec: EstimatorSpec) -> AttitudeEstimator:
     return est
 
 
-def evaluate_recording(rec: Recording, settings: EvalSettings, source: str = "") -> SequenceResult:
-    """Every rate × scenario × estimator on one recording."""
+#: ``runner(specs, scenario_recording) -> [(quats (N, 4) with NaN rows, counters), ...]`` one per spec
+Runner = Callable[[list[EstimatorSpec], Recording], list[tuple[NDArray[np.float64], dict[str, Any]]]]
+
+
+def offline_runner(specs: list[EstimatorSpec], rec: Recording) -> list[tuple[NDArray[np.float64], dict[str, Any]]]:
+    """Run each estimator in-process through the node's EstimatorStream (counters include ``seconds``)."""
+    import time
+
+    out = []
+    for spec in specs:
+        t = time.perf_counter()
+        q, _accepted, counters = run_estimator(_estimator(spec), rec)
+        counters["seconds"] = time.perf_counter() - t
+        out.append((q, counters))
+    return out
+
+
+def evaluate_recording(
+    rec: Recording, settings: EvalSettings, source: str = "", runner: Runner | None = None
+) -> SequenceResult:
+    """Every rate × scenario × estimator on one recording (offline unless another ``runner`` is given)."""
     import time
 
     t0 = time.perf_counter()
+    run = runner or offline_runner
     res = SequenceResult(
         source=source or rec.name, name=rec.name, dataset=rec.dataset or "unknown", citation=rec.source
     )
@@ -404,10 +424,10 @@ def evaluate_recording(rec: Recording, settings: EvalSettings, source: str = "")
         for scenario in settings.scenarios:
             srec, info = make_scenario(r, scenario, settings.seed)
             res.scenarios.setdefault(scenario, asdict(info))
-            for spec in settings.estimators:
-                tr = time.perf_counter()
-                q, _acc, counters = run_estimator(_estimator(spec), srec)
-                secs = time.perf_counter() - tr
+            outputs = run(settings.estimators, srec)
+            for spec, (q, counters) in zip(settings.estimators, outputs, strict=True):
+                counters = dict(counters)
+                secs = counters.pop("seconds", float("nan"))
                 row: dict[str, Any] = {
                     "sequence": rec.name,
                     "dataset": res.dataset,
