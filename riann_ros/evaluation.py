@@ -438,6 +438,7 @@ def evaluate_recording(
                     "resampled": rate is not None,
                     "estimator": spec.label,
                     "estimator_name": spec.name,
+                    "mode": "offline" if runner is None else getattr(runner, "mode", "custom"),
                     "seconds": secs,
                 }
                 row.update(score(srec, q, settings.with_heading))

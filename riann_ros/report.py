@@ -31,6 +31,10 @@ CSV_FIELDS = (
     "n_scored",
     "n_unestimated",
     "seconds",
+    "mode",
+    "published",
+    "received",
+    "lost",
     "source",
 )
 

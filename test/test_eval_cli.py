@@ -202,9 +202,9 @@ def test_tune_adds_the_best_filter(bags, tmp_path, capsys):
     assert "madgwick(beta=0.1) tuned" in capsys.readouterr().out
 
 
-def test_live_is_reported_as_missing(bags, capsys):
-    assert main([str(bags[0]), "--live"]) == 2
-    assert "not implemented" in capsys.readouterr().err
+def test_live_rejects_parallel_jobs(bags, capsys):
+    assert main([str(bags[0]), "--live", "--jobs", "2"]) == 2
+    assert "one replay at a time" in capsys.readouterr().err
 
 
 # -- BROAD acceptance ---------------------------------------------------------------------------------
@@ -265,3 +265,31 @@ def test_broad_acceptance(broad_dir, tmp_path):
         other = [r["rmse_deg"] for r in rows if r["estimator"] == label]
         if other:
             assert mean_riann < np.mean(other), label
+
+
+# -- live ---------------------------------------------------------------------------------------------
+@pytest.mark.ros
+@pytest.mark.slow
+def test_live_equals_offline(bags, tmp_path, monkeypatch, capsys):
+    pytest.importorskip("rclpy")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_DOMAIN_ID", "31")
+    args = [
+        str(bags[0]),
+        "--estimators",
+        "riann,madgwick:beta=0.1",
+        "--scenarios",
+        "restrictive,realistic",
+        "--no-plots",
+        "-q",
+    ]
+    assert main([*args, "--out", str(tmp_path / "off")]) == 0
+    assert main([*args, "--out", str(tmp_path / "live"), "--live", "--speed", "0"]) == 0
+    assert "messages lost / published: riann 0 /" in capsys.readouterr().out
+    off = json.loads((tmp_path / "off" / "results.json").read_text())["results"]
+    live = json.loads((tmp_path / "live" / "results.json").read_text())["results"]
+    assert len(off) == len(live) == 4
+    for a, b in zip(off, live, strict=True):
+        assert (a["scenario"], a["estimator"]) == (b["scenario"], b["estimator"])
+        assert b["mode"] == "live" and b["lost"] == 0
+        assert abs(a["rmse_deg"] - b["rmse_deg"]) < 0.01, (a, b)

@@ -13,12 +13,20 @@ BROAD trial files (``.hdf5`` / ``.mat``). Exit status: 0 all inputs evaluated, 1
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import shlex
+import shutil
+import signal
+import subprocess
 import sys
+import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from riann_ros import evaluation as ev
 from riann_ros import report
@@ -88,7 +96,22 @@ def build_parser() -> argparse.ArgumentParser:
         "geometry_msgs/QuaternionStamped topics /eval/<scenario>/<estimator> (first scenario)",
     )
     p.add_argument("--force", action="store_true", help="overwrite existing --write-estimates outputs")
-    p.add_argument("--live", action="store_true", help="replay over DDS to the ROS nodes (not implemented yet)")
+    p.add_argument(
+        "--live",
+        action="store_true",
+        help="replay the inputs over DDS to the estimator nodes (started by the tool, or already running with "
+        "--live-topics) instead of running them in-process; reports messages lost",
+    )
+    p.add_argument("--speed", type=float, default=1.0, help="--live replay speed factor (0: as fast as the nodes go)")
+    p.add_argument(
+        "--live-input", default=None, help="--live: IMU topic to publish on (default /riann_eval/imu/data_raw)"
+    )
+    p.add_argument(
+        "--live-topics",
+        default=None,
+        help="--live with nodes already running: their attitude topics, comma-separated, in --estimators order "
+        "(they must subscribe to --live-input)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
     return p
 
@@ -174,11 +197,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     argv_list = sys.argv[1:] if argv is None else list(argv)
-    if args.live:
-        _err(
-            "--live is not implemented yet; run without it for the offline evaluation (the same code path "
-            "as the nodes: riann_ros.stream.EstimatorStream)"
-        )
+    if args.live and (args.tune or args.jobs > 1 or args.write_estimates):
+        _err("--live runs one replay at a time: it does not combine with --tune, --jobs or --write-estimates")
         return 2
     try:
         spec_text = args.estimators or ",".join(
@@ -220,7 +240,14 @@ def main(argv: list[str] | None = None) -> int:
             *(s for s in extra if s.label not in {e.label for e in estimators}),
         ]
 
-    results = ev.evaluate_sources(sources, settings, args.jobs, report.Progress(len(sources), enabled=not quiet))
+    if args.live:
+        try:
+            results = _run_live(args, sources, settings, quiet)
+        except ev.EvalError as exc:
+            _err(str(exc))
+            return 1
+    else:
+        results = ev.evaluate_sources(sources, settings, args.jobs, report.Progress(len(sources), enabled=not quiet))
     if settings.series_for and settings.series_for != "*" and not any(r.series for r in results):
         _err(f"--plot-sequence {settings.series_for!r} matches no evaluated sequence")
     elapsed = time.perf_counter() - t_start
@@ -230,6 +257,13 @@ def main(argv: list[str] | None = None) -> int:
     rows = [row for r in results if not r.error for row in r.rows]
     agg = ev.aggregate(rows)
     print(report.format_table(agg))
+    if args.live and rows:
+        lost: dict[str, list[int]] = {}
+        for row in rows:
+            v = lost.setdefault(row["estimator"], [0, 0])
+            v[0] += row.get("lost", 0)
+            v[1] += row.get("published", 0)
+        print("live: messages lost / published: " + ", ".join(f"{k} {a} / {b}" for k, (a, b) in lost.items()))
     print(
         f"\n{len(results) - len(failures)} of {len(results)} input(s) evaluated in {elapsed:.1f} s"
         + (f"; {len(failures)} failed" if failures else "")
@@ -300,3 +334,285 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+# ---------------------------------------------------------------------------------------------------
+# --live: replay over DDS to the estimator nodes
+# ---------------------------------------------------------------------------------------------------
+LIVE_NS = "/riann_eval"
+LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt): each replay restarts them
+
+
+def _ros_param(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)  # keeps the decimal point: the nodes declare float parameters
+    return str(value)
+
+
+def _node_topics(name: str) -> tuple[str, str]:
+    """(attitude topic, imu output topic) of the ``<name>_node`` class, to remap them."""
+    import importlib
+
+    from riann_ros.nodes.node_base import EstimatorNode
+
+    mod = importlib.import_module(f"riann_ros.nodes.{name}_node")
+    for obj in vars(mod).values():
+        if isinstance(obj, type) and issubclass(obj, EstimatorNode) and obj.ESTIMATOR == name:
+            return obj.ATTITUDE_TOPIC, obj.IMU_TOPIC
+    return "imu/attitude", "imu/data"
+
+
+def _node_executable(name: str) -> str:
+    exe = Path(sys.executable).parent / f"{name}_node"
+    if exe.exists():
+        return str(exe)
+    found = shutil.which(f"{name}_node")
+    if found is None:
+        raise ev.EvalError(f"--live: {name}_node is not installed (run make setup)")
+    return found
+
+
+class LiveRunner:
+    """Replays scenario recordings over DDS to one node per estimator and collects what they publish.
+
+    With ``start_nodes`` the tool starts ``<name>_node`` per spec (input remapped to
+    ``/riann_eval/imu/data_raw``, output to ``/riann_eval/<i>/attitude``, reliable QoS) with the
+    recording's rate as ``nominal_rate``; otherwise ``topics`` name the attitude topics of nodes already
+    running on ``input_topic``. Consecutive replays are separated by a stamp gap larger than the nodes'
+    ``max_dt`` so every replay starts the estimators afresh, as offline. Publishing is paced at ``speed``
+    × real time (0: as fast as the slowest node keeps up) with at most ``window`` samples in flight.
+    """
+
+    mode = "live"
+
+    def __init__(
+        self,
+        speed: float = 1.0,
+        window: int = 200,
+        input_topic: str | None = None,
+        topics: list[str] | None = None,
+        log_dir: Path | None = None,
+    ) -> None:
+        import rclpy
+        from geometry_msgs.msg import QuaternionStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import Imu
+
+        self.speed = speed
+        self.window = window
+        self.external = topics
+        self.input_topic = input_topic or f"{LIVE_NS}/imu/data_raw"
+        self.log_dir = log_dir or Path(tempfile.mkdtemp(prefix="riann_live_"))
+        self._Imu, self._Quat = Imu, QuaternionStamped
+        self._qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        self._ctx = rclpy.context.Context()
+        rclpy.init(context=self._ctx)
+        self.node = rclpy.create_node("riann_bag_eval_live", context=self._ctx)
+        self._pub = self.node.create_publisher(Imu, self.input_topic, self._qos)
+        self._exec = SingleThreadedExecutor(context=self._ctx)
+        self._exec.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+        self._procs: list[subprocess.Popen] = []
+        self._subs: list[Any] = []
+        self._got: list[list[tuple[int, float, float, float, float]]] = []
+        self._next_stamp = 1_000_000_000
+        self._started_for: tuple | None = None
+
+    def _spin(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        try:
+            while self._ctx.ok():
+                self._exec.spin_once(timeout_sec=0.05)
+        except (ExternalShutdownException, Exception):
+            pass
+
+    # -- nodes ----------------------------------------------------------------------------------
+    def _subscribe(self, topics: list[str]) -> None:
+        for s in self._subs:
+            self.node.destroy_subscription(s)
+        self._subs, self._got = [], []
+        for i, topic in enumerate(topics):
+            box: list[tuple[int, float, float, float, float]] = []
+            self._got.append(box)
+
+            def cb(m, box=box) -> None:
+                q = m.quaternion
+                box.append((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, q.w, q.x, q.y, q.z))
+
+            self._subs.append(self.node.create_subscription(self._Quat, topic, cb, self._qos))
+            del i
+
+    def _ensure_nodes(self, specs: list[ev.EstimatorSpec], rate: float) -> None:
+        key = (tuple(specs), round(rate, 6))
+        if self._started_for == key:
+            return
+        if self.external is not None:
+            if len(self.external) != len(specs):
+                raise ev.EvalError(f"--live-topics gives {len(self.external)} topics for {len(specs)} estimators")
+            if self._started_for is None:
+                self._subscribe(self.external)
+                self._wait_connected(None)
+            self._started_for = key
+            return
+        self.stop_nodes()
+        topics = []
+        for i, spec in enumerate(specs):
+            out = f"{LIVE_NS}/e{i}/attitude"
+            att_topic, imu_topic = _node_topics(spec.name)
+            cmd = [
+                _node_executable(spec.name),
+                "--ros-args",
+                "-r",
+                f"__node:=riann_eval_{i}_{spec.name}",
+                "-r",
+                f"imu/data_raw:={self.input_topic}",
+                "-r",
+                f"{att_topic}:={out}",
+                "-r",
+                f"{imu_topic}:={LIVE_NS}/e{i}/imu",
+                "-p",
+                "input_qos:=reliable",
+                "-p",
+                "input_depth:=1000",
+                "-p",
+                "output_depth:=1000",
+                "-p",
+                f"nominal_rate:={float(rate)!r}",
+                *(a for k, v in spec.params for a in ("-p", f"{k}:={_ros_param(v)}")),
+            ]
+            with open(self.log_dir / f"node_{i}_{spec.name}.log", "w") as log:  # the child keeps its own fd
+                self._procs.append(subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT))
+            topics.append(out)
+        self._subscribe(topics)
+        self._wait_connected(specs)
+        self._started_for = key
+
+    def _wait_connected(self, specs: list[ev.EstimatorSpec] | None, timeout: float = 60.0) -> None:
+        end = time.monotonic() + timeout
+        n = len(self._subs)
+        while time.monotonic() < end:
+            if self._pub.get_subscription_count() >= n and all(s.get_publisher_count() > 0 for s in self._subs):
+                time.sleep(0.3)  # let discovery settle in both directions
+                return
+            dead = [p for p in self._procs if p.poll() is not None]
+            if dead:
+                break
+            time.sleep(0.05)
+        logs = "; ".join(f"{p.name}: {p.read_text()[-300:]}" for p in sorted(self.log_dir.glob("node_*.log")))
+        raise ev.EvalError(f"--live: the estimator nodes did not connect ({logs or 'no logs'})")
+
+    def stop_nodes(self) -> None:
+        for p in self._procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        for p in self._procs:
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+        self._procs = []
+        self._started_for = None
+
+    def close(self) -> None:
+        self.stop_nodes()
+        with contextlib.suppress(Exception):
+            self._ctx.try_shutdown()
+        self._thread.join(2)
+
+    # -- one replay -----------------------------------------------------------------------------
+    def __call__(self, specs: list[ev.EstimatorSpec], rec: Any) -> list[tuple[np.ndarray, dict[str, Any]]]:
+        self._ensure_nodes(specs, rec.rate_hz)
+        stamps = rec.stamps_ns - rec.stamps_ns[0] + self._next_stamp
+        self._next_stamp = int(stamps[-1]) + LIVE_GAP_NS
+        for box in self._got:
+            box.clear()
+        msg = self._Imu()
+        msg.header.frame_id = rec.frame_id
+        msg.orientation_covariance[0] = -1.0
+        t0 = time.monotonic()
+        rel = (stamps - stamps[0]) * 1e-9
+        n = len(stamps)
+        acc, gyr = rec.acc.tolist(), rec.gyr.tolist()
+        for i in range(n):
+            if self.speed > 0:
+                delay = t0 + rel[i] / self.speed - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            stall_end = time.monotonic() + 2.0
+            while i - min(len(b) for b in self._got) >= self.window and time.monotonic() < stall_end:
+                time.sleep(0.0002)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamps[i]), 1_000_000_000)
+            a, g = acc[i], gyr[i]
+            la, av = msg.linear_acceleration, msg.angular_velocity
+            la.x, la.y, la.z = a
+            av.x, av.y, av.z = g
+            self._pub.publish(msg)
+        last = int(stamps[-1])
+        idle_end = time.monotonic() + 5.0
+        counts = [len(b) for b in self._got]
+        while time.monotonic() < idle_end:
+            if all(b and b[-1][0] == last for b in self._got):
+                break
+            time.sleep(0.01)
+            now = [len(b) for b in self._got]
+            if now != counts:
+                counts, idle_end = now, time.monotonic() + 5.0
+        wall = time.monotonic() - t0
+        index = {int(s): k for k, s in enumerate(stamps)}
+        out = []
+        for box in self._got:
+            q = np.full((n, 4), np.nan)
+            unknown = 0
+            for s, w, x, y, z in list(box):
+                k = index.get(s)
+                if k is None:
+                    unknown += 1
+                else:
+                    q[k] = (w, x, y, z)
+            received = int(np.isfinite(q).all(axis=1).sum())
+            out.append(
+                (
+                    q,
+                    {
+                        "seconds": wall,
+                        "published": n,
+                        "received": received,
+                        "lost": n - received,
+                        "unexpected": unknown,
+                    },
+                )
+            )
+        return out
+
+
+def _run_live(args, sources: list[str], settings: ev.EvalSettings, quiet: bool) -> list[ev.SequenceResult]:
+    try:
+        runner = LiveRunner(
+            speed=args.speed,
+            input_topic=args.live_input,
+            topics=args.live_topics.split(",") if args.live_topics else None,
+        )
+    except ImportError as exc:
+        raise ev.EvalError(f"--live needs rclpy and the ROS message packages: {exc}") from exc
+    progress = report.Progress(len(sources), enabled=not quiet)
+    results = []
+    try:
+        for i, src in enumerate(sources):
+            try:
+                rec = ev.load_recording(src)
+                res = ev.evaluate_recording(rec, settings, src, runner=runner)
+            except ev.EvalError as exc:
+                res = ev.SequenceResult(source=src, error=str(exc))
+            except Exception as exc:
+                res = ev.SequenceResult(source=src, error=f"{src}: {type(exc).__name__}: {exc}")
+            results.append(res)
+            progress(i + 1, len(sources), res)
+    finally:
+        runner.close()
+    return results
