@@ -155,3 +155,35 @@ def test_cli_failure_half_way_leaves_no_bag(
     assert main(["--format", "synthetic", "--duration", "20", "-o", str(out)]) == 1
     assert "No space left on device" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_example_bags_are_reproducible_and_small(tmp_path: Path) -> None:
+    """bags/*.mcap: each < 2 MB and regenerated bit-for-bit (samples) by the commands in make_bags.sh."""
+    import shlex
+
+    root = Path(__file__).resolve().parents[1]
+    script = (root / "bags" / "make_bags.sh").read_text().splitlines()
+    commands = [shlex.split(line)[1:] for line in script if line.startswith("$CONVERT")]
+    assert len(commands) >= 2
+    for argv in commands:
+        i = argv.index("-o")
+        committed = root / argv[i + 1]
+        assert committed.is_file() and committed.stat().st_size < 2_000_000
+        out = tmp_path / committed.name
+        assert main([*argv[:i], *argv[i + 2 :], "-o", str(out), "-q"]) == 0
+        a, b = bagio.read_recording(committed), bagio.read_recording(out)
+        _check_same(a, b)
+        assert a.meta == b.meta
+    assert sorted(p.name for p in (root / "bags").glob("*.mcap")) == sorted(
+        Path(c[c.index("-o") + 1]).name for c in commands
+    )
+
+
+def test_empty_imu_topic_is_an_error(tmp_path: Path) -> None:
+    from rosbags.rosbag2 import Writer
+
+    p = tmp_path / "empty"
+    with Writer(p, version=9) as w:
+        w.add_connection(bagio.IMU_TOPIC, bagio.IMU_TYPE, typestore=bagio.typestore())
+    with pytest.raises(bagio.BagError, match="no messages"):
+        bagio.read_recording(p)
