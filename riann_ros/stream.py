@@ -96,7 +96,7 @@ class InputGate:
         self.accepted = 0
         self._warned: set[str] = set()
         self._g_norms: list[float] = []
-        self._dts: list[float] = []
+        self._clear_dt_stats()
         self.restart()
 
     def restart(self) -> None:
@@ -117,13 +117,18 @@ class InputGate:
                 return GateResult(False, reason=NO_STAMP)
             self._warn(ZERO_STAMP, warnings)
             stamp_ns = receive_ns
-        a = np.asarray(acc, dtype=float)
-        g = np.asarray(gyr, dtype=float)
-        if not (np.isfinite(a).all() and np.isfinite(g).all()):
-            self.rejected[NON_FINITE] += 1
-            return GateResult(False, stamp_ns=stamp_ns, reason=NON_FINITE, warnings=warnings)
-        na = float(np.sqrt(a @ a))
-        if na > cfg.max_acc or float(np.sqrt(g @ g)) > cfg.max_gyr:
+        # plain floats: this runs once per message in the node
+        ax, ay, az = acc  # type: ignore[misc]
+        gx, gy, gz = gyr  # type: ignore[misc]
+        sa = float(ax * ax + ay * ay + az * az)
+        sg = float(gx * gx + gy * gy + gz * gz)
+        if not (math.isfinite(sa) and math.isfinite(sg)):  # NaN or inf in a component, or overflow
+            finite = all(math.isfinite(v) for v in (ax, ay, az, gx, gy, gz))
+            reason = OUT_OF_RANGE if finite else NON_FINITE
+            self.rejected[reason] += 1
+            return GateResult(False, stamp_ns=stamp_ns, reason=reason, warnings=warnings)
+        na = math.sqrt(sa)
+        if na > cfg.max_acc or math.sqrt(sg) > cfg.max_gyr:
             self.rejected[OUT_OF_RANGE] += 1
             return GateResult(False, stamp_ns=stamp_ns, reason=OUT_OF_RANGE, warnings=warnings)
         reset: str | None = None
@@ -149,7 +154,11 @@ class InputGate:
             self.resets[reset] += 1
         self._last_ns = stamp_ns
         self.accepted += 1
-        self._dts.append(dt)
+        self._dt_n += 1
+        self._dt_sum += dt
+        self._dt_sq += dt * dt
+        self._dt_min = min(self._dt_min, dt)
+        self._dt_max = max(self._dt_max, dt)
         if len(self._g_norms) < G_CHECK_SAMPLES:
             self._g_norms.append(na)
             if len(self._g_norms) == G_CHECK_SAMPLES and 0.5 < float(np.median(self._g_norms)) < 1.5:
@@ -158,17 +167,20 @@ class InputGate:
 
     def pop_dt_stats(self) -> dict[str, float]:
         """dt statistics (s) since the last call: count, min, mean, max, std; then forget them."""
-        d = np.asarray(self._dts)
-        self._dts = []
-        if len(d) == 0:
+        n = self._dt_n
+        if n == 0:
             return {"count": 0.0}
-        return {
-            "count": float(len(d)),
-            "min": float(d.min()),
-            "mean": float(d.mean()),
-            "max": float(d.max()),
-            "std": float(d.std()),
-        }
+        mean = self._dt_sum / n
+        out = {"count": float(n), "min": self._dt_min, "mean": mean, "max": self._dt_max,
+               "std": math.sqrt(max(self._dt_sq / n - mean * mean, 0.0))}
+        self._clear_dt_stats()
+        return out
+
+    def _clear_dt_stats(self) -> None:
+        # running sums, not a list: the gate also runs over hour-long bags offline
+        self._dt_n = 0
+        self._dt_sum = self._dt_sq = 0.0
+        self._dt_min, self._dt_max = math.inf, -math.inf
 
 
 class EstimatorStream:

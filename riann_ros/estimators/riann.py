@@ -200,12 +200,23 @@ class RiannEstimator(AttitudeEstimator):
 
     # -- public API -----------------------------------------------------------------------------
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
-        x = (*(float(v) for v in np.asarray(acc).reshape(3)), *(float(v) for v in np.asarray(gyr).reshape(3)))
+        # The node's hot path: plain floats (numpy per-call overhead dominates for one sample). Same
+        # arithmetic as update_batch's vectorised _compose.
+        a0, a1, a2 = acc  # type: ignore[misc]
+        g0, g1, g2 = gyr  # type: ignore[misc]
+        x = (float(a0), float(a1), float(a2), float(g0), float(g1), float(g2))
         rows: list[tuple[float, ...]] = []
-        idx, rot = self._plan_sample(x, float(dt), rows)
+        _, rot = self._plan_sample(x, float(dt), rows)
         self._prev = x
-        net = self._run(rows) if rows else np.empty((0, 4))
-        return self._compose(net, np.array([idx]), np.array([rot]))[0]
+        if rows:
+            self._q_net = self._run(rows)[-1]
+        if self._q_net is None:  # cannot happen: the first sample always makes a row
+            raise RuntimeError("no network output yet")
+        if rot is IDENTITY_T:
+            return self._q_net.copy()
+        w, x1, y1, z1 = _qmul(tuple(self._q_net.tolist()), rot)  # type: ignore[arg-type]
+        n = math.sqrt(w * w + x1 * x1 + y1 * y1 + z1 * z1)
+        return np.array([w / n, x1 / n, y1 / n, z1 / n])
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
         acc = np.asarray(acc, dtype=float)

@@ -141,10 +141,10 @@ class EstimatorNode(Node):
                              max_acc=float(p["max_acc"]), max_gyr=float(p["max_gyr"]))
 
     @staticmethod
-    def _orientation_covariance(rp_deg: float, yaw_deg: float) -> list[float]:
+    def _orientation_covariance(rp_deg: float, yaw_deg: float) -> np.ndarray:
         rp = math.radians(rp_deg) ** 2
         yaw = math.radians(yaw_deg) ** 2
-        return [rp, 0.0, 0.0, 0.0, rp, 0.0, 0.0, 0.0, yaw]
+        return np.array([rp, 0.0, 0.0, 0.0, rp, 0.0, 0.0, 0.0, yaw])
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         est_changes: dict[str, Any] = {}
@@ -202,10 +202,13 @@ class EstimatorNode(Node):
         att.header = msg.header
         o = att.quaternion
         o.w, o.x, o.y, o.z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
-        self._pub_att.publish(att)
-        msg.orientation = o
-        msg.orientation_covariance = self._covariance
-        self._pub_imu.publish(msg)
+        # serialising costs most of the callback: skip topics nobody subscribes to
+        if self._pub_att.get_subscription_count():
+            self._pub_att.publish(att)
+        if self._pub_imu.get_subscription_count():
+            msg.orientation = o
+            msg.orientation_covariance = self._covariance
+            self._pub_imu.publish(msg)
         self._proc_us.append((time.perf_counter_ns() - t0) * 1e-3)
 
     def _warn_throttled(self, key: str, text: str) -> None:

@@ -1,0 +1,189 @@
+#!/usr/bin/env python3
+"""riann_node throughput and latency over real DDS, with references measured in the same run.
+
+    .venv/bin/python bench/bench_node.py [--rates 200,1000,2000,4000] [--duration 60] [--node riann_node]
+
+For each input rate it starts the node (the installed executable), publishes synthetic IMU samples
+on a fixed schedule (header stamps = the schedule, like a real IMU), collects ``imu/attitude`` and
+reports: messages in / out, drops, late (end-to-end latency > 1 ms), end-to-end latency p50/p99
+(publication in this process → arrival of the output here: two DDS hops plus this process's own
+callback), and the node's own processing time p99 from its /diagnostics (callback entry →
+publication). References in the same run: one ONNX Runtime GRU step, a whole sequence per sample,
+and an rclpy echo node's end-to-end latency (subscribe + republish, no estimation).
+
+DDS stays on this machine: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, ROS_DOMAIN_ID=57 by default.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("ROS_DOMAIN_ID", "57")
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import QuaternionStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu
+
+BIN = Path(sys.executable).parent
+ECHO = """
+import rclpy, sys
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu
+from geometry_msgs.msg import QuaternionStamped
+rclpy.init()
+n = rclpy.create_node("echo_node")
+pub = n.create_publisher(QuaternionStamped, "imu/attitude", QoSProfile(depth=100))
+out = QuaternionStamped()
+def cb(m):
+    out.header = m.header
+    pub.publish(out)
+n.create_subscription(Imu, "imu/data_raw", cb, QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT))
+try:
+    rclpy.spin(n)
+except KeyboardInterrupt:
+    pass
+"""
+
+
+def onnx_reference() -> tuple[float, float]:
+    """µs per single ONNX Runtime step, µs per sample over a whole sequence (same session)."""
+    from riann_ros.estimators.riann import HIDDEN_SHAPE, make_session
+
+    s = make_session()
+    h = np.zeros(HIDDEN_SHAPE, np.float32)
+    x1 = np.array([[[0.1, 0.2, 9.8, 0.01, 0.02, 0.03, 0.005]]], np.float32)
+    for _ in range(50):
+        s.run(None, {"input": x1, "h0": h})
+    n = 2000
+    t0 = time.perf_counter()
+    for _ in range(n):
+        _, h = s.run(None, {"input": x1, "h0": h})
+    step = (time.perf_counter() - t0) / n * 1e6
+    xs = np.repeat(x1, 20000, axis=1)
+    t0 = time.perf_counter()
+    s.run(None, {"input": xs, "h0": np.zeros(HIDDEN_SHAPE, np.float32)})
+    seq = (time.perf_counter() - t0) / 20000 * 1e6
+    return step, seq
+
+
+class Harness:
+    def __init__(self) -> None:
+        rclpy.init()
+        self.node = rclpy.create_node("bench_node_harness")
+        self.pub = self.node.create_publisher(Imu, "imu/data_raw", QoSProfile(depth=1000))
+        self.arrivals: dict[int, int] = {}
+        self.proc_p99: list[float] = []
+        self.node.create_subscription(QuaternionStamped, "imu/attitude", self._on_out,
+                                      QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE))
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
+        self.ex = SingleThreadedExecutor()
+        self.ex.add_node(self.node)
+        threading.Thread(target=self.ex.spin, daemon=True).start()
+
+    def _on_out(self, m: QuaternionStamped) -> None:
+        self.arrivals[m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec] = time.perf_counter_ns()
+
+    def _on_diag(self, m: DiagnosticArray) -> None:
+        for s in m.status:
+            for kv in s.values:
+                if kv.key == "processing time p99 (us)" and kv.value != "nan":
+                    self.proc_p99.append(float(kv.value))
+
+    def run(self, cmd: list[str], rate: float, duration: float) -> dict[str, float]:
+        self.arrivals.clear()
+        self.proc_p99.clear()
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            end = time.monotonic() + 30
+            while self.pub.get_subscription_count() == 0 or self.node.count_publishers("/imu/attitude") == 0:
+                if time.monotonic() > end:
+                    raise RuntimeError("node did not connect")
+                time.sleep(0.05)
+            time.sleep(1.0)  # let discovery settle both ways
+            n = int(rate * duration)
+            rng = np.random.default_rng(0)
+            acc = np.array([0.3, -0.2, 9.8]) + rng.normal(0, 0.3, (n, 3))
+            gyr = rng.normal(0, 0.5, (n, 3))
+            sent: dict[int, int] = {}
+            msg = Imu()
+            msg.header.frame_id = "imu_link"
+            t0_ns = 1_700_000_000_000_000_000
+            period = 1.0 / rate
+            start = time.perf_counter()
+            behind = 0
+            for i in range(n):
+                target = start + i * period
+                while True:
+                    now = time.perf_counter()
+                    if now >= target:
+                        break
+                    if target - now > 0.0005:
+                        time.sleep(target - now - 0.0003)
+                if now - target > 0.002:
+                    behind += 1
+                stamp = t0_ns + round(i * period * 1e9)
+                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+                a, g = acc[i], gyr[i]
+                la, av = msg.linear_acceleration, msg.angular_velocity
+                la.x, la.y, la.z = float(a[0]), float(a[1]), float(a[2])
+                av.x, av.y, av.z = float(g[0]), float(g[1]), float(g[2])
+                sent[stamp] = time.perf_counter_ns()
+                self.pub.publish(msg)
+            achieved = n / (time.perf_counter() - start)
+            time.sleep(1.5)
+        finally:
+            proc.send_signal(2)
+            proc.wait(10)
+        lat = np.array([(self.arrivals[s] - t) * 1e-3 for s, t in sent.items() if s in self.arrivals])
+        return {
+            "rate": rate,
+            "achieved_rate": achieved,
+            "sent": float(n),
+            "received": float(len(lat)),
+            "dropped": float(n - len(lat)),
+            "late_over_1ms": float((lat > 1000).sum()) if len(lat) else float("nan"),
+            "e2e_p50_us": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
+            "e2e_p99_us": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
+            "node_proc_p99_us": max(self.proc_p99) if self.proc_p99 else float("nan"),
+            "publisher_behind": float(behind),
+        }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rates", default="200,1000,2000,4000")
+    ap.add_argument("--duration", type=float, default=60.0, help="seconds per rate")
+    ap.add_argument("--node", default="riann_node")
+    ap.add_argument("--no-echo", action="store_true", help="skip the echo-node reference")
+    args = ap.parse_args()
+    step, seq = onnx_reference()
+    print(f"ONNX Runtime: single step {step:.1f} us, whole sequence {seq:.1f} us/sample")
+    h = Harness()
+    cols = ["rate", "achieved_rate", "sent", "received", "dropped", "late_over_1ms", "e2e_p50_us", "e2e_p99_us",
+            "node_proc_p99_us", "publisher_behind"]
+    print("| what | " + " | ".join(cols) + " |")
+    print("|---" * (len(cols) + 1) + "|")
+    for rate in [float(r) for r in args.rates.split(",")]:
+        runs = [(args.node, [str(BIN / args.node), "--ros-args", "-p", f"nominal_rate:={rate}"])]
+        if not args.no_echo:
+            runs.append(("echo (reference)", [sys.executable, "-c", ECHO]))
+        for label, cmd in runs:
+            r = h.run(cmd, rate, args.duration)
+            print(f"| {label} | " + " | ".join(f"{r[c]:.0f}" for c in cols) + " |", flush=True)
+    rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
