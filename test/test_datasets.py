@@ -66,6 +66,22 @@ def test_euroc_folder(tmp_path: Path) -> None:
     assert np.array_equal(back.quat_ref, rec.quat_ref, equal_nan=True) and np.array_equal(back.stamps_ns, stamps)
 
 
+def test_euroc_cli_imu_to_body(tmp_path: Path) -> None:
+    from riann_ros.cli.convert import main
+
+    root, _, _ = _euroc(tmp_path)
+    q_bi = [float(np.cos(0.25)), float(np.sin(0.25)), 0.0, 0.0]  # IMU rotated 0.5 rad about body x
+    out = tmp_path / "e.mcap"
+    assert main([str(root), "-o", str(out), "--imu-to-body", ",".join(map(str, q_bi)), "-q"]) == 0
+    rec = bagio.read_recording(out)
+    plain = read_euroc(root)
+    ok = np.isfinite(plain.quat_ref).all(axis=1)
+    assert np.allclose(rec.quat_ref[ok], quat.multiply(plain.quat_ref[ok], q_bi))
+    with pytest.raises(SystemExit) as e:  # not a unit quaternion: usage error
+        main([str(root), "-o", str(tmp_path / "f.mcap"), "--imu-to-body", "1,1,0,0"])
+    assert e.value.code == 2
+
+
 def test_euroc_tum_ground_truth_and_no_gt(tmp_path: Path) -> None:
     root, _, _ = _euroc(tmp_path, gt=False)
     assert read_euroc(root).quat_ref is None

@@ -58,6 +58,17 @@ def _bias(text: str) -> float | tuple[float, float, float]:
     raise argparse.ArgumentTypeError(f"bias must be a number or three numbers, got {text!r}")
 
 
+def _quat(text: str) -> tuple[float, float, float, float]:
+    try:
+        w, x, y, z = (float(p) for p in text.replace(",", " ").split())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a quaternion 'w,x,y,z', got {text!r}") from None
+    n = (w * w + x * x + y * y + z * z) ** 0.5
+    if abs(n - 1.0) > 1e-3:
+        raise argparse.ArgumentTypeError(f"quaternion {text!r} is not a unit quaternion (norm {n:.4g})")
+    return (w / n, x / n, y / n, z / n)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="riann-bag-convert",
@@ -91,6 +102,11 @@ def build_parser() -> argparse.ArgumentParser:
     e = p.add_argument_group("EuRoC/ASL")
     e.add_argument("--ground-truth", type=Path, help="ground truth: ASL data.csv or TUM file (t tx ty tz qx qy qz qw)")
     e.add_argument("--max-gap", type=float, default=0.1, help="no reference across ground-truth gaps > s (0.1)")
+    e.add_argument(
+        "--imu-to-body",
+        type=_quat,
+        help="IMU orientation in the ground-truth body frame 'w,x,y,z' (default: identity, as in EuRoC)",
+    )
 
     s = p.add_argument_group("synthetic")
     s.add_argument("--rate", type=float, default=200.0, help="Hz (default 200)")
@@ -124,7 +140,12 @@ def _reader_opts(fmt: str, args: argparse.Namespace) -> dict:
             "delimiter": args.delimiter,
         }
     if fmt == "euroc":
-        return {**common, "ground_truth": args.ground_truth, "max_gap_s": args.max_gap}
+        return {
+            **common,
+            "ground_truth": args.ground_truth,
+            "max_gap_s": args.max_gap,
+            "imu_to_body": args.imu_to_body,
+        }
     if fmt == "synthetic":
         return {
             **common,
