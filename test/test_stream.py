@@ -1,0 +1,106 @@
+"""The ROS-free input gate and EstimatorStream: every documented bad-input rule."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from riann_ros import stream as st
+from riann_ros.estimators import create
+from riann_ros.stream import EstimatorStream, GateConfig, InputGate
+
+A = (0.0, 0.0, 9.81)
+G = (0.0, 0.0, 0.0)
+S = 1_000_000_000
+
+
+def test_first_sample_uses_nominal_rate_then_stamp_differences():
+    gate = InputGate(GateConfig(nominal_rate=200.0))
+    r0 = gate.check(S, A, G)
+    assert r0.accepted and r0.reset == st.START and r0.dt == pytest.approx(0.005)
+    r1 = gate.check(S + 3_000_000, A, G)
+    assert r1.accepted and r1.reset is None and r1.dt == pytest.approx(0.003)
+
+
+@pytest.mark.parametrize(("acc", "gyr", "reason"), [
+    ((np.nan, 0.0, 9.8), G, st.NON_FINITE),
+    (A, (0.0, np.inf, 0.0), st.NON_FINITE),
+    ((3000.0, 0.0, 0.0), G, st.OUT_OF_RANGE),
+    (A, (0.0, 0.0, 250.0), st.OUT_OF_RANGE),
+    ((1e200, 0.0, 0.0), G, st.OUT_OF_RANGE),  # finite but overflows when squared
+])
+def test_bad_samples_are_rejected_without_touching_the_stamp_sequence(acc, gyr, reason):
+    gate = InputGate()
+    gate.check(S, A, G)
+    r = gate.check(S + 10_000_000, acc, gyr)
+    assert not r.accepted and r.reason == reason and gate.rejected[reason] == 1
+    nxt = gate.check(S + 20_000_000, A, G)
+    assert nxt.accepted and nxt.dt == pytest.approx(0.02)  # dt from the last accepted sample
+
+
+def test_repeats_backwards_gaps_and_clock_jumps():
+    gate = InputGate(GateConfig(max_dt=0.5))
+    gate.check(S, A, G)
+    assert gate.check(S, A, G).reason == st.STAMP_REPEAT
+    assert gate.check(S - 1_000_000, A, G).reason == st.STAMP_BACKWARDS
+    r = gate.check(S + 2 * S, A, G)  # 2 s later: gap
+    assert r.accepted and r.reset == st.GAP and r.dt == pytest.approx(0.01)
+    r = gate.check(S, A, G)  # 2 s back: clock jump (bag loop)
+    assert r.accepted and r.reset == st.CLOCK_JUMP
+    assert gate.resets[st.GAP] == gate.resets[st.CLOCK_JUMP] == 1
+
+
+def test_zero_stamps_use_receive_time_and_warn_once():
+    gate = InputGate()
+    r = gate.check(0, A, G, receive_ns=5 * S)
+    assert r.accepted and r.stamp_ns == 5 * S and r.warnings == [st.ZERO_STAMP]
+    r = gate.check(0, A, G, receive_ns=5 * S + 10_000_000)
+    assert r.accepted and r.warnings == []
+    assert gate.check(0, A, G).reason == st.NO_STAMP  # offline: no receive time, nothing to use
+
+
+def test_acc_in_g_warns_once_after_the_check_window():
+    gate = InputGate()
+    warned = []
+    for i in range(200):
+        warned += gate.check(S + i * 10_000_000, (0.0, 0.0, 1.0), G).warnings
+    assert warned == [st.ACC_IN_G]
+    ok = InputGate()
+    assert not any(ok.check(S + i * 10_000_000, A, G).warnings for i in range(200))
+
+
+def test_dt_statistics_are_popped():
+    gate = InputGate()
+    for i in range(11):
+        gate.check(S + i * 4_000_000, A, G)
+    stats = gate.pop_dt_stats()
+    assert stats["count"] == 11 and stats["max"] == pytest.approx(0.01) and stats["min"] == pytest.approx(0.004)
+    assert gate.pop_dt_stats() == {"count": 0.0}
+
+
+@pytest.mark.parametrize("name", ["riann", "madgwick", "mahony", "vqf"])
+def test_process_batch_equals_per_sample_process(name):
+    rng = np.random.default_rng(7)
+    n = 400
+    stamps = S + np.cumsum(rng.choice([0, 5_000_000, 10_000_000, -2_000_000, 900_000_000], n,
+                                      p=[0.03, 0.8, 0.1, 0.04, 0.03])).astype(np.int64)
+    acc = np.array(A) + rng.normal(0, 0.5, (n, 3))
+    gyr = rng.normal(0, 0.3, (n, 3))
+    acc[rng.integers(0, n, 5)] = np.nan
+    batch = EstimatorStream(create(name), GateConfig(nominal_rate=200.0))
+    q_b, ok = batch.process_batch(stamps, acc, gyr)
+    single = EstimatorStream(create(name), GateConfig(nominal_rate=200.0))
+    rows = [single.process(int(s), a, g)[0] for s, a, g in zip(stamps, acc, gyr, strict=True)]
+    assert [r is not None for r in rows] == ok.tolist()
+    tol = 1e-5 if name == "riann" else 1e-9  # RIANN: float32 GRU, one step at a time vs a sequence
+    assert np.abs(np.array([r for r in rows if r is not None]) - q_b[ok]).max() < tol
+    assert np.isnan(q_b[~ok]).all()
+    assert batch.gate.rejected == single.gate.rejected and batch.gate.resets == single.gate.resets
+
+
+def test_reset_restarts_the_stamp_sequence():
+    s = EstimatorStream(create("riann"), GateConfig(nominal_rate=100.0))
+    s.process(S, A, G)
+    s.reset()
+    q, r = s.process(S - 1_000_000, A, G)  # would be "backwards" without the reset
+    assert q is not None and r.reset == st.START
