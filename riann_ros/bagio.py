@@ -392,6 +392,31 @@ def _bag_storage(path: Path) -> str:
     return "sqlite3" if any(path.glob("*.db3*")) else "mcap"
 
 
+def _bag_compression(path: Path) -> str | None:
+    """``"zstd"`` when the bag uses any compression (MCAP chunks, rosbag2 message/file mode), else None."""
+    try:
+        if path.is_dir():
+            import yaml
+
+            meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+            if meta.get("compression_mode"):
+                return "zstd"
+            files = sorted(path.glob("*.mcap"))
+            if not files:
+                return None
+            path = files[0]
+        if path.suffix != ".mcap":
+            return None
+        from mcap.reader import make_reader
+
+        with path.open("rb") as f:
+            summary = make_reader(f).get_summary()
+        chunks = summary.chunk_indexes if summary is not None else []
+        return "zstd" if any(c.compression for c in chunks) else None
+    except Exception:
+        return None
+
+
 def _parse_stamp(raw: bytes) -> int:
     sec, nsec = struct.unpack_from("<iI", raw, 4)
     return sec * 1_000_000_000 + nsec
@@ -657,18 +682,21 @@ def write_estimates(
     *,
     force: bool = False,
     storage: str | None = None,
-    compression: str | None = None,
+    compression: str | None = "same",
 ) -> Path:
     """Copy bag ``src`` to ``dst`` adding one ``QuaternionStamped`` topic per ``estimates`` entry.
 
     ``estimates[topic] = (stamps_ns (N,), quats (N, 4) w, x, y, z)``; rows with a non-finite quaternion
-    are skipped; ``frame_id`` is ``"world"``. Messages are written in log-time order. Same storage as
-    ``src`` unless given; same refuse-overwrite/atomic rules as :func:`write_recording`.
+    are skipped; ``frame_id`` is ``"world"``. Messages are written in log-time order. Storage and
+    compression are those of ``src`` unless given (``compression``: ``"same"``, ``None`` or ``"zstd"``);
+    same refuse-overwrite/atomic rules as :func:`write_recording`.
     """
     src, dst = Path(src), Path(dst)
     if dst.resolve() == src.resolve():
         raise FileExistsError(f"{dst}: output is the input bag; choose another output path")
     storage = storage or ("mcap" if dst.suffix == ".mcap" else _bag_storage(src))
+    if compression == "same":
+        compression = _bag_compression(src)
     prepared = []
     for topic, (stamps, quats) in estimates.items():
         if not topic.startswith("/"):
