@@ -162,6 +162,18 @@ def quat_messages(stamps_ns: np.ndarray, quats_wxyz: np.ndarray, frame_id: str =
     return rows
 
 
+_MSGDEFS: dict[str, tuple[str, str]] = {}
+
+
+def _add_connection(writer, topic: str, msgtype: str):
+    """``writer.add_connection`` with the message definition and RIHS01 hash computed once per type."""
+    if msgtype not in _MSGDEFS:
+        ts = typestore()
+        _MSGDEFS[msgtype] = (ts.generate_msgdef(msgtype, ros_version=2)[0], ts.hash_rihs01(msgtype))
+    msgdef, rihs01 = _MSGDEFS[msgtype]
+    return writer.add_connection(topic, msgtype, msgdef=msgdef, rihs01=rihs01)
+
+
 def _serialize(msg, msgtype: str) -> bytes:
     return bytes(typestore().serialize_cdr(msg, msgtype))
 
@@ -338,12 +350,11 @@ def write_recording(
     bool_bytes = {True: _bool_msg(True), False: _bool_msg(False)}
 
     with _AtomicBag(target, storage, compression, force) as writer:
-        ts = typestore()
         writer.set_custom_data(INFO_KEY, info)
-        c_info = writer.add_connection(INFO_TOPIC, STRING_TYPE, typestore=ts)
-        c_imu = writer.add_connection(IMU_TOPIC, IMU_TYPE, typestore=ts)
-        c_ref = writer.add_connection(REF_TOPIC, QUAT_TYPE, typestore=ts) if ref_rows is not None else None
-        c_scored = writer.add_connection(SCORED_TOPIC, BOOL_TYPE, typestore=ts)
+        c_info = _add_connection(writer, INFO_TOPIC, STRING_TYPE)
+        c_imu = _add_connection(writer, IMU_TOPIC, IMU_TYPE)
+        c_ref = _add_connection(writer, REF_TOPIC, QUAT_TYPE) if ref_rows is not None else None
+        c_scored = _add_connection(writer, SCORED_TOPIC, BOOL_TYPE)
         write = writer.write
         write(c_info, int(stamps[0]), _string_msg(info))
         is_ref = np.zeros(len(rec), dtype=bool)
@@ -732,7 +743,7 @@ def write_estimates(
                     serialization_format=getattr(c.ext, "serialization_format", "cdr"),
                     offered_qos_profiles=getattr(c.ext, "offered_qos_profiles", []),
                 )
-            est_conns = [writer.add_connection(topic, QUAT_TYPE, typestore=typestore()) for topic, _, _ in prepared]
+            est_conns = [_add_connection(writer, topic, QUAT_TYPE) for topic, _, _ in prepared]
 
             def source():
                 for c, t, raw in reader.messages():

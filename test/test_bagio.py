@@ -341,3 +341,35 @@ def test_foreign_bag_generic_path_and_stamp_order(tmp_path: Path) -> None:
 def test_synthetic_bag_round_trip(tmp_path: Path) -> None:
     rec = generate(rate=100, duration=20, seed=4)
     _same(rec, bagio.read_recording(bagio.write_recording(tmp_path / "syn.mcap", rec, compression="zstd")))
+
+
+def test_round_trip_property(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Random lengths, stamps, extreme float64 values, reference gaps and masks round-trip exactly."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    floats = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+    @settings(max_examples=10, deadline=None)
+    @given(
+        n=st.integers(1, 40),
+        seed=st.integers(0, 2**32 - 1),
+        special=st.lists(floats, min_size=6, max_size=6),
+        frame=st.text(min_size=0, max_size=12),
+        chunk=st.integers(1, 50),
+    )
+    def check(n: int, seed: int, special: list[float], frame: str, chunk: int) -> None:
+        rng = np.random.default_rng(seed)
+        stamps = np.cumsum(rng.integers(1, 10**9, n)) + int(rng.integers(0, 10**18))
+        acc = rng.normal(size=(n, 3))
+        acc[0] = special[:3]
+        gyr = rng.normal(size=(n, 3))
+        gyr[-1] = special[3:]
+        q = rng.normal(size=(n, 4))
+        q[rng.random(n) < 0.3] = np.nan
+        rec = Recording(stamps, acc, gyr, q, rng.random(n) < 0.5, name="p", frame_id=frame or "f")
+        out = tmp_path_factory.mktemp("prop") / "p.mcap"
+        bagio.write_recording(out, rec)
+        _same(rec, bagio.concat(list(bagio.iter_imu_chunks(out, chunk=chunk))))
+
+    check()
