@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -289,18 +288,12 @@ def test_matches_ahrs_whole_trial(name: str, broad_trial) -> None:
     q0 = quat.from_accelerometer(acc[0])
     dt = np.full(len(acc), 1.0 / rate)
     if name == "madgwick":
-        t0 = time.perf_counter()
         ref = ahrs.filters.Madgwick(gyr=gyr, acc=acc, frequency=rate, q0=q0, gain=0.033).Q
-        t1 = time.perf_counter()
         ours = MadgwickEstimator(beta=0.033).update_batch(acc, gyr, dt)
     else:
-        t0 = time.perf_counter()
         ref = ahrs.filters.Mahony(gyr=gyr, acc=acc, frequency=rate, q0=q0, k_P=1.0, k_I=0.3).Q
-        t1 = time.perf_counter()
         ours = MahonyEstimator(kp=1.0, ki=0.3).update_batch(acc, gyr, dt)
-    t2 = time.perf_counter()
-    # the issue asks for >= 5x; measured about 15x (Madgwick) and 30x (Mahony), see bench/bench_filters.py
-    assert (t1 - t0) / (t2 - t1) > 5.0, f"only {(t1 - t0) / (t2 - t1):.1f}x faster than ahrs"
+    # speed against ahrs is a benchmark (bench/bench_filters.py, BENCHMARKS.md), not a timed test
     assert len(ours) == len(acc) > 40000
     np.testing.assert_allclose(ours, _sign_aligned(ref, ours), atol=1e-6, rtol=0)
 
