@@ -91,9 +91,11 @@ def main() -> int:
     rows = data["results"]
     per: dict[str, list[float]] = {}
     for r in rows:
-        acc = per.setdefault(r["estimator"], [0.0, 0.0])
+        acc = per.setdefault(r["estimator"], [0.0, 0.0, 0.0])
         acc[0] += r["seconds"]
         acc[1] += r["n_samples"]
+        acc[2] += r.get("cpu_seconds", float("nan"))
+    cpu_total = sum(v[2] for v in per.values())
     cmd = "riann-bag-eval <12 BROAD trials> " + " ".join(argv[len(inputs) :])
     print(f"## riann-bag-eval, {len(inputs)} inputs, jobs {args.jobs}\n")
     print(f"- command: `{cmd}` (exit {rc})")
@@ -102,9 +104,14 @@ def main() -> int:
         f"1-min load average before/after: {load_before:.2f} / {os.getloadavg()[0]:.2f}"
     )
     print(f"- runs: {len(rows)} (sequence × scenario × estimator), samples: {sum(v[1] for v in per.values()):.0f}")
-    print("\n| estimator | runs CPU s | samples/s (gate + estimator) |\n|---|---:|---:|")
-    for k, (secs, n) in per.items():
-        print(f"| {k} | {secs:.1f} | {n / secs:,.0f} |")
+    print(
+        f"- CPU time of all estimator runs: {cpu_total:.1f} s, i.e. {cpu_total / args.jobs:.1f} s per worker "
+        f"(the wall time on {args.jobs} otherwise idle cores, plus start-up and reading)"
+    )
+    print("\n| estimator | runs wall s | runs CPU s | samples/s per core (CPU; gate + estimator) |")
+    print("|---|---:|---:|---:|")
+    for k, (secs, n, cpu) in per.items():
+        print(f"| {k} | {secs:.1f} | {cpu:.1f} | {n / cpu:,.0f} |")
     print(f"\ninput gate alone (InputGate.check per sample, in-process, one trial): {gate_rate():,.0f} samples/s")
     print()
     print(format_markdown_table(data["summary"]))

@@ -31,6 +31,7 @@ CSV_FIELDS = (
     "n_scored",
     "n_unestimated",
     "seconds",
+    "cpu_seconds",
     "mode",
     "published",
     "received",
