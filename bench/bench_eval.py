@@ -96,6 +96,7 @@ def main() -> int:
         acc[1] += r["n_samples"]
         acc[2] += r.get("cpu_seconds", float("nan"))
     cpu_total = sum(v[2] for v in per.values())
+    cpu_seq = sum(s.get("cpu_seconds", 0.0) for s in data["sequences"])
     cmd = "riann-bag-eval <12 BROAD trials> " + " ".join(argv[len(inputs) :])
     print(f"## riann-bag-eval, {len(inputs)} inputs, jobs {args.jobs}\n")
     print(f"- command: `{cmd}` (exit {rc})")
@@ -107,6 +108,10 @@ def main() -> int:
     print(
         f"- CPU time of all estimator runs: {cpu_total:.1f} s, i.e. {cpu_total / args.jobs:.1f} s per worker "
         f"(the wall time on {args.jobs} otherwise idle cores, plus start-up and reading)"
+    )
+    print(
+        f"- CPU time of the workers (reading, scenarios, runs, scoring): {cpu_seq:.1f} s, i.e. "
+        f"{cpu_seq / args.jobs:.1f} s per worker"
     )
     print("\n| estimator | runs wall s | runs CPU s | samples/s per core (CPU; gate + estimator) |")
     print("|---|---:|---:|---:|")

@@ -376,6 +376,7 @@ class SequenceResult:
     series: dict[str, Any] | None = None
     estimates: dict[str, Any] | None = None  # label → (stamps_ns, quats) on the restrictive sequence
     seconds: float = 0.0
+    cpu_seconds: float = 0.0  # reading + scenarios + runs + scoring, in the worker
     citation: str = ""
 
 
@@ -464,9 +465,14 @@ def evaluate_recording(
 
 def evaluate_source(source: str, settings: EvalSettings) -> SequenceResult:
     """Load and evaluate one input; any problem ends up in ``result.error`` naming the input."""
+    import time
+
+    c0 = time.process_time()
     try:
         rec = load_recording(source)
-        return evaluate_recording(rec, settings, str(source))
+        res = evaluate_recording(rec, settings, str(source))
+        res.cpu_seconds = time.process_time() - c0
+        return res
     except EvalError as exc:
         return SequenceResult(source=str(source), error=str(exc))
     except Exception as exc:  # an estimator crash must not take the other bags down

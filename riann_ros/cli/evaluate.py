@@ -194,6 +194,23 @@ def _write_estimates(results: list[ev.SequenceResult], out_dir: Path, force: boo
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The CLI. Ctrl-C (SIGINT) exits with status 130 and a one-line message, leaving no result files of
+    this run (files being written when it came are removed)."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        for f in _WRITING:
+            f.unlink(missing_ok=True)
+        _err("interrupted; no results written" + (" (partly written result files removed)" if _WRITING else ""))
+        return 130
+    finally:
+        _WRITING.clear()
+
+
+_WRITING: list[Path] = []  # result files of this run while they are being written
+
+
+def _main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     argv_list = sys.argv[1:] if argv is None else list(argv)
@@ -308,6 +325,7 @@ def main(argv: list[str] | None = None) -> int:
                     "name": r.name,
                     "dataset": r.dataset,
                     "seconds": r.seconds,
+                    "cpu_seconds": r.cpu_seconds,
                     "scenarios": r.scenarios,
                 }
                 for r in results
@@ -317,6 +335,12 @@ def main(argv: list[str] | None = None) -> int:
             "tuning": tuning,
             "failures": failures,
         }
+        _WRITING[:] = [
+            out / f"{stem}.{ext}"
+            for stem in ("rmse_boxplots", "error_over_time", "rmse_vs_rate")
+            for ext in ("png", "svg")
+        ]
+        _WRITING.extend([out / "results.csv", out / "results.json", out / "report.md"])
         report.write_csv(out / "results.csv", rows)
         report.write_json(out / "results.json", payload)
         plots: list[Path] = []
@@ -328,6 +352,7 @@ def main(argv: list[str] | None = None) -> int:
             plots += report.plot_rmse_vs_rate(rows, out)
         sources_text = sorted({r.citation for r in results if r.citation and not r.error})
         report.write_markdown(out / "report.md", agg, rows, settings_dict, failures, plots, tuning, sources_text)
+        _WRITING.clear()
         print(f"wrote {out}/results.csv, results.json, report.md" + (f" and {len(plots)} plot files" if plots else ""))
     return 1 if failures or problems else 0
 
