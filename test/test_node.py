@@ -109,6 +109,7 @@ def test_bad_input_is_rejected_or_restarts_as_documented(ros, start_node):
     assert values["rejected stamp_backwards (total)"] == "1"
     assert values["restarts gap (total)"] == "1" and values["restarts clock_jump (total)"] == "1"
     assert "riann_node" in status.name
+    assert float(values["inference time max (us)"]) > 0.0 and float(values["input rate (Hz)"]) >= 0.0
     ros.destroy(pub, att, diag)
 
 

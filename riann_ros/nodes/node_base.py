@@ -121,6 +121,7 @@ class EstimatorNode(Node):
         self._period_in = 0
         self._period_rejected: Counter[str] = Counter()
         self._proc_us: list[float] = []
+        self._est_us: list[float] = []
         self._frame_id = ""
         self.get_logger().info(
             f"{self.ESTIMATOR} estimator on '{self.resolve_topic_name(INPUT_TOPIC)}' -> "
@@ -185,7 +186,9 @@ class EstimatorNode(Node):
         gyr = (av.x, av.y, av.z)
         receive_ns = self.get_clock().now().nanoseconds if stamp_ns == 0 else None
         self._period_in += 1
+        t1 = time.perf_counter_ns()
         q, r = self.stream.process(stamp_ns, acc, gyr, receive_ns)
+        self._est_us.append((time.perf_counter_ns() - t1) * 1e-3)
         for w in r.warnings:
             self.get_logger().warning(st.WARNING_TEXT[w])
         if r.reset in (st.GAP, st.CLOCK_JUMP):
@@ -231,6 +234,7 @@ class EstimatorNode(Node):
         gate = self.stream.gate
         dts = gate.pop_dt_stats()
         proc = np.asarray(self._proc_us)
+        est = np.asarray(self._est_us)
         rate = self._period_in / period
         status = DiagnosticStatus()
         status.name = f"{self.get_name()}: {self.ESTIMATOR} attitude estimator"
@@ -249,6 +253,8 @@ class EstimatorNode(Node):
             "dt max (ms)": f"{dts.get('max', math.nan) * 1e3:.3f}",
             "dt std (ms)": f"{dts.get('std', math.nan) * 1e3:.3f}",
             "samples accepted (total)": str(gate.accepted),
+            "inference time mean (us)": f"{est.mean():.1f}" if len(est) else "nan",
+            "inference time max (us)": f"{est.max():.1f}" if len(est) else "nan",
             "processing time mean (us)": f"{proc.mean():.1f}" if len(proc) else "nan",
             "processing time p99 (us)": f"{np.percentile(proc, 99):.1f}" if len(proc) else "nan",
             "processing time max (us)": f"{proc.max():.1f}" if len(proc) else "nan",
@@ -266,6 +272,7 @@ class EstimatorNode(Node):
         self._period_in = 0
         self._period_rejected.clear()
         self._proc_us = []
+        self._est_us = []
 
 
 def run(node_cls: type[EstimatorNode], args: list[str] | None = None) -> int:
