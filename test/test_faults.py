@@ -1,0 +1,415 @@
+"""Faults the way ROS users cause them, over real DDS and on the installed CLIs (issue 6).
+
+Node tests (``pytest.mark.ros``) start the installed node executables and talk to them through the
+test-side rclpy node (``ros`` fixture); nothing of ROS is mocked. Every node output is compared with
+what :class:`riann_ros.stream.EstimatorStream` gives offline on the same stamp sequence, so "no output
+with a wrong dt" is checked sample by sample, not just "something came out".
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import QuaternionStamped
+from sensor_msgs.msg import Imu
+
+from conftest import ROOT, executable, wait_for
+from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
+from riann_ros import bagio
+from riann_ros.datasets.synthetic import generate
+from riann_ros.estimators import create
+from riann_ros.stream import EstimatorStream, GateConfig
+
+NS = 1_000_000_000
+T0 = 1_700_000_000 * NS  # a plausible wall-clock stamp (a zero stamp means "unstamped")
+TOL = 1e-4  # node (per message) vs EstimatorStream.process_batch, as in test_node.py
+
+ros = pytest.mark.ros
+
+
+# ---- helpers --------------------------------------------------------------------------------------
+
+
+def motion(n: int, rate: float = 200.0, seed: int = 0, t0_ns: int = T0):
+    """n samples of the synthetic generator's smooth motion, stamped from t0_ns."""
+    rec = generate(rate=rate, duration=(n + 1) / rate, seed=seed)
+    return rec.stamps_ns[:n] + t0_ns, rec.acc[:n], rec.gyr[:n]
+
+
+def expected(stamps, acc, gyr, rate: float = 200.0, name: str = "riann", max_dt: float = 0.5):
+    return EstimatorStream(create(name), GateConfig(nominal_rate=rate, max_dt=max_dt)).process_batch(stamps, acc, gyr)
+
+
+def connect(ros_h, node, topic: str = "imu/attitude", reliable_in: bool = True):
+    pub = ros_h.publisher(Imu, "imu/data_raw", reliable=reliable_in)
+    att = ros_h.collect(QuaternionStamped, topic)
+    wait_for(lambda: pub.get_subscription_count() > 0 and att.sub.get_publisher_count() > 0, 20,
+             f"node to connect (log: {node.output()})")
+    return pub, att
+
+
+def check_against_core(got, stamps, acc, gyr, rate=200.0):
+    """The node's outputs are exactly the accepted samples of EstimatorStream, in order, same numbers."""
+    q_core, ok = expected(stamps, acc, gyr, rate)
+    assert [stamp_ns(m) for m in got] == stamps[ok].tolist()
+    q = quats(got)
+    assert np.isfinite(q).all() and np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
+    assert np.abs(q - q_core[ok]).max() < TOL
+    return ok
+
+
+# A driver in a process of its own: publishes samples from an .npz file on imu/data_raw (reliable),
+# paced, after its subscriber matched; waits until everything is acknowledged, then exits.
+DRIVER = r"""
+import sys, time
+import numpy as np
+import rclpy
+from rclpy.duration import Duration
+from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
+from sensor_msgs.msg import Imu
+d = np.load(sys.argv[1]); period = float(sys.argv[2])
+rclpy.init()
+node = rclpy.create_node("fake_imu_driver")
+pub = node.create_publisher(Imu, "imu/data_raw", QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST,
+                                                            reliability=ReliabilityPolicy.RELIABLE))
+end = time.monotonic() + 20
+while pub.get_subscription_count() == 0 and time.monotonic() < end:
+    time.sleep(0.01)
+time.sleep(0.3)
+for s, a, g in zip(d["stamps"], d["acc"], d["gyr"]):
+    m = Imu()
+    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(s), 1_000_000_000)
+    m.header.frame_id = "imu_link"
+    m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z = (float(v) for v in a)
+    m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z = (float(v) for v in g)
+    pub.publish(m)
+    time.sleep(period)
+ok = pub.wait_for_all_acked(Duration(seconds=10))
+node.destroy_node()
+rclpy.shutdown()
+print("driver done", len(d["stamps"]), "acked" if ok else "NOT ACKED", flush=True)
+"""
+
+
+def run_driver(tmp_path: Path, k: int, stamps, acc, gyr, period: float = 0.003) -> None:
+    f = tmp_path / f"driver{k}.npz"
+    np.savez(f, stamps=np.asarray(stamps, dtype=np.int64), acc=acc, gyr=gyr)
+    r = subprocess.run([sys.executable, "-c", DRIVER, str(f), str(period)], capture_output=True, text=True,
+                       timeout=60, env=os.environ.copy())
+    assert r.returncode == 0 and "acked" in r.stdout and "NOT" not in r.stdout, r.stdout + r.stderr
+
+
+def settle(att, n_expected: int, timeout: float = 20.0) -> None:
+    wait_for(lambda: len(att.messages) >= n_expected, timeout, f"{n_expected} outputs (have {len(att.messages)})")
+    time.sleep(0.3)  # nothing more must come
+
+
+# ---- the driver stops and restarts ------------------------------------------------------------------
+
+
+@ros
+def test_driver_restarts_node_resumes_and_restarts_where_stamps_say(ros, start_node, tmp_path):
+    node = start_node("riann_node", "-p", "input_qos:=reliable", "-p", "nominal_rate:=200.0", "-p", "max_dt:=0.5")
+    att = ros.collect(QuaternionStamped, "imu/attitude")
+    wait_for(lambda: att.sub.get_publisher_count() > 0, 20, f"node (log: {node.output()})")
+    s, a, g = motion(800)
+    # driver 1: samples 0..199; driver 2 (new process, after a pause): stamps continue, 200..399;
+    # driver 3: restarts its clock 3 s back (> max_dt: restart); driver 4: resumes 0.1 s before
+    # driver 3's last stamp (≤ max_dt back: those samples are rejected as out of order, then it goes on).
+    seg = [
+        (s[0:200], a[0:200], g[0:200]),
+        (s[200:400], a[200:400], g[200:400]),
+        (s[400:600] - 3 * NS - (s[400] - s[0]), a[400:600], g[400:600]),
+    ]
+    last3 = int(seg[2][0][-1])
+    d4 = s[600:800] - s[600] + last3 - 100_000_000  # 20 samples at or before last3 (5 ms grid), 180 after
+    seg.append((d4, a[600:800], g[600:800]))
+    for k, (ss, aa, gg) in enumerate(seg):
+        run_driver(tmp_path, k, ss, aa, gg)
+        time.sleep(0.5)  # the driver is gone for a while
+    stamps = np.concatenate([x[0] for x in seg])
+    _, ok = expected(stamps, a, g)
+    assert (~ok).sum() == 21  # 20 out of order + 1 repeat of last3
+    settle(att, int(ok.sum()))
+    check_against_core(att.messages, stamps, a, g)
+    log = node.output()
+    assert log.count("clock jump at stamp") == 1 and "gap at stamp" not in log
+    assert "stamp_backwards" in log
+    # the restart really restarted: a fresh estimator from driver 3's first sample gives the same numbers
+    q3 = create("riann").update_batch(seg[2][1], seg[2][2], np.r_[1 / 200.0, np.diff(seg[2][0]) * 1e-9])
+    assert np.abs(quats(att.messages[400:600]) - q3).max() < TOL
+    assert node.proc.poll() is None
+    ros.destroy(att)
+
+
+# ---- a bag replayed in a loop with /clock ------------------------------------------------------------
+
+
+@ros
+def test_bag_loop_with_sim_time_second_pass_equals_first(ros, start_node):
+    from rosgraph_msgs.msg import Clock
+
+    rec = bagio.read_recording(ROOT / "bags" / "synthetic_rotation_100hz.mcap")
+    sl = slice(1, 301)  # skip the zero stamp the bag starts with (it would mean "unstamped")
+    stamps, acc, gyr = rec.stamps_ns[sl], rec.acc[sl], rec.gyr[sl]
+    node = start_node("riann_node", "-p", "use_sim_time:=true", "-p", "input_qos:=reliable",
+                      "-p", "nominal_rate:=100.0")
+    pub, att = connect(ros, node)
+    clock = ros.publisher(Clock, "/clock", reliable=True, depth=10)
+    wait_for(lambda: clock.get_subscription_count() > 0, 20, "node's /clock subscription")
+    msgs = [imu_msg(x, y, z) for x, y, z in zip(stamps, acc, gyr, strict=True)]
+    n = len(msgs)
+    for p in range(2):  # what `ros2 bag play --loop --clock` does: the clock goes back with every loop
+        for m in msgs:
+            c = Clock()
+            c.clock = m.header.stamp
+            clock.publish(c)
+            pub.publish(m)
+            time.sleep(0.002)
+        settle(att, (p + 1) * n)
+    got = att.messages
+    assert len(got) == 2 * n
+    assert [stamp_ns(m) for m in got] == stamps.tolist() * 2
+    q = quats(got)
+    assert np.abs(q[:n] - q[n:]).max() < 1e-6
+    q_core, ok = expected(np.r_[stamps, stamps], np.r_[acc, acc], np.r_[gyr, gyr], rate=100.0)
+    assert ok.all() and np.abs(q - q_core).max() < TOL
+    assert node.output().count("clock jump at stamp") == 1
+    time.sleep(1.5)  # the node (its timers run on the jumped-back ROS clock) is still alive
+    assert node.proc.poll() is None, node.output()
+    ros.destroy(pub, att, clock)
+
+
+# ---- bursts -----------------------------------------------------------------------------------------
+
+
+@ros
+def test_burst_of_500_after_a_pause_is_processed_whole_and_in_order(ros, start_node):
+    node = start_node("riann_node", "-p", "nominal_rate:=200.0")  # default QoS: sensor_data, depth 1000
+    pub, att = connect(ros, node)
+    s, a, g = motion(550)
+    msgs = [imu_msg(x, y, z) for x, y, z in zip(s, a, g, strict=True)]
+    publish_paced(pub, msgs[:50], att.messages, 50)
+    settle(att, 50)
+    time.sleep(1.0)  # the pause
+    for m in msgs[50:]:  # 500 at once
+        pub.publish(m)
+    settle(att, 550, timeout=30)
+    assert len(att.messages) == 550
+    check_against_core(att.messages, s, a, g)
+    assert "input_depth=1000" in node.output()
+    ros.destroy(pub, att)
+
+
+@ros
+def test_burst_larger_than_input_depth_loses_oldest_never_reorders(ros, start_node):
+    """Documented policy: keep-last input_depth; a larger burst loses messages in DDS, never reorders."""
+    node = start_node("riann_node", "-p", "nominal_rate:=200.0", "-p", "input_depth:=20")
+    pub, att = connect(ros, node)
+    s, a, g = motion(3000)
+    msgs = [imu_msg(x, y, z) for x, y, z in zip(s, a, g, strict=True)]
+    time.sleep(0.5)
+    for m in msgs:
+        pub.publish(m)
+    wait_for(lambda: att.messages and stamp_ns(att.messages[-1]) == s[-1], 30, "the newest message")
+    time.sleep(0.5)
+    got = att.messages
+    st = np.array([stamp_ns(m) for m in got])
+    assert (np.diff(st) > 0).all()  # never reordered
+    assert len(got) <= len(msgs)
+    idx = np.searchsorted(s, st)
+    assert (s[idx] == st).all()
+    # what arrived is processed exactly as EstimatorStream processes that subsequence (dt from stamps)
+    check_against_core(got, s[idx], a[idx], g[idx])
+    print(f"burst of {len(msgs)} with input_depth 20: {len(got)} processed, {len(msgs) - len(got)} lost")
+    ros.destroy(pub, att)
+
+
+# ---- best effort and reliable drivers at the same time ---------------------------------------------
+
+
+@ros
+def test_best_effort_and_reliable_publishers_at_once(ros, start_node):
+    node = start_node("riann_node", "-p", "nominal_rate:=200.0")  # default settings
+    pub_be = ros.publisher(Imu, "imu/data_raw", reliable=False)
+    pub_rel = ros.publisher(Imu, "imu/data_raw", reliable=True)
+    att = ros.collect(QuaternionStamped, "imu/attitude")
+    wait_for(lambda: pub_be.get_subscription_count() > 0 and pub_rel.get_subscription_count() > 0
+             and att.sub.get_publisher_count() > 0, 20, f"both publishers to connect (log: {node.output()})")
+    time.sleep(0.3)
+    s, a, g = motion(200)
+    for k in range(4):  # alternate blocks of 50: best effort, reliable, best effort, reliable
+        pub, frame = (pub_be, "driver_be") if k % 2 == 0 else (pub_rel, "driver_rel")
+        for i in range(50 * k, 50 * (k + 1)):
+            pub.publish(imu_msg(s[i], a[i], g[i], frame_id=frame))
+            time.sleep(0.003)
+    settle(att, 200)
+    got = att.messages
+    frames = [m.header.frame_id for m in got]
+    assert frames.count("driver_rel") == 100 and frames.count("driver_be") == 100
+    check_against_core(got, s, a, g)
+    ros.destroy(pub_be, pub_rel, att)
+
+
+# ---- node killed and restarted ---------------------------------------------------------------------
+
+
+def _gids(infos) -> set[bytes]:
+    return {bytes(i.endpoint_gid) for i in infos}
+
+
+@ros
+def test_node_killed_and_restarted_reinitialises_from_next_sample(ros, start_node):
+    args = ("-p", "input_qos:=reliable", "-p", "nominal_rate:=200.0")
+    node = start_node("riann_node", *args)
+    pub, att = connect(ros, node)
+    s, a, g = motion(400)
+    msgs = [imu_msg(x, y, z) for x, y, z in zip(s, a, g, strict=True)]
+    publish_paced(pub, msgs[:200], att.messages, 200)
+    settle(att, 200)
+    check_against_core(att.messages, s[:200], a[:200], g[:200])
+    old_sub = _gids(ros.node.get_subscriptions_info_by_topic("/imu/data_raw"))
+    old_pub = _gids(ros.node.get_publishers_info_by_topic("/imu/attitude"))
+    node.proc.send_signal(signal.SIGKILL)
+    node.proc.wait(10)
+    node2 = start_node("riann_node", *args)
+    wait_for(lambda: _gids(ros.node.get_subscriptions_info_by_topic("/imu/data_raw")) - old_sub
+             and _gids(ros.node.get_publishers_info_by_topic("/imu/attitude")) - old_pub, 20,
+             f"restarted node in the graph (log: {node2.output()})")
+    time.sleep(1.0)  # endpoint matching
+    before = len(att.messages)
+    for m in msgs[200:]:
+        pub.publish(m)
+        time.sleep(0.003)
+    settle(att, before + 200)
+    after = att.messages[before:]
+    assert len(after) == 200
+    assert [stamp_ns(m) for m in after] == s[200:].tolist()
+    # a fresh estimator from the first sample after the restart, first dt = 1/nominal_rate
+    q_fresh = create("riann").update_batch(a[200:], g[200:], np.r_[1 / 200.0, np.diff(s[200:]) * 1e-9])
+    assert np.abs(quats(after) - q_fresh).max() < TOL
+    log = node2.output()
+    assert "Traceback" not in log and "error" not in log.lower(), log
+    ros.destroy(pub, att)
+
+
+# ---- the CLIs interrupted half-way -----------------------------------------------------------------
+
+
+def _sigint_when(cmd: list[str], cond, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=os.environ.copy())
+    try:
+        wait_for(lambda: cond() or p.poll() is not None, timeout, "the half-way point")
+        assert p.poll() is None, "finished before it could be interrupted: make the input bigger"
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    return subprocess.CompletedProcess(cmd, p.returncode, out, err)
+
+
+@pytest.mark.slow
+def test_converter_interrupted_half_way_leaves_nothing_and_rerun_succeeds(tmp_path):
+    out = tmp_path / "out" / "long.mcap"
+    cmd = [str(executable("riann-bag-convert")), "--format", "synthetic", "--rate", "1000", "--duration", "150",
+           "-o", str(out)]
+
+    def writing() -> bool:  # the hidden temporary bag exists and has grown: the write is half-way
+        return any(f.stat().st_size > 4_000_000 for f in out.parent.glob(".long.mcap.*/**/*.mcap"))
+
+    r = _sigint_when(cmd, writing)
+    assert r.returncode == 130, r.stderr
+    assert "interrupted" in r.stderr and "Traceback" not in r.stderr
+    assert not out.exists()
+    assert list(out.parent.iterdir()) == []  # no temporary left either
+    r2 = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert r2.returncode == 0, r2.stderr
+    assert len(bagio.read_recording(out)) == 150_001
+
+
+@pytest.fixture(scope="module")
+def long_bags(tmp_path_factory) -> list[Path]:
+    d = tmp_path_factory.mktemp("long")
+    return [bagio.write_recording(d / f"syn{k}.mcap", generate(rate=1000, duration=30, seed=k, start_s=1.0))
+            for k in range(3)]
+
+
+RESULT_FILES = ("results.csv", "results.json", "report.md")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_evaluator_interrupted_half_way_writes_nothing_and_rerun_succeeds(long_bags, tmp_path, jobs):
+    out = tmp_path / "eval_out"
+    cmd = [str(executable("riann-bag-eval")), *map(str, long_bags), "--estimators", "riann",
+           "--scenarios", "realistic", "--jobs", str(jobs), "--out", str(out)]
+    err = tmp_path / "stderr.txt"
+    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err.open("w"), env=os.environ.copy(),
+                         start_new_session=True)
+    try:
+        wait_for(lambda: "1/3" in err.read_text() or p.poll() is not None, 120, "the first input done")
+        assert p.poll() is None, "finished before it could be interrupted"
+        os.killpg(p.pid, signal.SIGINT)  # Ctrl-C in a terminal reaches the whole process group
+        p.wait(60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    text = err.read_text()
+    assert p.returncode != 0
+    for f in RESULT_FILES:
+        assert not (out / f).exists(), f"{f} left after an interrupted run"
+    assert "interrupted" in text, text
+    r2 = subprocess.run([*cmd, "-q", "--no-plots"], capture_output=True, text=True, timeout=300)
+    assert r2.returncode == 0, r2.stderr
+    assert all((out / f).stat().st_size > 0 for f in RESULT_FILES)
+
+
+# ---- corrupt inputs --------------------------------------------------------------------------------
+
+
+def test_corrupt_bags_are_named_and_the_good_one_still_evaluated(tmp_path):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    rec = generate(rate=200, duration=30, seed=4, start_s=1.0)
+    good = bagio.write_recording(tmp_path / "good.mcap", rec)
+    truncated = tmp_path / "truncated.mcap"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    notable = bagio.write_recording(tmp_path / "notable", rec, storage="sqlite3")
+    (db,) = notable.glob("*.db3")
+    con = sqlite3.connect(db)
+    con.execute("DROP TABLE topics")
+    con.commit()
+    con.close()
+    wrong = tmp_path / "wrongtype"
+    ts = bagio.typestore()
+    with Writer(wrong, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        c = w.add_connection(bagio.IMU_TOPIC, "std_msgs/msg/String", typestore=ts)
+        for t in range(1, 11):
+            w.write(c, t * 5_000_000, bytes(ts.serialize_cdr(ts.types["std_msgs/msg/String"](data="imu?"),
+                                                             "std_msgs/msg/String")))
+    out = tmp_path / "eval_out"
+    cmd = [str(executable("riann-bag-eval")), str(truncated), str(notable), str(good), str(wrong),
+           "--estimators", "madgwick", "--scenarios", "realistic", "--out", str(out), "--no-plots", "-q"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr
+    failed = [ln for ln in r.stderr.splitlines() if "FAILED" in ln]
+    assert len(failed) == 3, r.stderr
+    for bad, why in ((truncated, "truncated"), (notable, "table"), (wrong, "expected sensor_msgs/msg/Imu")):
+        line = next((ln for ln in failed if str(bad) in ln), None)
+        assert line is not None, f"{bad} not named: {r.stderr}"
+        assert why in line.lower() or why in line, line
+    assert "1 of 4 input(s) evaluated" in r.stdout
+    csv = (out / "results.csv").read_text()
+    assert "good" in csv and "truncated" not in csv
