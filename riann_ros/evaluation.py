@@ -480,6 +480,10 @@ def evaluate_source(source: str, settings: EvalSettings) -> SequenceResult:
 
 
 def _init_worker() -> None:
+    import signal
+
+    # Ctrl-C reaches the whole process group: the parent handles it and stops the workers
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # one core per worker: ONNX Runtime and BLAS would otherwise fight over the cores
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
@@ -505,7 +509,8 @@ def evaluate_sources(
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
         ctx = mp.get_context("spawn" if os.name == "nt" else "forkserver")
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker) as pool:
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker)
+        try:
             futures = {pool.submit(evaluate_source, src, settings): i for i, src in enumerate(sources)}
             for fut in as_completed(futures):
                 i = futures[fut]
@@ -516,6 +521,17 @@ def evaluate_sources(
                 done += 1
                 if progress:
                     progress(done, len(sources), results[i])  # type: ignore[arg-type]
+        except BaseException:
+            # Ctrl-C (or any error here): stop the workers now instead of waiting for their sequences
+            procs = list(getattr(pool, "_processes", {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
+            for p in procs:
+                if p.is_alive():
+                    p.terminate()
+            for p in procs:
+                p.join(5)
+            raise
+        pool.shutdown(wait=True)
     return [r for r in results if r is not None]
 
 
