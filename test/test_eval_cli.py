@@ -293,3 +293,28 @@ def test_live_equals_offline(bags, tmp_path, monkeypatch, capsys):
         assert (a["scenario"], a["estimator"]) == (b["scenario"], b["estimator"])
         assert b["mode"] == "live" and b["lost"] == 0
         assert abs(a["rmse_deg"] - b["rmse_deg"]) < 0.01, (a, b)
+
+
+@pytest.mark.broad
+@pytest.mark.slow
+def test_broad_bag_scores_equal_file_scores(broad_dir, tmp_path):
+    """A trial converted with riann-bag-convert scores exactly like the trial file read directly."""
+    from riann_ros.cli.convert import main as convert_main
+
+    src = next(p for p in sorted(broad_dir.iterdir()) if p.name.startswith("07_"))
+    bag = tmp_path / "trial07.mcap"
+    assert convert_main([str(src), "-o", str(bag), "-q"]) == 0
+    outs = {}
+    for name, inp in (("file", src), ("bag", bag)):
+        out = tmp_path / name
+        assert (
+            main([str(inp), "--estimators", "riann,vqf", "--scenarios", "all", "--out", str(out), "--no-plots", "-q"])
+            == 0
+        )
+        outs[name] = json.loads((out / "results.json").read_text())
+    a, b = outs["file"]["results"], outs["bag"]["results"]
+    assert [(r["scenario"], r["estimator"]) for r in a] == [(r["scenario"], r["estimator"]) for r in b]
+    for ra, rb in zip(a, b, strict=True):
+        assert ra["rmse_deg"] == pytest.approx(rb["rmse_deg"], abs=1e-9)
+        assert ra["n_scored"] == rb["n_scored"]
+    assert outs["file"]["sequences"][0]["scenarios"] == outs["bag"]["sequences"][0]["scenarios"]
