@@ -51,6 +51,7 @@ RESET_CAUSES = (START, GAP, CLOCK_JUMP)
 ZERO_STAMP = "zero_stamp"
 ACC_IN_G = "acc_in_g"
 G_CHECK_SAMPLES = 50
+CLEAN_CHUNK = 8192  # samples per vectorised gate check in process_batch
 
 WARNING_TEXT = {
     ZERO_STAMP: "IMU messages carry zero header stamps; using the receive time instead. dt will include "
@@ -165,6 +166,39 @@ class InputGate:
                 self._warn(ACC_IN_G, warnings)
         return GateResult(True, dt=dt, stamp_ns=stamp_ns, reset=reset, warnings=warnings)
 
+    def check_clean_prefix(
+        self, stamps_ns: NDArray[np.int64], acc: NDArray[np.float64], gyr: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Vectorised :meth:`check` for the leading samples that continue the current sequence cleanly.
+
+        The longest prefix whose samples would all be accepted without a restart or a warning (finite,
+        in range, non-zero stamps, each step in (0, ``max_dt``], after the g-units check window) is
+        taken at once: the gate's state and counters advance exactly as per-sample checks would, and
+        its dts (s) are returned (empty when the first sample needs the per-sample path).
+        """
+        none = np.empty(0)
+        if self._last_ns is None or len(stamps_ns) == 0 or len(self._g_norms) < G_CHECK_SAMPLES:
+            return none
+        cfg = self.config
+        with np.errstate(over="ignore", invalid="ignore"):
+            sa = np.einsum("ij,ij->i", acc, acc)
+            sg = np.einsum("ij,ij->i", gyr, gyr)
+            good = np.isfinite(sa) & np.isfinite(sg) & (np.sqrt(sa) <= cfg.max_acc) & (np.sqrt(sg) <= cfg.max_gyr)
+        diffs = np.diff(stamps_ns, prepend=np.int64(self._last_ns))
+        good &= (stamps_ns != 0) & (diffs > 0) & (diffs <= cfg.max_dt * 1e9)
+        k = len(good) if good.all() else int(np.argmin(good))
+        if k == 0:
+            return none
+        dt = diffs[:k] * 1e-9
+        self._last_ns = int(stamps_ns[k - 1])
+        self.accepted += k
+        self._dt_n += k
+        self._dt_sum += float(dt.sum())
+        self._dt_sq += float((dt * dt).sum())
+        self._dt_min = min(self._dt_min, float(dt.min()))
+        self._dt_max = max(self._dt_max, float(dt.max()))
+        return dt
+
     def pop_dt_stats(self) -> dict[str, float]:
         """dt statistics (s) since the last call: count, min, mean, max, std; then forget them."""
         n = self._dt_n
@@ -233,13 +267,24 @@ class EstimatorStream:
         accepted = np.zeros(n, dtype=bool)
         dts = np.zeros(n)
         starts: list[int] = []  # indices where the estimator restarts
-        for i in range(n):
-            r = self.gate.check(int(stamps[i]), acc[i], gyr[i])
+        gate = self.gate
+        i = 0
+        while i < n:
+            # the clean stretches (the common case offline) at once, anything else per sample
+            j = min(n, i + CLEAN_CHUNK)
+            clean = gate.check_clean_prefix(stamps[i:j], acc[i:j], gyr[i:j])
+            if len(clean):
+                accepted[i : i + len(clean)] = True
+                dts[i : i + len(clean)] = clean
+                i += len(clean)
+                continue
+            r = gate.check(int(stamps[i]), acc[i], gyr[i])
             if r.accepted:
                 accepted[i] = True
                 dts[i] = r.dt
                 if r.reset is not None:
                     starts.append(i)
+            i += 1
         idx = np.flatnonzero(accepted)
         if len(idx) == 0:
             return out, accepted

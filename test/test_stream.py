@@ -104,3 +104,33 @@ def test_reset_restarts_the_stamp_sequence():
     s.reset()
     q, r = s.process(S - 1_000_000, A, G)  # would be "backwards" without the reset
     assert q is not None and r.reset == st.START
+
+
+def test_batch_gate_fast_path_matches_per_sample_checks():
+    rng = np.random.default_rng(11)
+    n = 20000
+    stamps = S + np.cumsum(rng.integers(4_000_000, 6_000_000, n)).astype(np.int64)
+    acc = np.array(A) + rng.normal(0, 0.3, (n, 3))
+    gyr = rng.normal(0, 0.2, (n, 3))
+    stamps[12345] = stamps[12344]  # one repeat in the middle of a clean stretch
+    acc[15000] = np.nan
+    fast = InputGate(GateConfig(nominal_rate=200.0))
+    slow = InputGate(GateConfig(nominal_rate=200.0))
+    dts_fast = []
+    i = 0
+    while i < n:  # what process_batch does
+        clean = fast.check_clean_prefix(stamps[i : i + 4096], acc[i : i + 4096], gyr[i : i + 4096])
+        if len(clean):
+            dts_fast += clean.tolist()
+            i += len(clean)
+            continue
+        r = fast.check(int(stamps[i]), acc[i], gyr[i])
+        if r.accepted:
+            dts_fast.append(r.dt)
+        i += 1
+    dts_slow = [r.dt for r in (slow.check(int(s), a, g) for s, a, g in zip(stamps, acc, gyr, strict=True))
+                if r.accepted]
+    assert dts_fast == dts_slow and len(dts_fast) == n - 2
+    assert fast.rejected == slow.rejected and fast.accepted == slow.accepted
+    f, s = fast.pop_dt_stats(), slow.pop_dt_stats()
+    assert f.keys() == s.keys() and all(abs(f[k] - s[k]) < 1e-12 for k in f)
