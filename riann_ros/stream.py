@@ -119,10 +119,11 @@ class InputGate:
             self._warn(ZERO_STAMP, warnings)
             stamp_ns = receive_ns
         # plain floats: this runs once per message in the node
-        ax, ay, az = acc  # type: ignore[misc]
-        gx, gy, gz = gyr  # type: ignore[misc]
-        sa = float(ax * ax + ay * ay + az * az)
-        sg = float(gx * gx + gy * gy + gz * gz)
+        # (Python floats also keep numpy's overflow warnings out of huge inputs: they just become inf)
+        ax, ay, az = (float(v) for v in acc)  # type: ignore[union-attr]
+        gx, gy, gz = (float(v) for v in gyr)  # type: ignore[union-attr]
+        sa = ax * ax + ay * ay + az * az
+        sg = gx * gx + gy * gy + gz * gz
         if not (math.isfinite(sa) and math.isfinite(sg)):  # NaN or inf in a component, or overflow
             finite = all(math.isfinite(v) for v in (ax, ay, az, gx, gy, gz))
             reason = OUT_OF_RANGE if finite else NON_FINITE
