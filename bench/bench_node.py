@@ -181,6 +181,8 @@ def main() -> int:
         for label, cmd in runs:
             r = h.run(cmd, rate, args.duration)
             print(f"| {label} | " + " | ".join(f"{r[c]:.0f}" for c in cols) + " |", flush=True)
+    h.ex.shutdown()
+    h.node.destroy_node()
     rclpy.shutdown()
     return 0
 
