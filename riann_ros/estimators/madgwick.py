@@ -63,6 +63,21 @@ def sanitize(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> tuple[list, list,
     return a.tolist(), g.tolist(), h.tolist()
 
 
+def initialise(q: tuple[float, float, float, float] | None, acc: list, out: list
+               ) -> tuple[tuple[float, float, float, float] | None, int]:
+    """Until the first usable accelerometer sample sets the attitude, output the identity.
+
+    Returns the attitude (None when no sample was usable) and the index of the first sample to
+    filter; the outputs of the samples consumed are appended to ``out``.
+    """
+    i = 0
+    while q is None and i < len(acc):
+        q = initial_attitude(*acc[i])
+        out.append(q if q is not None else (1.0, 0.0, 0.0, 0.0))
+        i += 1
+    return q, i
+
+
 def initial_attitude(ax: float, ay: float, az: float) -> tuple[float, float, float, float] | None:
     """Zero-heading attitude from one accelerometer sample, or None when it carries no direction."""
     if not (ax * ax + ay * ay + az * az > 0.0):
@@ -79,12 +94,7 @@ def _madgwick_run(
     append = out.append
     sqrt = math.sqrt
     inf = math.inf
-    i = 0
-    n = len(acc)
-    while q is None and i < n:
-        q = initial_attitude(*acc[i])
-        append(q if q is not None else (1.0, 0.0, 0.0, 0.0))
-        i += 1
+    q, i = initialise(q, acc, out)
     if q is None:
         return None, out
     qw, qx, qy, qz = q

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.madgwick import as_array, initial_attitude, sanitize
+from riann_ros.estimators.madgwick import as_array, initialise, sanitize
 
 #: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
 DEFAULT_KP = 1.0
@@ -42,12 +42,7 @@ def _mahony_run(
     append = out.append
     sqrt = math.sqrt
     inf = math.inf
-    i = 0
-    n = len(acc)
-    while q is None and i < n:
-        q = initial_attitude(*acc[i])
-        append(q if q is not None else (1.0, 0.0, 0.0, 0.0))
-        i += 1
+    q, i = initialise(q, acc, out)
     if q is None:
         return None, b, out
     qw, qx, qy, qz = q
