@@ -22,6 +22,10 @@
   scores.
 * **Rates** — :func:`resample` (FFT resampling of acc/gyr with ``scipy.signal.resample``, slerp of the
   reference, nearest neighbour for the score mask), applied to the recording *before* the scenario.
+* **Memory** — bags at their native rate are evaluated streamed (:func:`evaluate_bag`: chunks of
+  ``STREAM_CHUNK`` samples through one stream per scenario × estimator, scores accumulated), so memory
+  does not grow with the bag length; resampled runs (``rates``: the FFT needs the whole sequence),
+  ``keep_estimates`` and BROAD files load the whole recording (:func:`evaluate_recording`).
 """
 
 from __future__ import annotations
@@ -463,14 +467,337 @@ def evaluate_recording(
     return res
 
 
+# ---------------------------------------------------------------------------------------------------
+# streamed evaluation of bags (bounded memory)
+# ---------------------------------------------------------------------------------------------------
+STREAM_CHUNK = 100_000  # samples per bag chunk when a bag is evaluated streamed
+
+
+def streams_bag(source: str | os.PathLike[str], settings: EvalSettings) -> bool:
+    """Whether :func:`evaluate_source` evaluates ``source`` chunk by chunk (:func:`evaluate_bag`).
+
+    Bags at their native rate only: FFT resampling (``--rates``) needs the whole sequence, and
+    ``keep_estimates`` (``--write-estimates``) keeps every estimate anyway; those, and BROAD files
+    (small), are loaded whole."""
+    return (
+        Path(source).suffix.lower() not in BROAD_SUFFIXES
+        and all(r is None for r in settings.rates)
+        and not settings.keep_estimates
+    )
+
+
+def _median_rate(hist: dict[int, int]) -> float:
+    """``Recording.rate_hz`` (1 / median step) from a histogram of the stamp steps (ns → count)."""
+    n = sum(hist.values())
+    if n == 0:
+        return float("nan")
+    keys = sorted(hist)
+    cum = np.cumsum([hist[k] for k in keys])
+
+    def kth(k: int) -> int:  # the k-th smallest step (0-based)
+        return keys[int(np.searchsorted(cum, k, side="right"))]
+
+    if n % 2:
+        med = float(np.int64(kth(n // 2)) * 1e-9)
+    else:
+        med = float(np.median(np.array([kth(n // 2 - 1), kth(n // 2)], dtype=np.int64) * 1e-9))
+    return 1.0 / med
+
+
+def _add_steps(hist: dict[int, int], steps: NDArray[np.int64]) -> None:
+    if len(steps):
+        vals, counts = np.unique(steps, return_counts=True)
+        for v, c in zip(vals.tolist(), counts.tolist(), strict=True):
+            hist[v] = hist.get(v, 0) + c
+
+
+@dataclass
+class _BagSummary:
+    """What a first pass over a bag gives before the estimators run (all of bounded size)."""
+
+    name: str
+    dataset: str
+    source: str
+    n: int
+    first_stamp: int
+    i0: int  # first scored sample
+    stamp_i0: int
+    rest_gyr_mean: NDArray[np.float64]  # mean gyro over [0, i0) (zeros when i0 == 0)
+    rate_all: float  # Recording.rate_hz of the whole bag
+    rate_from_i0: float  # … of the samples from i0 on (the realistic sequence)
+
+
+def _read_error(p: Path, exc: Exception) -> EvalError:
+    return exc if isinstance(exc, EvalError) else EvalError(f"{p}: cannot read: {exc}")
+
+
+def _summarise_bag(p: Path, chunk: int) -> _BagSummary:
+    """The first pass: the checks of :func:`load_recording`, the initial rest's gyro mean, the rates."""
+    from riann_ros import bagio
+
+    if not p.exists():
+        raise EvalError(f"{p}: no such file or directory")
+    n = 0
+    first_stamp = stamp_i0 = 0
+    last: int | None = None
+    i0 = -1
+    has_ref = ref_any = scored_any = scored_ref = False
+    rest: list[NDArray[np.float64]] = []
+    hist_all: dict[int, int] = {}
+    hist_i0: dict[int, int] = {}
+    meta: tuple[str, str, str] = ("", "", "")
+    try:
+        for c in bagio.iter_imu_chunks(p, chunk=chunk):
+            m = len(c)
+            if n == 0:
+                first_stamp = int(c.stamps_ns[0])
+                meta = (c.name, c.dataset, c.source)
+                has_ref = c.quat_ref is not None
+            idx = np.arange(n, n + m)  # global index of each sample
+            steps = np.diff(c.stamps_ns, prepend=np.int64(last)) if last is not None else np.diff(c.stamps_ns)
+            later = idx if last is not None else idx[1:]  # global index of the later sample of each step
+            _add_steps(hist_all, steps)
+            if i0 < 0 and c.score_mask.any():
+                k = int(np.argmax(c.score_mask))
+                i0, stamp_i0 = n + k, int(c.stamps_ns[k])
+                rest.append(c.gyr[:k].copy())
+            elif i0 < 0:
+                rest.append(c.gyr.copy())
+            if i0 >= 0:
+                _add_steps(hist_i0, steps[later > i0])
+            scored_any |= bool(c.score_mask.any())
+            if has_ref and c.quat_ref is not None:
+                ok = np.isfinite(c.quat_ref).all(axis=1)
+                ref_any |= bool(ok.any())
+                scored_ref |= bool((ok & c.score_mask).any())
+            last = int(c.stamps_ns[-1])
+            n += m
+    except Exception as exc:  # bagio.BagError, OSError, ValueError, …
+        raise _read_error(p, exc) from exc
+    if n < 2:
+        raise EvalError(f"{p}: fewer than 2 IMU samples")
+    if not has_ref or not ref_any:
+        raise EvalError(f"{p}: no reference orientation (nothing to score against)")
+    if not scored_any:
+        raise EvalError(f"{p}: no scored samples (score mask is empty)")
+    if not scored_ref:
+        raise EvalError(f"{p}: no scored samples with a reference")
+    name, dataset, source = meta
+    if not name or name == "sequence":
+        name = p.stem if p.is_file() else p.name
+    gyr_rest = np.concatenate(rest) if rest else np.zeros((0, 3))
+    return _BagSummary(
+        name=name,
+        dataset=dataset,
+        source=source,
+        n=n,
+        first_stamp=first_stamp,
+        i0=i0,
+        stamp_i0=stamp_i0,
+        rest_gyr_mean=np.mean(gyr_rest, axis=0) if i0 > 0 else np.zeros(3),
+        rate_all=_median_rate(hist_all),
+        rate_from_i0=_median_rate(hist_i0),
+    )
+
+
+class _Accumulator:
+    """Running sums for :func:`score` over the chunks of one scenario × estimator run."""
+
+    def __init__(self, with_heading: bool) -> None:
+        self.with_heading = with_heading
+        self.n = self.n_scored = self.n_unest = self.n_base = 0
+        self.sq = self.sq_heading = self.sq_total = 0.0
+        self.max_e = -math.inf
+
+    def add(self, quat_ref: NDArray[np.float64], mask: NDArray[np.bool_], q: NDArray[np.float64]) -> None:
+        ref_ok = np.isfinite(quat_ref).all(axis=1)
+        est_ok = np.isfinite(q).all(axis=1)
+        base = mask & ref_ok
+        valid = base & est_ok
+        self.n += len(q)
+        self.n_base += int(base.sum())
+        self.n_scored += int(valid.sum())
+        self.n_unest += int((base & ~est_ok).sum())
+        if valid.any():
+            qt, qe = quat_ref[valid], q[valid]
+            e = quat.inclination_error(qt, qe)
+            self.sq += float(np.sum(e**2))
+            self.max_e = max(self.max_e, float(e.max()))
+            if self.with_heading:
+                self.sq_heading += float(np.sum(quat.heading_error(qt, qe) ** 2))
+                self.sq_total += float(np.sum(quat.total_error(qt, qe) ** 2))
+
+    def result(self) -> dict[str, Any]:
+        """What :func:`score` returns for the whole sequence (same errors, same keys in the same order)."""
+        if self.n_base == 0:
+            raise EvalError("no scored samples (score mask ∩ reference present is empty)")
+        out: dict[str, Any] = {"n_samples": self.n, "n_scored": self.n_scored, "n_unestimated": self.n_unest}
+        if self.n_scored == 0:
+            raise EvalError("the estimator gave no output on any scored sample")
+
+        def rms(sq: float) -> float:
+            return float(np.degrees(np.sqrt(sq / self.n_scored)))
+
+        out["rmse_deg"] = rms(self.sq)
+        out["max_err_deg"] = float(np.degrees(self.max_e))
+        if self.with_heading:
+            out["heading_rmse_deg"] = rms(self.sq_heading)
+            out["total_rmse_deg"] = rms(self.sq_total)
+        return out
+
+
+_STREAM_ESTIMATORS: dict[tuple[EstimatorSpec, str], AttitudeEstimator] = {}
+
+
+def evaluate_bag(source: str | os.PathLike[str], settings: EvalSettings, chunk: int | None = None) -> SequenceResult:
+    """:func:`evaluate_recording` of a bag at its native rate, streamed: the same rows, scenario infos and
+    plot series, with memory bounded by the chunk size (``STREAM_CHUNK`` samples) instead of the bag length.
+
+    Two passes over the bag: the first (:func:`_summarise_bag`) makes the checks of
+    :func:`load_recording`, takes the mean gyro over the initial rest and the rates (1 / median step of
+    the whole bag and of the realistic sequence, the ``nominal_rate`` the whole-recording path uses); the
+    second runs one :class:`EstimatorStream` per scenario × estimator over each chunk (``process_batch``
+    continues its state across calls) and accumulates the scores. Rates in ``settings`` must be native.
+    """
+    import time
+
+    from riann_ros import bagio
+
+    if any(r is not None for r in settings.rates):
+        raise ValueError("evaluate_bag evaluates at the native rate only (resampling needs the whole sequence)")
+    t0 = time.perf_counter()
+    p = Path(source)
+    chunk = chunk or STREAM_CHUNK
+    info = _summarise_bag(p, chunk)
+    res = SequenceResult(source=str(source), name=info.name, dataset=info.dataset or "unknown", citation=info.source)
+    want_series = settings.series_for is not None and settings.series_for in ("*", info.name)
+    specs = settings.estimators
+
+    class _Run:  # one scenario
+        def __init__(self, scenario: str) -> None:
+            self.scenario = scenario
+            self.start = info.i0 if scenario == REALISTIC else 0
+            self.added = random_bias(settings.seed, info.name) if scenario in (PARTIAL, REALISTIC) else np.zeros(3)
+            first = info.stamp_i0 if self.start else info.first_stamp
+            self.first = first
+            self.shift = STAMP_OFFSET_NS - first if first <= 0 else 0
+            self.length = info.n - self.start
+            rate = info.rate_from_i0 if self.start else info.rate_all
+            rate = rate if self.length > 1 and math.isfinite(rate) else 100.0
+            self.streams = []
+            for spec in specs:
+                est = _STREAM_ESTIMATORS.get((spec, scenario))
+                if est is None:
+                    est = _STREAM_ESTIMATORS[(spec, scenario)] = spec.create()
+                est.reset()
+                self.streams.append(EstimatorStream(est, GateConfig(nominal_rate=rate)))
+            self.acc = [_Accumulator(settings.with_heading) for _ in specs]
+            self.wall = [0.0] * len(specs)
+            self.cpu = [0.0] * len(specs)
+            self.step = settings.series_step if settings.series_step > 0 else -(-self.length // SERIES_POINTS)
+            self.curves: list[list[NDArray]] = [[] for _ in specs]
+            self.t: list[NDArray] = []
+            self.scored: list[NDArray] = []
+            res.scenarios.setdefault(
+                scenario,
+                asdict(
+                    ScenarioInfo(
+                        scenario=scenario,
+                        start_index=self.start,
+                        rest_samples=info.i0,
+                        bias_removed_dps=np.degrees(info.rest_gyr_mean).round(6).tolist(),
+                        bias_added_dps=np.degrees(self.added).round(6).tolist(),
+                    )
+                ),
+            )
+
+        def feed(self, c: Recording, offset: int) -> None:
+            """Chunk ``c`` whose first sample has the global index ``offset``."""
+            k = max(0, self.start - offset)
+            if k >= len(c):
+                return
+            stamps = c.stamps_ns[k:] + self.shift if self.shift else c.stamps_ns[k:]
+            gyr = c.gyr[k:].copy()
+            if info.i0 > 0:
+                gyr -= info.rest_gyr_mean
+            if self.scenario in (PARTIAL, REALISTIC):
+                gyr += self.added
+            acc = c.acc[k:]
+            ref = c.quat_ref[k:]
+            mask = c.score_mask[k:]
+            local = offset + k - self.start  # index of this piece's first sample in the scenario sequence
+            pick = slice((-local) % self.step, None, self.step) if want_series else None
+            for j, stream in enumerate(self.streams):
+                t, cpu = time.perf_counter(), time.process_time()
+                q, _accepted = stream.process_batch(stamps, acc, gyr)
+                self.wall[j] += time.perf_counter() - t
+                self.cpu[j] += time.process_time() - cpu
+                self.acc[j].add(ref, mask, q)
+                if pick is not None:
+                    self.curves[j].append(np.degrees(quat.inclination_error(ref[pick], q[pick])).astype(np.float32))
+            if pick is not None:
+                self.t.append(((stamps[pick] - (self.first + self.shift)) * 1e-9).astype(np.float32))
+                self.scored.append(mask[pick])
+
+    runs = [_Run(s) for s in settings.scenarios]
+    offset = 0
+    chunks = bagio.iter_imu_chunks(p, chunk=chunk)
+    while True:
+        try:
+            c = next(chunks)
+        except StopIteration:
+            break
+        except Exception as exc:  # reading only: an estimator crash is reported as such by evaluate_source
+            raise _read_error(p, exc) from exc
+        for run in runs:
+            run.feed(c, offset)
+        offset += len(c)
+    rate_val = round(info.rate_all, 3)
+    for run in runs:
+        for j, spec in enumerate(specs):
+            stream = run.streams[j]
+            row: dict[str, Any] = {
+                "sequence": info.name,
+                "dataset": res.dataset,
+                "source": res.source,
+                "scenario": run.scenario,
+                "rate": NATIVE,
+                "rate_hz": rate_val,
+                "resampled": False,
+                "estimator": spec.label,
+                "estimator_name": spec.name,
+                "mode": "offline",
+                "seconds": run.wall[j],
+            }
+            row.update(run.acc[j].result())
+            row.update({f"rejected_{k}": int(v) for k, v in stream.gate.rejected.items()})
+            row.update({f"reset_{k}": int(v) for k, v in stream.gate.resets.items()})
+            row["cpu_seconds"] = run.cpu[j]
+            res.rows.append(row)
+            if want_series:
+                if res.series is None:
+                    res.series = {"sequence": info.name, "curves": {}}
+                res.series["curves"].setdefault(run.scenario, {})[spec.label] = np.concatenate(run.curves[j])
+                res.series.setdefault("t", {})[run.scenario] = np.concatenate(run.t)
+                res.series.setdefault("scored", {})[run.scenario] = np.concatenate(run.scored)
+    res.seconds = time.perf_counter() - t0
+    return res
+
+
 def evaluate_source(source: str, settings: EvalSettings) -> SequenceResult:
-    """Load and evaluate one input; any problem ends up in ``result.error`` naming the input."""
+    """Load and evaluate one input; any problem ends up in ``result.error`` naming the input.
+
+    Bags at their native rate are evaluated streamed (:func:`evaluate_bag`, memory independent of the
+    bag length); resampled runs (``rates``), ``keep_estimates`` and BROAD files load the whole recording."""
     import time
 
     c0 = time.process_time()
     try:
-        rec = load_recording(source)
-        res = evaluate_recording(rec, settings, str(source))
+        if streams_bag(source, settings):
+            res = evaluate_bag(source, settings)
+        else:
+            rec = load_recording(source)
+            res = evaluate_recording(rec, settings, str(source))
         res.cpu_seconds = time.process_time() - c0
         return res
     except EvalError as exc:

@@ -318,3 +318,45 @@ def test_broad_bag_scores_equal_file_scores(broad_dir, tmp_path):
         assert ra["rmse_deg"] == pytest.approx(rb["rmse_deg"], abs=1e-9)
         assert ra["n_scored"] == rb["n_scored"]
     assert outs["file"]["sequences"][0]["scenarios"] == outs["bag"]["sequences"][0]["scenarios"]
+
+
+@pytest.mark.parametrize(("chunk", "t0_ns"), [(1000, 1_700_000_000_000_000_000), (257, 0)])
+def test_streamed_bag_equals_whole_recording(tmp_path, chunk, t0_ns):
+    """Bags are evaluated chunk by chunk (bounded memory): the same rows, scenario infos and plot series as
+    the whole-recording path, for all four estimators and all three scenarios, with small chunks (the
+    initial rest crosses chunk boundaries with 257)."""
+    rec = synthetic(rate=200.0, rest_s=3.0, move_s=12.0, name="streamed", t0_ns=t0_ns)
+    bag = bagio.write_recording(tmp_path / "streamed.mcap", rec)
+    settings = ev.EvalSettings(
+        estimators=ev.parse_estimators("riann,madgwick,mahony,vqf"),
+        scenarios=list(ev.SCENARIOS),
+        seed=3,
+        with_heading=True,
+        series_for="*",
+        series_step=7,
+    )
+    assert ev.streams_bag(bag, settings)
+    streamed = ev.evaluate_bag(bag, settings, chunk=chunk)
+    whole = ev.evaluate_recording(ev.load_recording(bag), settings, str(bag))
+    assert streamed.error is None
+    assert (streamed.name, streamed.dataset, streamed.citation) == (whole.name, whole.dataset, whole.citation)
+    assert streamed.scenarios == whole.scenarios
+    assert len(streamed.rows) == len(whole.rows) == 4 * 3
+    timing = {"seconds", "cpu_seconds"}
+    for a, b in zip(streamed.rows, whole.rows, strict=True):
+        assert list(a) == list(b)  # same columns in the same order
+        for key in ("rmse_deg", "max_err_deg", "heading_rmse_deg", "total_rmse_deg"):
+            assert a[key] == pytest.approx(b[key], abs=1e-6), (a["scenario"], a["estimator"], key)
+        assert {k: v for k, v in a.items() if k not in timing and not k.endswith("_deg")} == {
+            k: v for k, v in b.items() if k not in timing and not k.endswith("_deg")
+        }
+    sa, sb = streamed.series, whole.series
+    assert sa["sequence"] == sb["sequence"]
+    for scn in settings.scenarios:
+        np.testing.assert_array_equal(sa["t"][scn], sb["t"][scn])
+        np.testing.assert_array_equal(sa["scored"][scn], sb["scored"][scn])
+        for label, curve in sb["curves"][scn].items():
+            np.testing.assert_allclose(sa["curves"][scn][label], curve, atol=1e-4, equal_nan=True)
+    # resampled runs and --write-estimates keep loading the whole recording
+    assert not ev.streams_bag(bag, ev.EvalSettings(estimators=settings.estimators, rates=[None, 100.0]))
+    assert not ev.streams_bag(bag, ev.EvalSettings(estimators=settings.estimators, keep_estimates=True))

@@ -63,7 +63,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--rates",
         default=None,
         help="comma-separated sampling rates (Hz) to resample to (FFT), e.g. 50,100,200,500; "
-        "'native' keeps the recording's own rate",
+        "'native' keeps the recording's own rate. Native-rate runs stream bags chunk by chunk (memory independent "
+        "of the bag length); resampled runs and --write-estimates load each input whole",
     )
     p.add_argument("--jobs", "-j", type=int, default=1, help="parallel worker processes (one per sequence)")
     p.add_argument(
