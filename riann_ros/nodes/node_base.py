@@ -51,7 +51,8 @@ NODE_PARAMS: dict[str, tuple[Any, str, float | None, float | None]] = {
                   "drivers), best_effort, or reliable.", None, None),
     "input_depth": (1000, "Input queue depth (keep last): a burst larger than this loses its oldest "
                     "messages in DDS before the node sees them.", 1, 100000),
-    "output_depth": (100, "Output queue depth (keep last, reliable).", 1, 100000),
+    "output_depth": (1000, "Output queue depth (keep last, reliable): outputs not yet acknowledged by a "
+                     "slow subscriber are dropped once more than this many are queued.", 1, 100000),
     "roll_pitch_stddev_deg": (2.0, "deg; standard deviation written to the roll and pitch entries of the "
                               "orientation covariance of imu/data.", 0.0, 180.0),
     "yaw_stddev_deg": (180.0, "deg; standard deviation written to the yaw entry of the orientation covariance "
