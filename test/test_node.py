@@ -37,7 +37,10 @@ def test_node_output_equals_core_on_a_broad_trial(ros, start_node, broad_trial):
     stamps = rec.stamps_ns + 1_700_000_000_000_000_000  # BROAD starts at 0; a zero stamp means "unstamped"
     msgs = [imu_msg(s, a, g) for s, a, g in zip(stamps, rec.acc, rec.gyr, strict=True)]
     t0 = time.monotonic()
-    publish_paced(pub, msgs, att.messages, len(msgs))
+    try:
+        publish_paced(pub, msgs, att.messages, len(msgs))
+    except AssertionError as e:
+        raise AssertionError(f"{e}; node log: {node.output()[-3000:]}") from None
     time.sleep(0.2)
     print(f"{len(msgs)} messages through riann_node in {time.monotonic() - t0:.1f} s")
     got = att.messages
