@@ -27,7 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from riann_ros.cli.evaluate import main as eval_main
 from riann_ros.datasets.broad import broad_files, find_broad_dir
-from riann_ros.report import format_markdown_table
+from riann_ros.evaluation import Group
+from riann_ros.evaluation.report import format_markdown_table
 
 ESTIMATORS = "riann,madgwick:beta=0.033,mahony:kp=1:ki=0.3,vqf"
 
@@ -119,7 +120,7 @@ def main() -> int:
         print(f"| {k} | {secs:.1f} | {cpu:.1f} | {n / cpu:,.0f} |")
     print(f"\ninput gate alone (InputGate.check per sample, in-process, one trial): {gate_rate():,.0f} samples/s")
     print()
-    print(format_markdown_table(data["summary"]))
+    print(format_markdown_table([Group(**g) for g in data["summary"]]))
     return rc
 
 

@@ -35,6 +35,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
 
+from riann_ros import stamps
+
 BIN = Path(sys.executable).parent
 ECHO = """
 import rclpy, sys
@@ -92,7 +94,7 @@ class Harness:
         threading.Thread(target=self.ex.spin, daemon=True).start()
 
     def _on_out(self, m: QuaternionStamped) -> None:
-        self.arrivals[m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec] = time.perf_counter_ns()
+        self.arrivals[stamps.to_ns(m.header.stamp)] = time.perf_counter_ns()
 
     def _on_diag(self, m: DiagnosticArray) -> None:
         for s in m.status:
@@ -133,7 +135,7 @@ class Harness:
                 if now - target > 0.002:
                     behind += 1
                 stamp = t0_ns + round(i * period * 1e9)
-                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+                stamps.set_ns(msg.header.stamp, stamp)
                 a, g = acc[i], gyr[i]
                 la, av = msg.linear_acceleration, msg.angular_velocity
                 la.x, la.y, la.z = float(a[0]), float(a[1]), float(a[2])

@@ -43,6 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
+from riann_ros import stamps
+
 BIN = Path(sys.executable).parent
 TOPICS = {
     "riann_node": "imu/attitude",
@@ -92,7 +94,7 @@ def publisher_main(rate: float, n: int, stamp0: int, pub_times, n_subs: int, rea
             if ahead > 1_500_000:
                 time.sleep((ahead - 1_000_000) * 1e-9)
         k = i % m
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp0 + int(i * period_ns), 1_000_000_000)
+        stamps.set_ns(msg.header.stamp, stamp0 + int(i * period_ns))
         a, g = acc[k], gyr[k]
         la, av = msg.linear_acceleration, msg.angular_velocity
         la.x, la.y, la.z = a
@@ -156,7 +158,7 @@ def run(nodes: list[str], rate: float, duration: float, logdir: Path) -> list[di
 
         def cb(m) -> None:
             now = time.monotonic_ns()
-            i = round(((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec) - stamp0) / period_ns)
+            i = round((stamps.to_ns(m.header.stamp) - stamp0) / period_ns)
             s["out"] += 1
             if 0 <= i < n:
                 if i <= s["last"]:

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riann_ros.estimators.base import AttitudeEstimator
+from riann_ros.params import ParamSpec, defaults, find
 
 # rejection reasons
 NON_FINITE = "non_finite"
@@ -61,20 +62,42 @@ WARNING_TEXT = {
 }
 
 
+#: The gate's parameters: the one place of their defaults and ranges (the node declares them from here).
+GATE_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec("nominal_rate", 100.0, "Hz; dt assumed for the first sample after a (re)start, when no previous "
+              "stamp exists. Set it to your IMU's rate.", min=1.0, max=100000.0, runtime=True),
+    ParamSpec("max_dt", 0.5, "s; a stamp gap larger than this, or a jump back larger than this (bag loop, clock "
+              "reset), restarts the estimator from the next sample.", min=0.001, max=3600.0, runtime=True),
+    ParamSpec("max_acc", 2000.0, "m/s²; samples with a larger acceleration magnitude are rejected as implausible.",
+              min=1.0, max=1.0e6, runtime=True),
+    ParamSpec("max_gyr", 200.0, "rad/s; samples with a larger angular rate magnitude are rejected as implausible.",
+              min=0.1, max=1.0e6, runtime=True),
+)
+_GATE_DEFAULTS = defaults(GATE_PARAMS)
+
+
 @dataclass
 class GateConfig:
-    """Parameters of the input checks (the node exposes them as ROS parameters)."""
+    """Parameters of the input checks (the node exposes them as ROS parameters; see :data:`GATE_PARAMS`)."""
 
-    nominal_rate: float = 100.0  # Hz; dt of the first sample after a (re)start
-    max_dt: float = 0.5  # s; larger gaps, or jumps back larger than this, restart the estimator
-    max_acc: float = 2000.0  # m/s²; larger magnitudes are rejected as implausible
-    max_gyr: float = 200.0  # rad/s
+    nominal_rate: float = _GATE_DEFAULTS["nominal_rate"]  # Hz; dt of the first sample after a (re)start
+    max_dt: float = _GATE_DEFAULTS["max_dt"]  # s; larger gaps, or jumps back larger than this, restart
+    max_acc: float = _GATE_DEFAULTS["max_acc"]  # m/s²; larger magnitudes are rejected as implausible
+    max_gyr: float = _GATE_DEFAULTS["max_gyr"]  # rad/s
 
     def __post_init__(self) -> None:
-        if not (self.nominal_rate > 0 and math.isfinite(self.nominal_rate)):
-            raise ValueError(f"nominal_rate must be a positive number, got {self.nominal_rate}")
-        if not (self.max_dt > 0 and math.isfinite(self.max_dt)):
-            raise ValueError(f"max_dt must be a positive number, got {self.max_dt}")
+        for spec in GATE_PARAMS:
+            setattr(self, spec.name, spec.validate(getattr(self, spec.name)))
+
+    @classmethod
+    def for_rate(cls, rate_hz: float) -> GateConfig:
+        """The default gate with ``nominal_rate`` = ``rate_hz``, or the default rate when that is not a valid
+        rate (NaN for a one-sample sequence)."""
+        spec = find(GATE_PARAMS, "nominal_rate")
+        try:
+            return cls(nominal_rate=spec.validate(rate_hz))
+        except ValueError:
+            return cls()
 
 
 @dataclass

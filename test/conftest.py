@@ -164,3 +164,17 @@ def ros() -> Iterator[RosHarness]:
     h = RosHarness()
     yield h
     h.shutdown()
+
+
+def gate_dts(rec: Recording):
+    """Per-sample dt of a recording as the input gate gives it with ``nominal_rate`` = the recording's rate."""
+    from riann_ros import stamps
+
+    return stamps.dts(rec.stamps_ns, 1.0 / rec.rate_hz)
+
+
+def rmse(rec: Recording, q) -> float:
+    """Inclination RMSE (°) of estimates ``q`` on ``rec`` over its score mask (the evaluator's scoring)."""
+    from riann_ros.evaluation import score
+
+    return score(rec, q).rmse_deg

@@ -7,10 +7,12 @@ import time
 import numpy as np
 from sensor_msgs.msg import Imu
 
+from riann_ros import stamps
+
 
 def imu_msg(stamp_ns: int, acc, gyr, frame_id: str = "imu_link") -> Imu:
     m = Imu()
-    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    stamps.set_ns(m.header.stamp, stamp_ns)
     m.header.frame_id = frame_id
     m.orientation_covariance[0] = -1.0
     m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z = (float(v) for v in acc)
@@ -19,7 +21,7 @@ def imu_msg(stamp_ns: int, acc, gyr, frame_id: str = "imu_link") -> Imu:
 
 
 def stamp_ns(msg) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    return stamps.to_ns(msg.header.stamp)
 
 
 def publish_paced(pub, msgs: list[Imu], received, expected_out, window: int = 100, timeout: float = 120.0) -> None:

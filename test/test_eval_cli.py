@@ -173,7 +173,7 @@ def test_write_estimates(bags, tmp_path):
     assert topics[t1] == "geometry_msgs/msg/QuaternionStamped"
     assert topics["/eval/realistic/riann"] == "geometry_msgs/msg/QuaternionStamped"
     rec = bagio.read_recording(bags[0])
-    assert counts[t1] == len(rec) - ev.first_scored_index(rec)  # realistic: from the motion onset
+    assert counts[t1] == len(rec) - ev.summarise(ev.Source(bags[0], rec)).i0  # realistic: from the motion onset
     # the copy still holds the original recording
     rec2 = bagio.read_recording(dst)
     np.testing.assert_array_equal(rec2.stamps_ns, rec.stamps_ns)
@@ -215,14 +215,14 @@ def direct_onnx_rmse(rec) -> float:
     """RMSE of the published model run directly with ONNX Runtime over the realistic-scenario arrays."""
     import onnxruntime as ort
 
-    srec, _ = ev.make_scenario(rec, ev.REALISTIC, seed=0)
+    srec, _ = ev.scenario_recording(rec, ev.REALISTIC, seed=0)
     sess = ort.InferenceSession(
         str(importlib.resources.files("riann") / "riann.onnx"), providers=["CPUExecutionProvider"]
     )
     dt = np.full((len(srec), 1), 1.0 / float(rec.meta.get("sampling_rate", rec.rate_hz)))
     x = np.concatenate([srec.acc, srec.gyr, dt], axis=1).astype(np.float32)[None]
     out = sess.run(["output"], {"input": x, "h0": np.zeros((2, 1, 1, 200), np.float32)})[0][0]
-    return ev.score(srec, out.astype(np.float64))["rmse_deg"]
+    return ev.score(srec, out.astype(np.float64)).rmse_deg
 
 
 @pytest.mark.broad
@@ -322,8 +322,8 @@ def test_broad_bag_scores_equal_file_scores(broad_dir, tmp_path):
 
 @pytest.mark.parametrize(("chunk", "t0_ns"), [(1000, 1_700_000_000_000_000_000), (257, 0)])
 def test_streamed_bag_equals_whole_recording(tmp_path, chunk, t0_ns):
-    """Bags are evaluated chunk by chunk (bounded memory): the same rows, scenario infos and plot series as
-    the whole-recording path, for all four estimators and all three scenarios, with small chunks (the
+    """Bags are evaluated chunk by chunk (bounded memory): the same rows, scenario infos, plot series and estimates
+    as the whole recording in one chunk, for all four estimators and all three scenarios, with small chunks (the
     initial rest crosses chunk boundaries with 257)."""
     rec = synthetic(rate=200.0, rest_s=3.0, move_s=12.0, name="streamed", t0_ns=t0_ns)
     bag = bagio.write_recording(tmp_path / "streamed.mcap", rec)
@@ -334,16 +334,18 @@ def test_streamed_bag_equals_whole_recording(tmp_path, chunk, t0_ns):
         with_heading=True,
         series_for="*",
         series_step=7,
+        keep_estimates=True,
+        chunk=chunk,
     )
-    assert ev.streams_bag(bag, settings)
-    streamed = ev.evaluate_bag(bag, settings, chunk=chunk)
-    whole = ev.evaluate_recording(ev.load_recording(bag), settings, str(bag))
-    assert streamed.error is None
+    streamed = ev.evaluate_source(bag, settings)
+    whole = ev.evaluate_source(bag, settings, recording=ev.load_recording(bag))
+    assert streamed.error is None and whole.error is None
     assert (streamed.name, streamed.dataset, streamed.citation) == (whole.name, whole.dataset, whole.citation)
     assert streamed.scenarios == whole.scenarios
     assert len(streamed.rows) == len(whole.rows) == 4 * 3
     timing = {"seconds", "cpu_seconds"}
-    for a, b in zip(streamed.rows, whole.rows, strict=True):
+    for ra, rb in zip(streamed.rows, whole.rows, strict=True):
+        a, b = ra.to_dict(), rb.to_dict()
         assert list(a) == list(b)  # same columns in the same order
         for key in ("rmse_deg", "max_err_deg", "heading_rmse_deg", "total_rmse_deg"):
             assert a[key] == pytest.approx(b[key], abs=1e-6), (a["scenario"], a["estimator"], key)
@@ -357,6 +359,7 @@ def test_streamed_bag_equals_whole_recording(tmp_path, chunk, t0_ns):
         np.testing.assert_array_equal(sa["scored"][scn], sb["scored"][scn])
         for label, curve in sb["curves"][scn].items():
             np.testing.assert_allclose(sa["curves"][scn][label], curve, atol=1e-4, equal_nan=True)
-    # resampled runs and --write-estimates keep loading the whole recording
-    assert not ev.streams_bag(bag, ev.EvalSettings(estimators=settings.estimators, rates=[None, 100.0]))
-    assert not ev.streams_bag(bag, ev.EvalSettings(estimators=settings.estimators, keep_estimates=True))
+    ea, eb = streamed.estimates, whole.estimates
+    np.testing.assert_array_equal(ea["stamps"], eb["stamps"])
+    for label, q in eb["quats"].items():
+        np.testing.assert_allclose(ea["quats"][label], q, atol=1e-5)

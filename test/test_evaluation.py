@@ -52,6 +52,7 @@ def test_parse_estimators_labels_and_params():
 
 
 def test_parse_estimators_bool_and_errors():
+    assert ev.parse_estimator("madgwick:beta=1").kwargs == {"beta": 1.0}  # integers are fine for floats
     s = ev.parse_estimator("riann:rate_adaptation=false")
     assert s.kwargs == {"rate_adaptation": False}
     with pytest.raises(ValueError, match=r"unknown estimator 'ekf'.*known: riann"):
@@ -86,36 +87,36 @@ def test_sequence_seed_is_deterministic_and_per_sequence():
 def test_scenarios_bias_and_start():
     rec = synthetic()
     true_gyr = rec.gyr - np.array([0.01, -0.02, 0.005])
-    i0 = ev.first_scored_index(rec)
+    i0 = ev.summarise(ev.Source(rec.name, rec)).i0
     assert i0 == 200
 
-    r, info = ev.make_scenario(rec, ev.RESTRICTIVE, seed=0)
+    r, info = ev.scenario_recording(rec, ev.RESTRICTIVE, seed=0)
     assert len(r) == len(rec) and info.start_index == 0 and info.rest_samples == 200
     np.testing.assert_allclose(r.gyr, true_gyr, atol=1e-12)  # turn-on bias removed using the rest
     np.testing.assert_allclose(np.radians(info.bias_removed_dps), [0.01, -0.02, 0.005], atol=1e-8)
     assert info.bias_added_dps == [0.0, 0.0, 0.0]
     assert r.stamps_ns[0] > 0  # stamp 0 would be rejected by the node's gate
 
-    p, pinfo = ev.make_scenario(rec, ev.PARTIAL, seed=0)
+    p, pinfo = ev.scenario_recording(rec, ev.PARTIAL, seed=0)
     bias = ev.random_bias(0, rec.name)
     np.testing.assert_allclose(p.gyr, true_gyr + bias, atol=1e-12)
     np.testing.assert_allclose(pinfo.bias_added_dps, np.degrees(bias), atol=1e-5)
 
-    q, qinfo = ev.make_scenario(rec, ev.REALISTIC, seed=0)
+    q, qinfo = ev.scenario_recording(rec, ev.REALISTIC, seed=0)
     assert qinfo.start_index == i0 and len(q) == len(rec) - i0
     assert q.score_mask[0]
     np.testing.assert_allclose(q.gyr, true_gyr[i0:] + bias, atol=1e-12)  # same bias as partially-restrictive
     np.testing.assert_array_equal(q.quat_ref, rec.quat_ref[i0:])
     np.testing.assert_array_equal(np.diff(q.stamps_ns), np.diff(rec.stamps_ns[i0:]))
 
-    other, _ = ev.make_scenario(rec, ev.PARTIAL, seed=1)
+    other, _ = ev.scenario_recording(rec, ev.PARTIAL, seed=1)
     assert not np.allclose(other.gyr, p.gyr)
 
 
 def test_scenario_without_rest_removes_nothing():
     rec = synthetic(rest_s=0.0)
-    assert ev.first_scored_index(rec) == 0
-    r, info = ev.make_scenario(rec, ev.RESTRICTIVE)
+    assert ev.summarise(ev.Source(rec.name, rec)).i0 == 0
+    r, info = ev.scenario_recording(rec, ev.RESTRICTIVE)
     np.testing.assert_array_equal(r.gyr, rec.gyr)
     assert info.bias_removed_dps == [0.0, 0.0, 0.0] and info.rest_samples == 0
 
@@ -124,13 +125,13 @@ def test_no_scored_samples_is_an_error():
     rec = synthetic()
     rec.score_mask[:] = False
     with pytest.raises(ev.EvalError, match="no scored samples"):
-        ev.make_scenario(rec, ev.REALISTIC)
+        ev.scenario_recording(rec, ev.REALISTIC)
 
 
 # -- resampling ---------------------------------------------------------------------------------------
 def test_resample_signals_reference_and_mask():
     rec = synthetic(rate=200.0, t0_ns=5_000_000_000)
-    r = ev.resample(rec, 100.0)
+    r = ev.open_source("x.mcap", 100.0, rec).rec
     assert abs(len(r) - len(rec) / 2) <= 1
     assert r.rate_hz == pytest.approx(100.0, rel=1e-6)
     assert r.stamps_ns[0] == rec.stamps_ns[0]
@@ -145,7 +146,7 @@ def test_resample_signals_reference_and_mask():
     smooth = np.column_stack([np.sin(2 * np.pi * k * t / period) for k in (3, 7, 11)])
     rec.gyr = smooth
     rec.acc = 9.81 + smooth
-    r = ev.resample(rec, 50.0)
+    r = ev.open_source("x.mcap", 50.0, rec).rec
     np.testing.assert_allclose(r.gyr, smooth[::4][: len(r)], atol=1e-9)
     np.testing.assert_allclose(r.acc, 9.81 + smooth[::4][: len(r)], atol=1e-9)
 
@@ -155,11 +156,11 @@ def test_score_inclination_ignores_heading():
     rec = synthetic()
     heading_off = quat.multiply(quat.from_rotvec([0, 0, 1.0]), rec.quat_ref)  # world-frame yaw error
     s = ev.score(rec, heading_off, with_heading=True)
-    assert s["rmse_deg"] < 1e-5
-    assert s["heading_rmse_deg"] == pytest.approx(np.degrees(1.0), abs=1e-6)
-    assert s["total_rmse_deg"] == pytest.approx(np.degrees(1.0), abs=1e-6)
+    assert s.rmse_deg < 1e-5
+    assert s.heading_rmse_deg == pytest.approx(np.degrees(1.0), abs=1e-6)
+    assert s.total_rmse_deg == pytest.approx(np.degrees(1.0), abs=1e-6)
     tilted = quat.multiply(quat.from_rotvec([np.radians(3.0), 0, 0]), rec.quat_ref)
-    assert ev.score(rec, -tilted)["rmse_deg"] == pytest.approx(3.0, abs=1e-6)  # sign-invariant
+    assert ev.score(rec, -tilted).rmse_deg == pytest.approx(3.0, abs=1e-6)  # sign-invariant
 
 
 def test_score_mask_reference_and_estimate_gaps():
@@ -169,29 +170,31 @@ def test_score_mask_reference_and_estimate_gaps():
     rec.quat_ref[5] = np.nan  # missing reference in the rest: not scored anyway
     est[-1] = np.nan  # rejected by the gate: not scored, counted
     s = ev.score(rec, est)
-    assert s["n_scored"] == rec.score_mask.sum() - 1
-    assert s["n_unestimated"] == 1
-    assert s["rmse_deg"] > 0
+    assert s.n_scored == rec.score_mask.sum() - 1
+    assert s.n_unestimated == 1
+    assert s.rmse_deg > 0
     rec.quat_ref = None
     with pytest.raises(ev.EvalError, match="no reference"):
         ev.score(rec, est)
 
 
-def test_run_estimator_is_the_node_stream():
-    rec, _ = ev.make_scenario(synthetic(), ev.REALISTIC)
-    est = create("riann")
-    q, accepted, counters = ev.run_estimator(est, rec)
-    stream = EstimatorStream(create("riann"), GateConfig(nominal_rate=rec.rate_hz))
-    q2, acc2 = stream.process_batch(rec.stamps_ns, rec.acc, rec.gyr)
-    np.testing.assert_array_equal(accepted, acc2)
+def test_offline_runner_is_the_node_stream():
+    rec, _ = ev.scenario_recording(synthetic(), ev.REALISTIC)
+    specs = ev.parse_estimators("riann")
+    gate = GateConfig(nominal_rate=rec.rate_hz)
+    run = ev.OfflineRunner().start(specs, gate, 0)
+    (q,) = run.feed(rec)
+    (stats,) = run.finish()
+    q2, acc2 = EstimatorStream(create("riann"), gate).process_batch(rec.stamps_ns, rec.acc, rec.gyr)
+    np.testing.assert_array_equal(np.isfinite(q).all(axis=1), acc2)
     np.testing.assert_allclose(q, q2, atol=1e-6)
-    assert counters.get("reset_start") == 1
+    assert stats.resets == {"start": 1}
     # a second run starts from scratch (reset) and gives the same numbers
-    q3, _, _ = ev.run_estimator(est, rec)
+    (q3,) = ev.OfflineRunner().start(specs, gate, 0).feed(rec)
     np.testing.assert_allclose(q, q3, atol=1e-6)
 
 
-def test_evaluate_recording_rows_and_rates():
+def test_evaluate_source_rows_and_rates():
     rec = synthetic(rate=200.0)
     settings = ev.EvalSettings(
         estimators=ev.parse_estimators("riann"),
@@ -200,26 +203,31 @@ def test_evaluate_recording_rows_and_rates():
         series_for="*",
         keep_estimates=True,
     )
-    res = ev.evaluate_recording(rec, settings, "x.mcap")
+    res = ev.evaluate_source("x.mcap", settings, recording=rec)
+    assert res.error is None
     assert len(res.rows) == 6
-    assert {r["rate_hz"] for r in res.rows} == {200.0, 100.0}
-    assert all(r["rmse_deg"] < 5.0 for r in res.rows)  # exact synthetic signals: RIANN tracks them
+    assert {r.rate_hz for r in res.rows} == {200.0, 100.0}
+    assert all(r.rmse_deg < 5.0 for r in res.rows)  # exact synthetic signals: RIANN tracks them
     assert set(res.scenarios) == set(ev.SCENARIOS)
     assert set(res.series["curves"]) == set(ev.SCENARIOS)
     est = res.estimates
     assert est["scenario"] == ev.RESTRICTIVE
     np.testing.assert_array_equal(est["stamps"], rec.stamps_ns)  # the bag's own stamps (not shifted)
+    assert est["quats"]["riann"].shape == (len(rec), 4)
+
+
+def row(estimator: str, dataset: str, rmse: float, scenario: str = ev.REALISTIC) -> ev.ResultRow:
+    return ev.ResultRow(sequence="s", dataset=dataset, source="", scenario=scenario, rate=ev.NATIVE, rate_hz=100.0,
+                        resampled=False, estimator=estimator, estimator_name=estimator, mode="offline", n_samples=1,
+                        n_scored=1, n_unestimated=0, rmse_deg=rmse, max_err_deg=rmse)
 
 
 def test_aggregate_mean_median_max():
-    rows = [
-        {"estimator": "a", "scenario": ev.REALISTIC, "dataset": d, "rate_hz": 100.0, "rmse_deg": v}
-        for d, v in [("x", 1.0), ("x", 2.0), ("x", 6.0), ("y", 4.0)]
-    ]
-    agg = {(a["dataset"]): a for a in ev.aggregate(rows)}
-    assert agg["x"]["mean"] == pytest.approx(3.0) and agg["x"]["median"] == 2.0 and agg["x"]["max"] == 6.0
-    assert agg["y"]["n"] == 1
-    assert agg[ev.ALL_DATASETS]["n"] == 4 and agg[ev.ALL_DATASETS]["mean"] == pytest.approx(13 / 4)
+    rows = [row("a", d, v) for d, v in [("x", 1.0), ("x", 2.0), ("x", 6.0), ("y", 4.0)]]
+    agg = {a.dataset: a for a in ev.aggregate(rows)}
+    assert agg["x"].mean == pytest.approx(3.0) and agg["x"].median == 2.0 and agg["x"].max == 6.0
+    assert agg["y"].n == 1
+    assert agg[ev.ALL_DATASETS].n == 4 and agg[ev.ALL_DATASETS].mean == pytest.approx(13 / 4)
 
 
 # -- tuning -------------------------------------------------------------------------------------------
@@ -232,10 +240,7 @@ def test_parse_grid_and_best():
     assert len(specs) == 4 and specs[-1].kwargs == {"kp": 2.0, "ki": 0.3}
     with pytest.raises(ValueError, match="unknown parameter"):
         ev.parse_grid("madgwick:gain=1/2")
-    rows = [
-        {"estimator": s.label, "scenario": ev.REALISTIC, "rmse_deg": v}
-        for s, v in zip(specs, [3.0, 1.0, 2.0, 4.0], strict=True)
-    ]
+    rows = [row(s.label, "x", v) for s, v in zip(specs, [3.0, 1.0, 2.0, 4.0], strict=True)]
     best = ev.best_of(rows, specs, ev.REALISTIC)
     assert best["best"]["params"] == {"kp": 1.0, "ki": 0.3}
 
@@ -245,6 +250,6 @@ def test_tuning_finds_a_sensible_gain():
     rec = synthetic(gyr_bias=(0.0, 0.0, 0.0), move_s=20.0)
     specs = ev.grid_specs("madgwick", {"beta": [0.0, 0.1]})
     settings = ev.EvalSettings(estimators=specs, scenarios=[ev.PARTIAL], seed=4)
-    res = ev.evaluate_recording(rec, settings)
+    res = ev.evaluate_source("synthetic", settings, recording=rec)
     best = ev.best_of(res.rows, specs, ev.PARTIAL)
     assert best["best"]["params"] == {"beta": 0.1}

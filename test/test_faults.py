@@ -75,6 +75,7 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from sensor_msgs.msg import Imu
+from riann_ros import stamps
 d = np.load(sys.argv[1]); period = float(sys.argv[2])
 rclpy.init()
 node = rclpy.create_node("fake_imu_driver")
@@ -86,7 +87,7 @@ while pub.get_subscription_count() == 0 and time.monotonic() < end:
 time.sleep(0.3)
 for s, a, g in zip(d["stamps"], d["acc"], d["gyr"]):
     m = Imu()
-    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(s), 1_000_000_000)
+    stamps.set_ns(m.header.stamp, s)
     m.header.frame_id = "imu_link"
     m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z = (float(v) for v in a)
     m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z = (float(v) for v in g)

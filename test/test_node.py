@@ -12,10 +12,9 @@ from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
-from conftest import ROOT, wait_for
+from conftest import ROOT, rmse, wait_for
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
 from riann_ros.estimators import create
-from riann_ros.metrics import rmse_deg
 from riann_ros.stream import EstimatorStream, GateConfig
 
 pytestmark = pytest.mark.ros
@@ -52,8 +51,8 @@ def test_node_output_equals_core_on_a_broad_trial(ros, start_node, broad_trial):
         stamps, rec.acc, rec.gyr)
     assert ok.all()
     assert np.abs(q_node - q_core).max() < 1e-4
-    e_node = rmse_deg(rec.quat_ref, q_node, rec.score_mask)
-    e_core = rmse_deg(rec.quat_ref, q_core, rec.score_mask)
+    e_node = rmse(rec, q_node)
+    e_core = rmse(rec, q_core)
     assert abs(e_node - e_core) < 0.01 and 0.2 < e_node < 3.0
     ros.destroy(pub, att)
 

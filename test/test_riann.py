@@ -8,10 +8,10 @@ import numpy as np
 import onnxruntime as ort
 import pytest
 
+from conftest import gate_dts, rmse
 from riann_ros import quaternion as quat
 from riann_ros.estimators import create
 from riann_ros.estimators.riann import RiannEstimator, default_model_path
-from riann_ros.metrics import rmse_deg
 from riann_ros.resample import resample_recording
 
 
@@ -53,24 +53,25 @@ def test_tilted_rest_is_recognised():
 def test_streaming_equals_batch_on_broad(broad_trial):
     rec = broad_trial("02").slice(0, 4000)
     est = create("riann")
-    qb = est.update_batch(rec.acc, rec.gyr, rec.dt)
+    dt = gate_dts(rec)
+    qb = est.update_batch(rec.acc, rec.gyr, dt)
     est.reset()
-    qs = np.array([est.update(a, g, d) for a, g, d in zip(rec.acc, rec.gyr, rec.dt, strict=True)])
+    qs = np.array([est.update(a, g, d) for a, g, d in zip(rec.acc, rec.gyr, dt, strict=True)])
     assert np.abs(qs - qb).max() < 1e-5
     # batch continues from the state left by an earlier call
     est.reset()
-    q1 = est.update_batch(rec.acc[:1500], rec.gyr[:1500], rec.dt[:1500])
-    q2 = est.update_batch(rec.acc[1500:], rec.gyr[1500:], rec.dt[1500:])
+    q1 = est.update_batch(rec.acc[:1500], rec.gyr[:1500], dt[:1500])
+    q2 = est.update_batch(rec.acc[1500:], rec.gyr[1500:], dt[1500:])
     assert np.abs(np.vstack([q1, q2]) - qb).max() < 1e-5
 
 
 def test_reset_clears_the_hidden_state(broad_trial):
     rec = broad_trial("02").slice(20000, 21000)
     est = create("riann")
-    a = est.update_batch(rec.acc, rec.gyr, rec.dt)
-    b = est.update_batch(rec.acc, rec.gyr, rec.dt)
+    a = est.update_batch(rec.acc, rec.gyr, gate_dts(rec))
+    b = est.update_batch(rec.acc, rec.gyr, gate_dts(rec))
     est.reset()
-    c = est.update_batch(rec.acc, rec.gyr, rec.dt)
+    c = est.update_batch(rec.acc, rec.gyr, gate_dts(rec))
     assert np.abs(a - c).max() < 1e-9
     assert np.abs(a - b).max() > 1e-4  # without reset the state carries over
 
@@ -78,9 +79,9 @@ def test_reset_clears_the_hidden_state(broad_trial):
 def test_batch_equals_a_direct_onnxruntime_run(broad_trial):
     rec = broad_trial("07")
     sess = ort.InferenceSession(str(default_model_path()))
-    x = np.column_stack([rec.acc, rec.gyr, rec.dt]).astype(np.float32)[None]
+    x = np.column_stack([rec.acc, rec.gyr, gate_dts(rec)]).astype(np.float32)[None]
     out, _ = sess.run(None, {"input": x, "h0": np.zeros((2, 1, 1, 200), np.float32)})
-    q = create("riann").update_batch(rec.acc, rec.gyr, rec.dt)
+    q = create("riann").update_batch(rec.acc, rec.gyr, gate_dts(rec))
     ref = out[0] / np.linalg.norm(out[0], axis=1, keepdims=True)
     assert np.abs(q - ref).max() < 1e-5
 
@@ -94,7 +95,7 @@ def test_inclination_rmse_on_all_broad_trials(broad_dir, broad_trial):
     for f in broad_files(broad_dir):
         rec = broad_trial(f.name[:2])
         est.reset()
-        rmses[f.name] = rmse_deg(rec.quat_ref, est.update_batch(rec.acc, rec.gyr, rec.dt), rec.score_mask)
+        rmses[f.name] = rmse(rec, est.update_batch(rec.acc, rec.gyr, gate_dts(rec)))
     assert all(0.2 < v < 3.0 for v in rmses.values()), rmses
     if len(rmses) == 12:  # the 12-trial subset: measured mean 1.03 deg
         assert 1.0 <= np.mean(list(rmses.values())) <= 2.5, rmses
@@ -104,16 +105,16 @@ def test_inclination_rmse_on_all_broad_trials(broad_dir, broad_trial):
 @pytest.mark.parametrize("trial", ["02", "07", "15"])
 def test_rates_outside_the_trained_range_stay_accurate(broad_trial, trial):
     rec = broad_trial(trial)
-    native = rmse_deg(rec.quat_ref, create("riann").update_batch(rec.acc, rec.gyr, rec.dt), rec.score_mask)
+    native = rmse(rec, create("riann").update_batch(rec.acc, rec.gyr, gate_dts(rec)))
     fast = resample_recording(rec, 1000.0)
     slow = resample_recording(rec, 25.0)
-    e_fast = rmse_deg(fast.quat_ref, create("riann").update_batch(fast.acc, fast.gyr, fast.dt), fast.score_mask)
-    e_slow = rmse_deg(slow.quat_ref, create("riann").update_batch(slow.acc, slow.gyr, slow.dt), slow.score_mask)
+    e_fast = rmse(fast, create("riann").update_batch(fast.acc, fast.gyr, gate_dts(fast)))
+    e_slow = rmse(slow, create("riann").update_batch(slow.acc, slow.gyr, gate_dts(slow)))
     assert e_fast <= 1.2 * native, (native, e_fast)
     assert e_slow <= 2.0 * native, (native, e_slow)
     # and the adaptation is what makes the difference: fed straight in, 1000 Hz is far worse
     raw = create("riann", rate_adaptation=False)
-    e_raw = rmse_deg(fast.quat_ref, raw.update_batch(fast.acc, fast.gyr, fast.dt), fast.score_mask)
+    e_raw = rmse(fast, raw.update_batch(fast.acc, fast.gyr, gate_dts(fast)))
     assert e_raw > 3 * native
 
 

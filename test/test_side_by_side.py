@@ -12,11 +12,10 @@ import pytest
 from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu
 
-from conftest import ROOT, wait_for
+from conftest import ROOT, rmse, wait_for
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
 from riann_ros.estimators import create
-from riann_ros.evaluation import REALISTIC, make_scenario
-from riann_ros.metrics import rmse_deg
+from riann_ros.evaluation import REALISTIC, scenario_recording
 from riann_ros.stream import EstimatorStream, GateConfig
 
 LAUNCH_FILE = ROOT / "launch" / "side_by_side.launch.py"
@@ -141,7 +140,7 @@ def test_four_executables_each_publish_on_their_own_topics(ros, start_node):
 @pytest.mark.ros
 def test_four_nodes_on_broad_trial_15_equal_their_cores_and_riann_beats_madgwick(ros, start_node, broad_trial):
     t_start = time.monotonic()
-    rec, info = make_scenario(broad_trial("15"), REALISTIC, seed=0)
+    rec, info = scenario_recording(broad_trial("15"), REALISTIC, seed=0)
     n_all = len(rec)
     if 0 < BROAD_SAMPLES < n_all:
         rec = rec.slice(0, BROAD_SAMPLES)
@@ -166,7 +165,7 @@ def test_four_nodes_on_broad_trial_15_equal_their_cores_and_riann_beats_madgwick
         q_core = core(name, rec.stamps_ns, rec.acc, rec.gyr, rate, **params.get(name, {}))
         diff = np.abs(q_node - q_core).max()
         assert diff < 1e-4, f"{name}: node differs from its core by {diff}"
-        errors[name] = (rmse_deg(rec.quat_ref, q_node, rec.score_mask), rmse_deg(rec.quat_ref, q_core, rec.score_mask))
+        errors[name] = (rmse(rec, q_node), rmse(rec, q_core))
     assert "beta=0.033" in nodes["madgwick"].output()
     ros.destroy(pub, *att.values())
     print(f"\nBROAD {rec.name}, {REALISTIC} (seed 0, from sample {info.start_index}): first {len(msgs)} of "

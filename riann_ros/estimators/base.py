@@ -9,54 +9,28 @@ Every estimator is a causal filter over IMU samples:
   the same numbers as ``N`` calls of ``update`` (tested per estimator);
 * ``reset()`` — forget everything; the next sample re-initialises the filter.
 
-Parameters are described by :class:`ParamSpec` so that the ROS node base can declare them (with
-description, range and whether they can change at run time) without knowing the estimator, and the
-evaluator can list and grid-search them.
+A subclass implements ``reset`` and at least one of ``update`` / ``update_batch``: the base class
+derives the other (one sample as a batch of one, or a batch as a loop of samples). Construction
+validates the parameters and calls ``reset()``.
+
+Parameters are described by :class:`~riann_ros.params.ParamSpec` so that the ROS node base can declare
+them (with description, range and whether they can change at run time) without knowing the estimator,
+and the evaluator can list, parse and grid-search them.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from riann_ros.params import ParamSpec, find
+
 Array = NDArray[np.float64]
 
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One estimator parameter: what the node declares and the evaluator can tune."""
-
-    name: str
-    default: float | bool | str
-    description: str
-    min: float | None = None
-    max: float | None = None
-    runtime: bool = False  # may change while running (validated), without a reset
-
-    def validate(self, value: Any) -> Any:
-        """Return ``value`` converted to the parameter's type, or raise ``ValueError``."""
-        if isinstance(self.default, bool):
-            if not isinstance(value, bool):
-                raise ValueError(f"{self.name} must be a bool, got {value!r}")
-            return value
-        if isinstance(self.default, str):
-            if not isinstance(value, str):
-                raise ValueError(f"{self.name} must be a string, got {value!r}")
-            return value
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ValueError(f"{self.name} must be a number, got {value!r}")
-        v = float(value)
-        if not np.isfinite(v):
-            raise ValueError(f"{self.name} must be finite, got {value!r}")
-        if self.min is not None and v < self.min:
-            raise ValueError(f"{self.name}={v} is below its minimum {self.min}")
-        if self.max is not None and v > self.max:
-            raise ValueError(f"{self.name}={v} is above its maximum {self.max}")
-        return v
+__all__ = ["Array", "AttitudeEstimator", "ParamSpec"]
 
 
 class AttitudeEstimator(ABC):
@@ -64,6 +38,11 @@ class AttitudeEstimator(ABC):
 
     name: ClassVar[str] = ""
     PARAMS: ClassVar[tuple[ParamSpec, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.update is AttitudeEstimator.update and cls.update_batch is AttitudeEstimator.update_batch:
+            raise TypeError(f"{cls.__name__} must implement update or update_batch")
 
     def __init__(self, **params: Any) -> None:
         specs = {p.name: p for p in self.PARAMS}
@@ -76,14 +55,12 @@ class AttitudeEstimator(ABC):
         self.params: dict[str, Any] = {p.name: p.default for p in self.PARAMS}
         for key, value in params.items():
             self.params[key] = specs[key].validate(value)
+        self.reset()
 
     # -- parameters -----------------------------------------------------------------------------
     @classmethod
     def param_spec(cls, name: str) -> ParamSpec:
-        for p in cls.PARAMS:
-            if p.name == name:
-                return p
-        raise KeyError(name)
+        return find(cls.PARAMS, name)
 
     def set_params(self, **params: Any) -> None:
         """Change parameters while running; only those with ``runtime=True`` (validated)."""
@@ -102,12 +79,12 @@ class AttitudeEstimator(ABC):
     def reset(self) -> None:
         """Forget the state; the next sample initialises the filter again."""
 
-    @abstractmethod
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
         """Process one sample and return the attitude quaternion ``[w, x, y, z]``."""
+        return self.update_batch(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])[0]
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
-        """Process a sequence; the default loops over :meth:`update`. Subclasses vectorise."""
+        """Process a sequence (a loop over :meth:`update` unless a subclass vectorises it)."""
         acc = np.asarray(acc, dtype=float)
         gyr = np.asarray(gyr, dtype=float)
         dt = np.broadcast_to(np.asarray(dt, dtype=float), (len(acc),))
@@ -115,11 +92,3 @@ class AttitudeEstimator(ABC):
         for i in range(len(acc)):
             out[i] = self.update(acc[i], gyr[i], float(dt[i]))
         return out
-
-    def describe(self) -> str:
-        """Readable label with the non-default parameters, e.g. ``madgwick(beta=0.1)``."""
-        diff = {k: v for k, v in self.params.items() if v != self.param_spec(k).default}
-        if not diff:
-            return self.name
-        inner = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in diff.items())
-        return f"{self.name}({inner})"

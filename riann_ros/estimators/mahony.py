@@ -24,13 +24,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.madgwick import as_array, initialise, sanitize
+from riann_ros.estimators.common import Quat, as_array, initialise, sanitize
 
 #: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
 DEFAULT_KP = 1.0
 DEFAULT_KI = 0.3
 
-Quat = tuple[float, float, float, float]
 Vec = tuple[float, float, float]
 
 
@@ -114,10 +113,6 @@ class MahonyEstimator(AttitudeEstimator):
         ),
     )
 
-    def __init__(self, **params: object) -> None:
-        super().__init__(**params)
-        self.reset()
-
     def reset(self) -> None:
         self._q: Quat | None = None
         self._b: Vec = (0.0, 0.0, 0.0)
@@ -130,9 +125,6 @@ class MahonyEstimator(AttitudeEstimator):
     def bias(self) -> Array:
         """Current gyro-bias estimate (rad/s, sensor frame)."""
         return np.array(self._b)
-
-    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
-        return self.update_batch(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])[0]
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
         a, g, h = sanitize(acc, gyr, dt)

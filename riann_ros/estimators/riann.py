@@ -116,7 +116,6 @@ class RiannEstimator(AttitudeEstimator):
     def __init__(self, session: ort.InferenceSession | None = None, **params: object) -> None:
         super().__init__(**params)
         self._session = session or make_session(self.params["model_path"] or None)
-        self.reset()
 
     # -- state ----------------------------------------------------------------------------------
     def reset(self) -> None:

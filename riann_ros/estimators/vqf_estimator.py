@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike
 from vqf import VQF
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.madgwick import sanitize_arrays
+from riann_ros.estimators.common import sanitize_arrays
 
 DEFAULT_TS = 0.01  # s, used only when the first sample's dt is not positive
 
@@ -70,10 +70,6 @@ class VqfEstimator(AttitudeEstimator):
             runtime=True,
         ),
     )
-
-    def __init__(self, **params: object) -> None:
-        super().__init__(**params)
-        self.reset()
 
     def reset(self) -> None:
         self._vqf: VQF | None = None

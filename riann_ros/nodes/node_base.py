@@ -29,50 +29,41 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
+from riann_ros import stamps
 from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
-from riann_ros.estimators.base import ParamSpec
+from riann_ros.params import ParamSpec
 
 INPUT_TOPIC = "imu/data_raw"
 QOS_CHOICES = ("sensor_data", "reliable", "best_effort")
 THROTTLE_S = 5.0  # at most one warning per rejection reason in this many seconds
 
-# Node parameters: name -> (default, description, min, max, read_only)
-NODE_PARAMS: dict[str, tuple[Any, str, float | None, float | None]] = {
-    "nominal_rate": (100.0, "Hz; dt assumed for the first sample after a (re)start, when no previous stamp exists.",
-                     1.0, 100000.0),
-    "max_dt": (0.5, "s; a stamp gap larger than this, or a jump back larger than this (bag loop, clock reset), "
-               "restarts the estimator from the next sample.", 0.001, 3600.0),
-    "max_acc": (2000.0, "m/s²; samples with a larger acceleration magnitude are rejected as implausible.",
-                1.0, 1.0e6),
-    "max_gyr": (200.0, "rad/s; samples with a larger angular rate magnitude are rejected as implausible.",
-                0.1, 1.0e6),
-    "input_qos": ("sensor_data", "Input QoS: sensor_data (best effort, connects to reliable and best-effort "
-                  "drivers), best_effort, or reliable.", None, None),
-    "input_depth": (1000, "Input queue depth (keep last): a burst larger than this loses its oldest "
-                    "messages in DDS before the node sees them.", 1, 100000),
-    "output_depth": (1000, "Output queue depth (keep last, reliable): outputs not yet acknowledged by a "
-                     "slow subscriber are dropped once more than this many are queued.", 1, 100000),
-    "roll_pitch_stddev_deg": (2.0, "deg; standard deviation written to the roll and pitch entries of the "
-                              "orientation covariance of imu/data.", 0.0, 180.0),
-    "yaw_stddev_deg": (180.0, "deg; standard deviation written to the yaw entry of the orientation covariance "
-                       "(yaw is unobservable without a magnetometer).", 0.0, 1.0e6),
-    "diagnostics_period": (1.0, "s; period of /diagnostics messages.", 0.05, 3600.0),
-}
-# node parameters that only take effect at start-up
-STARTUP_ONLY = {"input_qos", "input_depth", "output_depth", "diagnostics_period"}
+#: Parameters of the node itself (the gate's come from :data:`riann_ros.stream.GATE_PARAMS`, the
+#: estimator's from its ``PARAMS``); those with ``runtime=False`` only take effect at start-up.
+NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec("input_qos", "sensor_data", "Input QoS: sensor_data (best effort, connects to reliable and "
+              "best-effort drivers), best_effort, or reliable.", choices=QOS_CHOICES),
+    ParamSpec("input_depth", 1000, "Input queue depth (keep last): a burst larger than this loses its oldest "
+              "messages in DDS before the node sees them.", min=1, max=100000),
+    ParamSpec("output_depth", 1000, "Output queue depth (keep last, reliable): outputs not yet acknowledged by a "
+              "slow subscriber are dropped once more than this many are queued.", min=1, max=100000),
+    ParamSpec("roll_pitch_stddev_deg", 2.0, "deg; standard deviation written to the roll and pitch entries of the "
+              "orientation covariance of imu/data.", min=0.0, max=180.0, runtime=True),
+    ParamSpec("yaw_stddev_deg", 180.0, "deg; standard deviation written to the yaw entry of the orientation "
+              "covariance (yaw is unobservable without a magnetometer).", min=0.0, max=1.0e6, runtime=True),
+    ParamSpec("diagnostics_period", 1.0, "s; period of /diagnostics messages.", min=0.05, max=3600.0),
+)
+NODE_PARAMS: tuple[ParamSpec, ...] = (*st.GATE_PARAMS, *NODE_ONLY_PARAMS)
 
 
-def _descriptor(description: str, lo: float | None, hi: float | None, default: Any, read_only: bool
-                ) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=description, read_only=read_only)
-    if lo is not None and hi is not None:
-        if isinstance(default, bool):
-            pass
-        elif isinstance(default, int):
-            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
-        elif isinstance(default, float):
-            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=spec.description, read_only=not spec.runtime)
+    if spec.min is not None and spec.max is not None and not isinstance(spec.default, bool):
+        if isinstance(spec.default, int):
+            d.integer_range = [IntegerRange(from_value=int(spec.min), to_value=int(spec.max), step=1)]
+        elif isinstance(spec.default, float):
+            lo, hi = float(spec.min), float(spec.max)
+            d.floating_point_range = [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]
     return d
 
 
@@ -96,12 +87,12 @@ class EstimatorNode(Node):
         super().__init__(self.NODE_NAME, **kwargs)
         cls = estimator_class(self.ESTIMATOR)
         self._specs: dict[str, ParamSpec] = {p.name: p for p in cls.PARAMS}
-        for name, (default, desc, lo, hi) in NODE_PARAMS.items():
-            self.declare_parameter(name, default, _descriptor(desc, lo, hi, default, name in STARTUP_ONLY))
-        for spec in cls.PARAMS:
-            self.declare_parameter(spec.name, spec.default,
-                                   _descriptor(spec.description, spec.min, spec.max, spec.default, not spec.runtime))
-        p = {name: self.get_parameter(name).value for name in [*NODE_PARAMS, *self._specs]}
+        self._node_specs = {p.name: p for p in NODE_PARAMS}
+        for spec in (*NODE_PARAMS, *cls.PARAMS):
+            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        p = {name: self.get_parameter(name).value for name in [*self._node_specs, *self._specs]}
+        for name, spec in self._node_specs.items():
+            p[name] = spec.validate(p[name])
         est_params = {k: self._as_spec_type(k, p[k]) for k in self._specs}
         self.stream = st.EstimatorStream(create(self.ESTIMATOR, **est_params), self._gate_config(p))
         self._covariance = self._orientation_covariance(p["roll_pitch_stddev_deg"], p["yaw_stddev_deg"])
@@ -139,8 +130,7 @@ class EstimatorNode(Node):
 
     @staticmethod
     def _gate_config(p: dict[str, Any]) -> st.GateConfig:
-        return st.GateConfig(nominal_rate=float(p["nominal_rate"]), max_dt=float(p["max_dt"]),
-                             max_acc=float(p["max_acc"]), max_gyr=float(p["max_gyr"]))
+        return st.GateConfig(**{spec.name: p[spec.name] for spec in st.GATE_PARAMS})
 
     @staticmethod
     def _orientation_covariance(rp_deg: float, yaw_deg: float) -> np.ndarray:
@@ -159,8 +149,8 @@ class EstimatorNode(Node):
                     if not spec.runtime:
                         return SetParametersResult(successful=False, reason=f"{prm.name} is read-only at run time")
                     est_changes[prm.name] = spec.validate(self._as_spec_type(prm.name, prm.value))
-                elif prm.name in ("nominal_rate", "max_dt", "max_acc", "max_gyr"):
-                    gate[prm.name] = float(prm.value)
+                elif prm.name in gate:
+                    gate[prm.name] = prm.value
                 elif prm.name in ("roll_pitch_stddev_deg", "yaw_stddev_deg"):
                     cur = {n: self.get_parameter(n).value for n in ("roll_pitch_stddev_deg", "yaw_stddev_deg")}
                     cur[prm.name] = float(prm.value)
@@ -181,7 +171,7 @@ class EstimatorNode(Node):
     def _on_imu(self, msg: Imu) -> None:
         t0 = time.perf_counter_ns()
         stamp = msg.header.stamp
-        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        stamp_ns = stamps.to_ns(stamp)
         la, av = msg.linear_acceleration, msg.angular_velocity
         acc = (la.x, la.y, la.z)
         gyr = (av.x, av.y, av.z)
@@ -200,7 +190,7 @@ class EstimatorNode(Node):
             self._warn_throttled(r.reason or "?", f"sample rejected ({r.reason}) at stamp {r.stamp_ns * 1e-9:.6f} s")
             return
         if stamp_ns == 0:  # publish with the receive time we used
-            stamp.sec, stamp.nanosec = divmod(r.stamp_ns, 1_000_000_000)
+            stamps.set_ns(stamp, r.stamp_ns)
         self._frame_id = msg.header.frame_id
         att = self._att_msg
         att.header = msg.header

@@ -1,0 +1,91 @@
+"""Offline attitude evaluation, the paper's way (ROS-free core of ``riann-bag-eval``).
+
+One pipeline (:mod:`~riann_ros.evaluation.run`): a source yields recording chunks
+(:mod:`~riann_ros.evaluation.sources`) → each scenario transforms them chunk by chunk
+(:mod:`~riann_ros.evaluation.scenarios`) → the estimators run through the node's ``EstimatorStream``
+→ one accumulator per scenario × estimator scores them (:mod:`~riann_ros.evaluation.scoring`).
+Estimator specs and tuning grids: :mod:`~riann_ros.evaluation.specs`; statistics across sequences and
+tuning: :mod:`~riann_ros.evaluation.aggregate`; tables and files: :mod:`~riann_ros.evaluation.report`;
+figures: :mod:`~riann_ros.evaluation.plots`.
+"""
+
+from riann_ros.evaluation.aggregate import ALL_DATASETS, Group, aggregate, best_of, rate_order, tune
+from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.run import (
+    NATIVE,
+    EvalSettings,
+    OfflineRunner,
+    ResultRow,
+    RunStats,
+    SequenceResult,
+    evaluate_source,
+    evaluate_sources,
+)
+from riann_ros.evaluation.scenarios import (
+    BIAS_STD_DPS,
+    PARTIAL,
+    REALISTIC,
+    RESTRICTIVE,
+    SCENARIOS,
+    ScenarioInfo,
+    ScenarioPlan,
+    parse_scenarios,
+    random_bias,
+    scenario_recording,
+    sequence_seed,
+)
+from riann_ros.evaluation.scoring import Accumulator, Score, score
+from riann_ros.evaluation.sources import BROAD_SUFFIXES, Source, load_recording, open_source, summarise
+from riann_ros.evaluation.specs import (
+    EstimatorSpec,
+    available_estimators,
+    grid_specs,
+    make_label,
+    parse_estimator,
+    parse_estimators,
+    parse_grid,
+)
+
+__all__ = [
+    "ALL_DATASETS",
+    "BIAS_STD_DPS",
+    "BROAD_SUFFIXES",
+    "NATIVE",
+    "PARTIAL",
+    "REALISTIC",
+    "RESTRICTIVE",
+    "SCENARIOS",
+    "Accumulator",
+    "EstimatorSpec",
+    "EvalError",
+    "EvalSettings",
+    "Group",
+    "OfflineRunner",
+    "ResultRow",
+    "RunStats",
+    "ScenarioInfo",
+    "ScenarioPlan",
+    "Score",
+    "SequenceResult",
+    "Source",
+    "aggregate",
+    "available_estimators",
+    "best_of",
+    "evaluate_source",
+    "evaluate_sources",
+    "grid_specs",
+    "load_recording",
+    "make_label",
+    "open_source",
+    "parse_estimator",
+    "parse_estimators",
+    "parse_grid",
+    "parse_scenarios",
+    "random_bias",
+    "rate_order",
+    "scenario_recording",
+    "score",
+    "sequence_seed",
+    "summarise",
+    "tune",
+]

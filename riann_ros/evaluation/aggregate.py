@@ -1,0 +1,102 @@
+"""Across sequences: group statistics, and tuning a filter on the inputs (ROS-free)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.run import NATIVE, EvalSettings, Progress, ResultRow, evaluate_sources
+from riann_ros.evaluation.scenarios import SCENARIOS
+from riann_ros.evaluation.specs import EstimatorSpec, grid_specs, make_label, parse_grid
+
+ALL_DATASETS = "all"
+
+
+@dataclass
+class Group:
+    """Statistics of the per-sequence RMSEs of one estimator × scenario × dataset × rate."""
+
+    estimator: str
+    scenario: str
+    dataset: str
+    rate: str | float
+    n: int
+    mean: float
+    median: float
+    max: float
+    min: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def rate_order(rate: str | float) -> tuple[int, float]:
+    """Sort key for rate keys: native first, then ascending Hz."""
+    return (0, 0.0) if rate == NATIVE else (1, float(rate))
+
+
+def scenario_order(scenarios: Iterable[str]) -> list[str]:
+    """The scenarios present, in the evaluator's order."""
+    present = set(scenarios)
+    return [s for s in SCENARIOS if s in present] + sorted(present - set(SCENARIOS))
+
+
+def aggregate(rows: Iterable[ResultRow], metric: str = "rmse_deg") -> list[Group]:
+    """Per estimator × scenario × dataset × rate: n, mean, median, max, min of the per-sequence ``metric``
+    (BROAD's group averaging: RMSE per trial, then the plain mean). With several datasets an ``all`` group
+    over every sequence is added."""
+    rows = [r for r in rows if getattr(r, metric) is not None]
+    groups: dict[tuple[str, str, str, str | float], list[float]] = {}
+    datasets = sorted({r.dataset for r in rows})
+    for r in rows:
+        for d in [r.dataset] + ([ALL_DATASETS] if len(datasets) > 1 else []):
+            groups.setdefault((r.estimator, r.scenario, d, r.rate), []).append(float(getattr(r, metric)))
+    order_est = list(dict.fromkeys(r.estimator for r in rows))
+    order_scn = scenario_order(r.scenario for r in rows)
+    order_ds = [*datasets, ALL_DATASETS]
+
+    def key(kv: tuple[tuple[str, str, str, str | float], list[float]]) -> tuple:
+        est, scn, ds, rate = kv[0]
+        return (order_scn.index(scn), order_ds.index(ds), rate_order(rate), order_est.index(est))
+
+    out = []
+    for (est, scn, ds, rate), vals in sorted(groups.items(), key=key):
+        v = np.asarray(vals)
+        out.append(Group(est, scn, ds, rate, len(v), float(v.mean()), float(np.median(v)), float(v.max()),
+                         float(v.min())))
+    return out
+
+
+def best_of(rows: Iterable[ResultRow], specs: list[EstimatorSpec], scenario: str) -> dict[str, Any]:
+    """The spec with the lowest mean RMSE over the sequences in ``scenario`` (all rates pooled)."""
+    by_label: dict[str, list[float]] = {}
+    for r in rows:
+        if r.scenario == scenario:
+            by_label.setdefault(r.estimator, []).append(r.rmse_deg)
+    table = []
+    for s in specs:
+        v = by_label.get(s.label)
+        if v:
+            table.append({"label": s.label, "params": s.kwargs, "mean": float(np.mean(v)), "max": float(np.max(v))})
+    if not table:
+        raise EvalError("tuning produced no scores")
+    table.sort(key=lambda d: d["mean"])
+    return {"scenario": scenario, "best": table[0], "grid": table}
+
+
+def tune(text: str, sources: Sequence[str], scenario: str, seed: int, jobs: int = 1,
+         progress: Progress | None = None) -> tuple[dict[str, Any], EstimatorSpec]:
+    """Grid-search the estimator of tuning spec ``text`` (``"madgwick"``, ``"mahony:kp=0.5/1:ki=0/0.3"``) for the
+    lowest mean RMSE on ``sources`` in ``scenario``: (the grid's results, the best spec labelled ``… tuned``)."""
+    name, grid = parse_grid(text)
+    specs = grid_specs(name, grid)
+    settings = EvalSettings(estimators=specs, scenarios=[scenario], seed=seed)
+    results = evaluate_sources(sources, settings, jobs, progress)
+    best = best_of([r for res in results if not res.error for r in res.rows], specs, scenario)
+    best["estimator"] = name
+    params = best["best"]["params"]
+    return best, EstimatorSpec.of(name, params, f"{make_label(name, params)} tuned")

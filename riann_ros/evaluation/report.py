@@ -1,0 +1,314 @@
+"""What ``riann-bag-eval`` shows and writes: tables, results.csv / results.json / report.md (ROS-free).
+
+:class:`Report` holds one run (settings, per-input results, tuning); :func:`write_results` writes its files
+into an output folder, removing what it wrote if interrupted, so a folder never holds half a run.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import platform
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from riann_ros.evaluation.aggregate import Group, aggregate, rate_order, scenario_order
+from riann_ros.evaluation.run import NATIVE, EvalSettings, ResultRow, SequenceResult
+from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
+
+CSV_FIELDS = (
+    "sequence",
+    "dataset",
+    "scenario",
+    "rate",
+    "rate_hz",
+    "estimator",
+    "rmse_deg",
+    "max_err_deg",
+    "heading_rmse_deg",
+    "total_rmse_deg",
+    "n_samples",
+    "n_scored",
+    "n_unestimated",
+    "seconds",
+    "cpu_seconds",
+    "mode",
+    "published",
+    "received",
+    "lost",
+    "source",
+)
+METRIC = (
+    "RMSE of e_alpha = 2 acos(sqrt(w^2+z^2)) of q_ref * conj(q_est), deg, over score mask & reference present & "
+    "estimate present"
+)
+PLOT_STEMS = ("rmse_boxplots", "error_over_time", "rmse_vs_rate")
+RESULT_FILES = ("results.csv", "results.json", "report.md")
+
+
+# ---------------------------------------------------------------------------------------------------
+# terminal
+# ---------------------------------------------------------------------------------------------------
+class Progress:
+    """A one-line progress bar on stderr (plain lines when stderr is not a terminal)."""
+
+    def __init__(self, total: int, stream: TextIO | None = None, width: int = 30, enabled: bool = True) -> None:
+        self.total = max(total, 1)
+        self.stream = stream or sys.stderr
+        self.width = width
+        self.enabled = enabled
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+
+    def __call__(self, done: int, total: int, result: SequenceResult | None = None) -> None:
+        if not self.enabled:
+            return
+        name = (result.name or Path(result.source).name) if result else ""
+        status = "FAILED" if result is not None and result.error else f"{result.seconds if result else 0.0:.1f}s"
+        filled = int(self.width * done / self.total)
+        bar = "#" * filled + "-" * (self.width - filled)
+        line = f"[{bar}] {done}/{total} {name} ({status})"
+        if self.tty:
+            self.stream.write("\r\033[K" + line + ("\n" if done >= total else ""))
+        else:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+
+def rate_label(rate: str | float) -> str:
+    return str(rate) if rate == NATIVE else f"{float(rate):g}"
+
+
+def format_table(agg: Sequence[Group], title: str = "attitude RMSE e_α (°) per sequence") -> str:
+    """Estimator × scenario × dataset (× rate when several): n, mean / median / max RMSE."""
+    if not agg:
+        return "(no results)"
+    multi = len({a.rate for a in agg}) > 1
+    headers = ["scenario", "dataset", *(["rate"] if multi else []), "estimator", "n", "mean", "median", "max"]
+    lines = [
+        [a.scenario, a.dataset, *([rate_label(a.rate)] if multi else []), a.estimator, str(a.n), f"{a.mean:.2f}",
+         f"{a.median:.2f}", f"{a.max:.2f}"]
+        for a in agg
+    ]
+    widths = [max(len(h), *(len(r[i]) for r in lines)) for i, h in enumerate(headers)]
+    numeric = {"n", "mean", "median", "max", "rate"}
+
+    def fmt(row: list[str]) -> str:
+        return "  ".join(
+            c.rjust(w) if h in numeric else c.ljust(w) for c, w, h in zip(row, widths, headers, strict=True)
+        )
+
+    out = [title, fmt(headers), "  ".join("-" * w for w in widths)]
+    prev = None
+    for row, a in zip(lines, agg, strict=True):
+        key = (a.scenario, a.dataset, a.rate)
+        if prev is not None and key != prev:
+            out.append("")
+        prev = key
+        out.append(fmt(row))
+    return "\n".join(out)
+
+
+def format_markdown_table(agg: Sequence[Group]) -> str:
+    multi = len({a.rate for a in agg}) > 1
+    head = "| scenario | dataset | " + ("rate Hz | " if multi else "") + "estimator | n | mean ° | median ° | max ° |"
+    sep = "|---|---|" + ("---:|" if multi else "") + "---|---:|---:|---:|---:|"
+    out = [head, sep]
+    for a in agg:
+        rate = f"{rate_label(a.rate)} | " if multi else ""
+        stats = f"{a.n} | {a.mean:.2f} | {a.median:.2f} | {a.max:.2f}"
+        out.append(f"| {a.scenario} | {a.dataset} | {rate}{a.estimator} | {stats} |")
+    return "\n".join(out)
+
+
+# ---------------------------------------------------------------------------------------------------
+# one run
+# ---------------------------------------------------------------------------------------------------
+@dataclass
+class Report:
+    """One ``riann-bag-eval`` run: what was asked, what came out."""
+
+    command: str
+    sources: list[str]
+    settings: EvalSettings
+    results: list[SequenceResult]
+    elapsed_s: float = 0.0
+    jobs: int = 1
+    tuning: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def rows(self) -> list[ResultRow]:
+        return [row for r in self.results if not r.error for row in r.rows]
+
+    @property
+    def failures(self) -> list[dict[str, str]]:
+        return [{"source": r.source, "error": r.error} for r in self.results if r.error]
+
+    @property
+    def summary(self) -> list[Group]:
+        return aggregate(self.rows)
+
+    def settings_dict(self) -> dict[str, Any]:
+        s = self.settings
+        return {
+            "command": self.command,
+            "inputs": self.sources,
+            "estimators": [e.to_dict() for e in s.estimators],
+            "scenarios": s.scenarios,
+            "seed": s.seed,
+            "rates": s.rates,
+            "jobs": self.jobs,
+            "bias_std_dps": BIAS_STD_DPS,
+            "scenario_definition": {k: v for k, v in DEFINITIONS.items() if k in s.scenarios},
+            "metric": METRIC,
+        }
+
+    def payload(self) -> dict[str, Any]:
+        """The content of results.json."""
+        return {
+            "settings": self.settings_dict(),
+            "versions": versions(),
+            "elapsed_s": self.elapsed_s,
+            "summary": [g.to_dict() for g in self.summary],
+            "sequences": [
+                {"source": r.source, "name": r.name, "dataset": r.dataset, "seconds": r.seconds,
+                 "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios}
+                for r in self.results
+                if not r.error
+            ],
+            "results": [row.to_dict() for row in self.rows],
+            "tuning": self.tuning,
+            "failures": self.failures,
+        }
+
+
+# ---------------------------------------------------------------------------------------------------
+# files
+# ---------------------------------------------------------------------------------------------------
+def write_csv(path: Path, rows: Sequence[ResultRow]) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(CSV_FIELDS), extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6f}" if isinstance(v, float) else v) for k, v in r.to_dict().items()})
+
+
+def versions() -> dict[str, Any]:
+    """Package, model and runtime versions for results.json."""
+    out: dict[str, Any] = {"python": platform.python_version(), "platform": platform.platform()}
+    from importlib import metadata
+
+    for dist in ("riann_ros", "riann", "onnxruntime", "numpy", "scipy", "vqf"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = None
+    if out["riann_ros"] is None:
+        from riann_ros import __version__
+
+        out["riann_ros"] = __version__
+    try:
+        import hashlib
+
+        from riann_ros.estimators.riann import default_model_path
+
+        p = default_model_path()
+        out["riann_model"] = {"path": str(p), "sha256": hashlib.sha256(p.read_bytes()).hexdigest()}
+    except Exception as exc:
+        out["riann_model"] = {"error": str(exc)}
+    return out
+
+
+def _clean(obj: Any) -> Any:
+    """JSON-safe: NaN/inf → None, numpy scalars → Python."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def write_json(path: Path, payload: dict[str, Any]) -> None:
+    with open(path, "w") as f:
+        json.dump(_clean(payload), f, indent=1)
+        f.write("\n")
+
+
+def _per_sequence(rows: Sequence[ResultRow]) -> list[str]:
+    lines: list[str] = []
+    ests = list(dict.fromkeys(r.estimator for r in rows))
+    rmse = {(r.sequence, r.scenario, r.estimator, r.rate): r.rmse_deg for r in rows}
+    for scn in scenario_order(r.scenario for r in rows):
+        for rate in sorted({r.rate for r in rows if r.scenario == scn}, key=rate_order):
+            unit = "" if rate == NATIVE else " Hz"
+            lines += [f"### {scn}, {rate_label(rate)}{unit}", "", "| sequence | " + " | ".join(ests) + " |",
+                      "|---|" + "---:|" * len(ests)]
+            for seq in dict.fromkeys(r.sequence for r in rows if r.scenario == scn):
+                cells = [rmse.get((seq, scn, e, rate)) for e in ests]
+                lines.append(f"| {seq} | " + " | ".join("–" if v is None else f"{v:.2f}" for v in cells) + " |")
+            lines.append("")
+    return lines
+
+
+def markdown(report: Report, plots: Sequence[Path]) -> str:
+    """The content of report.md."""
+    s = report.settings
+    rates = ", ".join("native" if r is None else f"{r:g} Hz" for r in s.rates)
+    lines = ["# riann-bag-eval report", "", f"Command: `{report.command}`", "",
+             f"Scenarios: {', '.join(s.scenarios)}; seed {s.seed}; rates: {rates}.",
+             "Metric: RMSE of the inclination error e_α (heading ignored, paper eq. 3) over the scored samples "
+             "with a reference; table values summarise the per-sequence RMSEs."]
+    citations = sorted({r.citation for r in report.results if r.citation and not r.error})
+    if citations:
+        lines += ["", "Data: " + "; ".join(citations)]
+    lines += ["", "## Summary", "", format_markdown_table(report.summary), ""]
+    if report.tuning:
+        lines += ["## Tuning (grid search on these sequences)", ""]
+        for t in report.tuning:
+            b = t["best"]
+            lines.append(
+                f"- {t['estimator']} ({t['scenario']}): best {b['label']} — mean {b['mean']:.2f}°, max {b['max']:.2f}°"
+            )
+        lines.append("")
+    lines += ["## Per sequence", "", *_per_sequence(report.rows)]
+    if report.failures:
+        lines += ["## Failed inputs", ""] + [f"- {f['error']}" for f in report.failures] + [""]
+    if plots:
+        lines += ["## Plots", ""] + [f"![{p.stem}]({p.name})" for p in plots if p.suffix == ".png"] + [""]
+    return "\n".join(lines)
+
+
+def write_results(out: Path, report: Report, plots: bool = True) -> list[Path]:
+    """results.csv, results.json, report.md and (``plots``) the figures in ``out``; returns the plot files.
+
+    If anything stops it half-way (Ctrl-C included), the files of this call are removed again."""
+    from riann_ros.evaluation import plots as pl
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = [out / f for f in RESULT_FILES] + [out / f"{s}.{e}" for s in PLOT_STEMS for e in ("png", "svg")]
+    try:
+        rows = report.rows
+        write_csv(out / "results.csv", rows)
+        write_json(out / "results.json", report.payload())
+        figures: list[Path] = []
+        if plots and rows:
+            figures += pl.plot_boxes(rows, out)
+            series = next((r.series for r in report.results if r.series), None)
+            if series:
+                figures += pl.plot_error_over_time(series, out)
+            figures += pl.plot_rmse_vs_rate(rows, out)
+        (out / "report.md").write_text(markdown(report, figures))
+        return figures
+    except BaseException:
+        for f in written:
+            f.unlink(missing_ok=True)
+        raise

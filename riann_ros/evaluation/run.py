@@ -1,0 +1,386 @@
+"""The one evaluation pipeline (ROS-free): source → scenario → estimators → scores.
+
+For each input and rate, a :class:`~riann_ros.evaluation.sources.Source` yields chunks (a bag chunk by
+chunk; a BROAD file or a resampled recording as one chunk); after a first pass
+(:func:`~riann_ros.evaluation.sources.summarise`) each chunk goes through every scenario's
+:class:`~riann_ros.evaluation.scenarios.ScenarioPlan`, into a runner, and the runner's estimates into
+one :class:`~riann_ros.evaluation.scoring.Accumulator` per scenario × estimator. A whole recording is
+the one-chunk case of the same code, so streamed and whole evaluations cannot disagree.
+
+The runner is where the estimates come from:
+
+* :class:`OfflineRunner` (default) runs every estimator in-process through
+  :class:`riann_ros.stream.EstimatorStream` with the sequence's rate as ``nominal_rate``: the very code
+  path of the ROS node, so offline scores are node scores. Its runs can be fed alternately, so one pass
+  over a bag serves all scenarios.
+* :class:`riann_ros.nodes.live.LiveRunner` replays the sequences over DDS to the estimator nodes; one
+  replay at a time (a pass per scenario).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from riann_ros.estimators.base import AttitudeEstimator
+from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.scenarios import SCENARIOS, ScenarioPlan
+from riann_ros.evaluation.scoring import Accumulator, error_deg
+from riann_ros.evaluation.sources import BROAD_SUFFIXES, STREAM_CHUNK, Source, open_source, read_whole, summarise
+from riann_ros.evaluation.specs import EstimatorSpec
+from riann_ros.recording import Recording
+from riann_ros.stream import EstimatorStream, GateConfig
+
+NATIVE = "native"  # rate key of rows at the recording's own rate
+SERIES_POINTS = 6000  # points per curve kept for the error-over-time plot
+
+
+@dataclass
+class EvalSettings:
+    estimators: list[EstimatorSpec]
+    scenarios: list[str] = field(default_factory=lambda: list(SCENARIOS))
+    seed: int = 0
+    rates: list[float | None] = field(default_factory=lambda: [None])  # None = the recording's own rate
+    with_heading: bool = False
+    series_for: str | None = None  # sequence name whose error-over-time series is kept ("*" = first)
+    series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
+    keep_estimates: bool = False  # return the estimates of the first scenario (for --write-estimates)
+    chunk: int = STREAM_CHUNK  # samples per bag chunk
+
+
+@dataclass
+class RunStats:
+    """What a runner reports about one estimator's run besides its estimates."""
+
+    seconds: float = 0.0  # wall time in the estimator (offline) or of the replay (live)
+    cpu_seconds: float = float("nan")
+    rejected: dict[str, int] = field(default_factory=dict)  # input-gate rejections per reason
+    resets: dict[str, int] = field(default_factory=dict)  # estimator restarts per cause
+    live: dict[str, int] | None = None  # live replays: published, received, lost, unexpected
+
+
+@dataclass
+class ResultRow:
+    """One estimator on one sequence in one scenario at one rate."""
+
+    sequence: str
+    dataset: str
+    source: str
+    scenario: str
+    rate: str | float  # NATIVE or the resampled rate (Hz)
+    rate_hz: float
+    resampled: bool
+    estimator: str  # label
+    estimator_name: str
+    mode: str
+    n_samples: int
+    n_scored: int
+    n_unestimated: int
+    rmse_deg: float
+    max_err_deg: float
+    heading_rmse_deg: float | None = None
+    total_rmse_deg: float | None = None
+    stats: RunStats = field(default_factory=RunStats)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The flat row of results.csv / results.json."""
+        d: dict[str, Any] = {
+            k: getattr(self, k)
+            for k in ("sequence", "dataset", "source", "scenario", "rate", "rate_hz", "resampled", "estimator",
+                      "estimator_name", "mode")
+        }
+        d["seconds"] = self.stats.seconds
+        d.update(n_samples=self.n_samples, n_scored=self.n_scored, n_unestimated=self.n_unestimated,
+                 rmse_deg=self.rmse_deg, max_err_deg=self.max_err_deg)
+        if self.heading_rmse_deg is not None:
+            d.update(heading_rmse_deg=self.heading_rmse_deg, total_rmse_deg=self.total_rmse_deg)
+        d.update({f"rejected_{k}": v for k, v in self.stats.rejected.items()})
+        d.update({f"reset_{k}": v for k, v in self.stats.resets.items()})
+        d.update(self.stats.live or {})
+        d["cpu_seconds"] = self.stats.cpu_seconds
+        return d
+
+
+@dataclass
+class SequenceResult:
+    source: str
+    name: str = ""
+    dataset: str = ""
+    error: str | None = None
+    rows: list[ResultRow] = field(default_factory=list)
+    scenarios: dict[str, Any] = field(default_factory=dict)  # scenario → ScenarioInfo dict
+    series: dict[str, Any] | None = None
+    estimates: dict[str, Any] | None = None  # first scenario: {"scenario", "stamps", "quats": {label: (N, 4)}}
+    seconds: float = 0.0
+    cpu_seconds: float = 0.0  # reading + scenarios + runs + scoring, in the worker
+    citation: str = ""
+
+
+# ---------------------------------------------------------------------------------------------------
+# runners
+# ---------------------------------------------------------------------------------------------------
+class Run(Protocol):
+    """One scenario sequence through a set of estimators, fed chunk by chunk."""
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        """The estimates (N, 4) of each estimator for this piece (NaN rows: no estimate)."""
+        ...
+
+    def finish(self) -> list[RunStats]: ...
+
+
+class Runner(Protocol):
+    mode: str
+    interleaved: bool  # whether several runs may be fed alternately (one pass serves all scenarios)
+
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run: ...
+
+
+_ESTIMATORS: dict[tuple[EstimatorSpec, int], AttitudeEstimator] = {}  # reused across sequences in a worker
+
+
+class _OfflineRun:
+    def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> None:
+        self.streams = []
+        for spec in specs:
+            est = _ESTIMATORS.get((spec, slot))
+            if est is None:
+                est = _ESTIMATORS[(spec, slot)] = spec.create()
+            est.reset()
+            self.streams.append(EstimatorStream(est, gate))
+        self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        out = []
+        for stream, stats in zip(self.streams, self.stats, strict=True):
+            t, cpu = time.perf_counter(), time.process_time()
+            q, _accepted = stream.process_batch(rec.stamps_ns, rec.acc, rec.gyr)
+            stats.seconds += time.perf_counter() - t
+            stats.cpu_seconds += time.process_time() - cpu
+            out.append(q)
+        return out
+
+    def finish(self) -> list[RunStats]:
+        for stream, stats in zip(self.streams, self.stats, strict=True):
+            stats.rejected = {k: int(v) for k, v in stream.gate.rejected.items()}
+            stats.resets = {k: int(v) for k, v in stream.gate.resets.items()}
+        return self.stats
+
+
+class OfflineRunner:
+    """Every estimator in-process through the node's :class:`EstimatorStream`."""
+
+    mode = "offline"
+    interleaved = True
+
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
+        return _OfflineRun(specs, gate, slot)
+
+
+# ---------------------------------------------------------------------------------------------------
+# the pipeline
+# ---------------------------------------------------------------------------------------------------
+class _ScenarioRun:
+    """One scenario of one sequence at one rate: the plan, its runner run, one accumulator per estimator."""
+
+    def __init__(self, plan: ScenarioPlan, slot: int, settings: EvalSettings, series: bool, estimates: bool) -> None:
+        self.plan = plan
+        self.slot = slot
+        self.specs = settings.estimators
+        self.acc = [Accumulator(settings.with_heading) for _ in self.specs]
+        self.run: Run | None = None
+        self.step = settings.series_step if settings.series_step > 0 else -(-plan.length // SERIES_POINTS)
+        self.series = series
+        self.curves: list[list[NDArray[np.float32]]] = [[] for _ in self.specs]
+        self.t: list[NDArray[np.float32]] = []
+        self.scored: list[NDArray[np.bool_]] = []
+        self.estimates: list[tuple[NDArray[np.int64], list[NDArray[np.float64]]]] | None = [] if estimates else None
+
+    def begin(self, runner: Runner) -> None:
+        self.run = runner.start(self.specs, self.plan.gate, self.slot)
+
+    def feed(self, chunk: Recording, offset: int) -> None:
+        piece = self.plan.apply(chunk, offset)
+        if piece is None or self.run is None:
+            return
+        rec = piece.rec
+        qs = self.run.feed(rec)
+        for acc, q in zip(self.acc, qs, strict=True):
+            acc.add(rec.quat_ref, rec.score_mask, q)
+        if self.series and rec.quat_ref is not None:
+            pick = slice((-piece.local) % self.step, None, self.step)
+            for curve, q in zip(self.curves, qs, strict=True):
+                curve.append(error_deg(rec.quat_ref[pick], q[pick]).astype(np.float32))
+            self.t.append(((rec.stamps_ns[pick] - self.plan.first_stamp) * 1e-9).astype(np.float32))
+            self.scored.append(rec.score_mask[pick])
+        if self.estimates is not None:
+            self.estimates.append((piece.stamps, qs))
+
+    def rows(self, res: SequenceResult, rate: float | None, rate_hz: float, mode: str) -> list[ResultRow]:
+        stats = self.run.finish() if self.run is not None else [RunStats() for _ in self.specs]
+        rows = []
+        for spec, acc, st in zip(self.specs, self.acc, stats, strict=True):
+            s = acc.result()
+            rows.append(
+                ResultRow(
+                    sequence=res.name,
+                    dataset=res.dataset,
+                    source=res.source,
+                    scenario=self.plan.scenario,
+                    rate=NATIVE if rate is None else float(rate),
+                    rate_hz=rate_hz,
+                    resampled=rate is not None,
+                    estimator=spec.label,
+                    estimator_name=spec.name,
+                    mode=mode,
+                    n_samples=s.n_samples,
+                    n_scored=s.n_scored,
+                    n_unestimated=s.n_unestimated,
+                    rmse_deg=s.rmse_deg,
+                    max_err_deg=s.max_err_deg,
+                    heading_rmse_deg=s.heading_rmse_deg,
+                    total_rmse_deg=s.total_rmse_deg,
+                    stats=st,
+                )
+            )
+        return rows
+
+    def keep_series(self, res: SequenceResult) -> None:
+        if res.series is None:
+            res.series = {"sequence": res.name, "curves": {}}
+        scn = self.plan.scenario
+        res.series["curves"][scn] = {
+            spec.label: np.concatenate(c) if c else np.zeros(0, np.float32)
+            for spec, c in zip(self.specs, self.curves, strict=True)
+        }
+        res.series.setdefault("t", {})[scn] = np.concatenate(self.t) if self.t else np.zeros(0, np.float32)
+        res.series.setdefault("scored", {})[scn] = np.concatenate(self.scored) if self.scored else np.zeros(0, bool)
+
+    def keep_estimates(self, res: SequenceResult) -> None:
+        parts = self.estimates or []
+        stamps = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
+        quats = {
+            spec.label: np.concatenate([p[1][j] for p in parts]) if parts else np.zeros((0, 4))
+            for j, spec in enumerate(self.specs)
+        }
+        res.estimates = {"scenario": self.plan.scenario, "stamps": stamps, "quats": quats}
+
+
+def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runner: Runner,
+                   res: SequenceResult) -> None:
+    summary = summarise(src)
+    if not res.name:
+        res.name, res.dataset, res.citation = summary.name, summary.dataset, summary.citation
+    native = rate is None
+    want_series = native and settings.series_for is not None and settings.series_for in ("*", res.name)
+    runs = [
+        _ScenarioRun(ScenarioPlan(scn, summary, settings.seed), slot, settings, want_series,
+                     native and settings.keep_estimates and slot == 0)
+        for slot, scn in enumerate(settings.scenarios)
+    ]
+    for run in runs:
+        res.scenarios.setdefault(run.plan.scenario, run.plan.info.to_dict())
+    for group in [runs] if runner.interleaved else [[r] for r in runs]:
+        for run in group:
+            run.begin(runner)
+        offset = 0
+        for chunk in src.chunks():
+            for run in group:
+                run.feed(chunk, offset)
+            offset += len(chunk)
+        rate_hz = round(summary.rate_all, 3)
+        for run in group:
+            res.rows.extend(run.rows(res, rate, rate_hz, runner.mode))
+            if want_series:
+                run.keep_series(res)
+            if run.estimates is not None:
+                run.keep_estimates(res)
+
+
+def evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runner: Runner | None = None,
+                    recording: Recording | None = None) -> SequenceResult:
+    """Every rate × scenario × estimator on one input; any problem ends up in ``result.error`` naming it.
+
+    ``source`` is a bag (``.mcap``, ``.db3``, a bag directory) or a BROAD trial file. Bags at their own
+    rate are read chunk by chunk; BROAD files, and inputs that are also resampled (``settings.rates``),
+    are read whole once. ``recording``: the input already in memory (``source`` then only names it).
+    """
+    t0, c0 = time.perf_counter(), time.process_time()
+    res = SequenceResult(source=str(source))
+    runner = runner or OfflineRunner()
+    try:
+        base = recording
+        whole = Path(source).suffix.lower() in BROAD_SUFFIXES or any(r is not None for r in settings.rates)
+        if base is None and whole:
+            base = read_whole(source)
+        for rate in settings.rates:
+            src = open_source(source, rate, base, settings.chunk)
+            _evaluate_rate(src, rate, settings, runner, res)
+    except EvalError as exc:
+        res = SequenceResult(source=str(source), error=str(exc))
+    except Exception as exc:  # an estimator crash must not take the other inputs down
+        res = SequenceResult(source=str(source), error=f"{source}: {type(exc).__name__}: {exc}")
+    res.seconds = time.perf_counter() - t0
+    res.cpu_seconds = time.process_time() - c0
+    return res
+
+
+def _init_worker() -> None:
+    import signal
+
+    # Ctrl-C reaches the whole process group: the parent handles it and stops the workers
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # one core per worker: ONNX Runtime and BLAS would otherwise fight over the cores
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = "1"
+
+
+Progress = Callable[[int, int, SequenceResult], None]
+
+
+def evaluate_sources(sources: Sequence[str], settings: EvalSettings, jobs: int = 1,
+                     progress: Progress | None = None, runner: Runner | None = None) -> list[SequenceResult]:
+    """Evaluate inputs, in ``jobs`` worker processes when > 1 (offline only); results in input order."""
+    results: list[SequenceResult | None] = [None] * len(sources)
+    if jobs <= 1 or len(sources) <= 1 or (runner is not None and not runner.interleaved):
+        for i, src in enumerate(sources):
+            results[i] = r = evaluate_source(src, settings, runner)
+            if progress:
+                progress(i + 1, len(sources), r)
+        return [r for r in results if r is not None]
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    ctx = mp.get_context("spawn" if os.name == "nt" else "forkserver")
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker)
+    done = 0
+    try:
+        futures = {pool.submit(evaluate_source, src, settings): i for i, src in enumerate(sources)}
+        for fut in as_completed(futures):
+            i = futures[fut]
+            try:
+                results[i] = fut.result()
+            except Exception as exc:  # a worker died
+                results[i] = SequenceResult(source=str(sources[i]), error=f"{sources[i]}: worker failed: {exc}")
+            done += 1
+            if progress:
+                progress(done, len(sources), results[i])  # type: ignore[arg-type]
+    except BaseException:
+        # Ctrl-C (or any error here): stop the workers now instead of waiting for their sequences
+        procs = list(getattr(pool, "_processes", {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        for p in procs:
+            p.join(5)
+        raise
+    pool.shutdown(wait=True)
+    return [r for r in results if r is not None]

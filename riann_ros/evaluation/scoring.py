@@ -1,0 +1,97 @@
+"""Scoring, the paper's way (eq. 3), accumulated chunk by chunk (ROS-free).
+
+Per sample e_α = 2·arccos(√(w² + z²)) of q_err = q_ref ⊗ q_est⁻¹ (heading ignored); per sequence the
+RMSE over the scored samples: score mask ∩ reference present ∩ estimate present (samples the input gate
+rejected have no estimate and are counted as ``n_unestimated``). Heading and total-angle RMSEs are
+optional extra columns. :class:`Accumulator` keeps running sums, so a bag of any length is scored in
+bounded memory; :func:`score` is the one-chunk case.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from riann_ros import quaternion as quat
+from riann_ros.evaluation.errors import EvalError
+from riann_ros.recording import Recording
+
+
+@dataclass
+class Score:
+    """The scores of one estimator on one sequence."""
+
+    n_samples: int
+    n_scored: int
+    n_unestimated: int
+    rmse_deg: float
+    max_err_deg: float
+    heading_rmse_deg: float | None = None
+    total_rmse_deg: float | None = None
+
+
+class Accumulator:
+    """Running sums for the RMSE over the chunks of one scenario × estimator run."""
+
+    def __init__(self, with_heading: bool = False) -> None:
+        self.with_heading = with_heading
+        self.n = self.n_scored = self.n_unest = self.n_base = 0
+        self.sq = self.sq_heading = self.sq_total = 0.0
+        self.max_e = -math.inf
+
+    def add(self, quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_], q: NDArray[np.float64]) -> None:
+        """One chunk: reference (N, 4) with NaN rows (None: no reference), score mask, estimates (N, 4)."""
+        self.n += len(q)
+        if quat_ref is None:
+            return
+        ref_ok = np.isfinite(quat_ref).all(axis=1)
+        est_ok = np.isfinite(q).all(axis=1)
+        base = mask & ref_ok
+        valid = base & est_ok
+        self.n_base += int(base.sum())
+        self.n_scored += int(valid.sum())
+        self.n_unest += int((base & ~est_ok).sum())
+        if valid.any():
+            qt, qe = quat_ref[valid], q[valid]
+            e = quat.inclination_error(qt, qe)
+            self.sq += float(np.sum(e**2))
+            self.max_e = max(self.max_e, float(e.max()))
+            if self.with_heading:
+                self.sq_heading += float(np.sum(quat.heading_error(qt, qe) ** 2))
+                self.sq_total += float(np.sum(quat.total_error(qt, qe) ** 2))
+
+    def result(self) -> Score:
+        if self.n_base == 0:
+            raise EvalError("no scored samples (score mask ∩ reference present is empty)")
+        if self.n_scored == 0:
+            raise EvalError("the estimator gave no output on any scored sample")
+
+        def rms(sq: float) -> float:
+            return float(np.degrees(np.sqrt(sq / self.n_scored)))
+
+        return Score(
+            n_samples=self.n,
+            n_scored=self.n_scored,
+            n_unestimated=self.n_unest,
+            rmse_deg=rms(self.sq),
+            max_err_deg=float(np.degrees(self.max_e)),
+            heading_rmse_deg=rms(self.sq_heading) if self.with_heading else None,
+            total_rmse_deg=rms(self.sq_total) if self.with_heading else None,
+        )
+
+
+def score(rec: Recording, q_est: NDArray[np.float64], with_heading: bool = False) -> Score:
+    """The scores of estimates ``q_est`` (N, 4) on a whole recording."""
+    if rec.quat_ref is None:
+        raise EvalError("no reference orientation (nothing to score against)")
+    acc = Accumulator(with_heading)
+    acc.add(rec.quat_ref, np.asarray(rec.score_mask, dtype=bool), np.asarray(q_est, dtype=float))
+    return acc.result()
+
+
+def error_deg(quat_ref: NDArray[np.float64], q_est: NDArray[np.float64]) -> NDArray[np.float64]:
+    """e_α in degrees per sample (NaN where the reference or the estimate is missing)."""
+    return np.degrees(quat.inclination_error(quat_ref, q_est))

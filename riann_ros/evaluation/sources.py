@@ -1,0 +1,226 @@
+"""Where recordings come from: sources that yield :class:`Recording` chunks, and their first pass (ROS-free).
+
+A bag at its native rate is read chunk by chunk (memory bounded by the chunk size, not the bag length);
+a BROAD trial file, or any recording resampled to another rate (the FFT needs the whole sequence), is
+one whole chunk. Everything after the source — scenario, estimators, scoring — is the same code for
+both: scoring a whole recording is the one-chunk case.
+
+:func:`summarise` is the first pass over a source: the input checks (samples, reference, scored
+samples), the motion onset (first scored sample), the mean gyro over the initial rest, and the rates
+(1 / median stamp step) of the whole sequence and of the sequence from the motion onset.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from riann_ros.evaluation.errors import EvalError
+from riann_ros.recording import Recording
+
+BAG_SUFFIXES = (".mcap", ".db3")
+BROAD_SUFFIXES = (".hdf5", ".h5", ".mat")
+STREAM_CHUNK = 100_000  # samples per chunk when a bag is read chunk by chunk
+
+
+class Source:
+    """A recording as a re-iterable sequence of chunks (each iteration reads it again)."""
+
+    def __init__(self, path: str | os.PathLike[str], rec: Recording | None = None, chunk: int = STREAM_CHUNK) -> None:
+        self.path = Path(path)
+        self.rec = rec  # the whole recording, or None: read the bag chunk by chunk
+        self.chunk = chunk
+
+    @property
+    def resampled(self) -> bool:
+        return self.rec is not None and "resampled_from_hz" in self.rec.meta
+
+    def chunks(self) -> Iterator[Recording]:
+        if self.rec is not None:
+            yield self.rec
+            return
+        from riann_ros import bagio
+
+        it = bagio.iter_imu_chunks(self.path, chunk=self.chunk)
+        while True:
+            try:
+                c = next(it)
+            except StopIteration:
+                return
+            except Exception as exc:  # reading only: an estimator crash is reported as such elsewhere
+                raise read_error(self.path, exc) from exc
+            yield c
+
+
+def read_error(path: Path, exc: Exception) -> EvalError:
+    return exc if isinstance(exc, EvalError) else EvalError(f"{path}: cannot read: {exc}")
+
+
+def read_whole(path: str | os.PathLike[str]) -> Recording:
+    """A bag (``.mcap``, ``.db3`` or a bag directory) or a BROAD trial file (``.hdf5`` / ``.mat``), whole."""
+    p = Path(path)
+    if not p.exists():
+        raise EvalError(f"{p}: no such file or directory")
+    try:
+        if p.suffix.lower() in BROAD_SUFFIXES:
+            from riann_ros.datasets.broad import read_broad
+
+            return read_broad(p)
+        from riann_ros import bagio
+
+        return bagio.read_recording(p)
+    except Exception as exc:  # bagio.BagError, OSError, ValueError, …
+        raise read_error(p, exc) from exc
+
+
+def open_source(path: str | os.PathLike[str], rate: float | None = None, base: Recording | None = None,
+                chunk: int = STREAM_CHUNK) -> Source:
+    """The source of ``path`` at ``rate`` Hz (None: its own rate). Bags at their own rate stream chunk by
+    chunk; BROAD files and resampled recordings are whole (``base``: the whole recording, if already read)."""
+    p = Path(path)
+    if rate is None and base is None and p.suffix.lower() not in BROAD_SUFFIXES:
+        if not p.exists():
+            raise EvalError(f"{p}: no such file or directory")
+        return Source(p, chunk=chunk)
+    rec = base if base is not None else read_whole(p)
+    if rate is not None:
+        from riann_ros.resample import resample_recording
+
+        if not (rate > 0 and math.isfinite(rate)):
+            raise ValueError(f"rate must be positive, got {rate}")
+        rec = resample_recording(rec, rate)
+    return Source(p, rec)
+
+
+def median_rate(hist: dict[int, int]) -> float:
+    """``Recording.rate_hz`` (1 / median step) from a histogram of the stamp steps (ns → count)."""
+    n = sum(hist.values())
+    if n == 0:
+        return float("nan")
+    keys = sorted(hist)
+    cum = np.cumsum([hist[k] for k in keys])
+
+    def kth(k: int) -> int:  # the k-th smallest step (0-based)
+        return keys[int(np.searchsorted(cum, k, side="right"))]
+
+    if n % 2:
+        med = float(np.int64(kth(n // 2)) * 1e-9)
+    else:
+        med = float(np.median(np.array([kth(n // 2 - 1), kth(n // 2)], dtype=np.int64) * 1e-9))
+    return 1.0 / med
+
+
+def _add_steps(hist: dict[int, int], steps: NDArray[np.int64]) -> None:
+    if len(steps):
+        vals, counts = np.unique(steps, return_counts=True)
+        for v, c in zip(vals.tolist(), counts.tolist(), strict=True):
+            hist[v] = hist.get(v, 0) + c
+
+
+@dataclass
+class Summary:
+    """What the first pass over a source gives before the estimators run (all of bounded size)."""
+
+    name: str
+    dataset: str
+    citation: str
+    frame_id: str
+    n: int
+    first_stamp: int
+    i0: int  # first scored sample (the motion onset); the initial rest is [0, i0)
+    stamp_i0: int
+    rest_gyr_mean: NDArray[np.float64]  # mean gyro over [0, i0) (zeros when i0 == 0)
+    rate_all: float  # 1 / median stamp step of the whole sequence
+    rate_from_i0: float  # … of the sequence from i0 on
+
+
+class _Pass:
+    """Running state of :func:`summarise`."""
+
+    def __init__(self) -> None:
+        self.n = self.first_stamp = self.stamp_i0 = 0
+        self.last: int | None = None
+        self.i0 = -1
+        self.has_ref = self.ref_any = self.scored_any = self.scored_ref = False
+        self.rest: list[NDArray[np.float64]] = []
+        self.hist_all: dict[int, int] = {}
+        self.hist_i0: dict[int, int] = {}
+        self.meta: tuple[str, str, str, str] = ("", "", "", "")
+
+    def add(self, c: Recording) -> None:
+        m = len(c)
+        if self.n == 0:
+            self.first_stamp = int(c.stamps_ns[0])
+            self.meta = (c.name, c.dataset, c.source, c.frame_id)
+            self.has_ref = c.quat_ref is not None
+        idx = np.arange(self.n, self.n + m)  # global index of each sample
+        if self.last is not None:
+            steps, later = np.diff(c.stamps_ns, prepend=np.int64(self.last)), idx
+        else:
+            steps, later = np.diff(c.stamps_ns), idx[1:]  # later: global index of each step's later sample
+        _add_steps(self.hist_all, steps)
+        if self.i0 < 0 and c.score_mask.any():
+            k = int(np.argmax(c.score_mask))
+            self.i0, self.stamp_i0 = self.n + k, int(c.stamps_ns[k])
+            self.rest.append(c.gyr[:k].copy())
+        elif self.i0 < 0:
+            self.rest.append(c.gyr.copy())
+        if self.i0 >= 0:
+            _add_steps(self.hist_i0, steps[later > self.i0])
+        self.scored_any |= bool(c.score_mask.any())
+        if self.has_ref and c.quat_ref is not None:
+            ok = np.isfinite(c.quat_ref).all(axis=1)
+            self.ref_any |= bool(ok.any())
+            self.scored_ref |= bool((ok & c.score_mask).any())
+        self.last = int(c.stamps_ns[-1])
+        self.n += m
+
+    def summary(self, p: Path) -> Summary:
+        if self.n < 2:
+            raise EvalError(f"{p}: fewer than 2 IMU samples")
+        if not self.has_ref or not self.ref_any:
+            raise EvalError(f"{p}: no reference orientation (nothing to score against)")
+        if not self.scored_any:
+            raise EvalError(f"{p}: no scored samples (score mask is empty)")
+        if not self.scored_ref:
+            raise EvalError(f"{p}: no scored samples with a reference")
+        name, dataset, citation, frame_id = self.meta
+        if not name or name == "sequence":
+            name = p.stem if p.is_file() else p.name
+        rest = np.concatenate(self.rest) if self.rest else np.zeros((0, 3))
+        return Summary(
+            name=name,
+            dataset=dataset or "unknown",
+            citation=citation,
+            frame_id=frame_id,
+            n=self.n,
+            first_stamp=self.first_stamp,
+            i0=self.i0,
+            stamp_i0=self.stamp_i0,
+            rest_gyr_mean=np.mean(rest, axis=0) if self.i0 > 0 else np.zeros(3),
+            rate_all=median_rate(self.hist_all),
+            rate_from_i0=median_rate(self.hist_i0),
+        )
+
+
+def summarise(src: Source) -> Summary:
+    """The first pass over ``src``: checks (raising :class:`EvalError` naming the input), motion onset,
+    initial-rest gyro mean and rates."""
+    state = _Pass()
+    for c in src.chunks():
+        state.add(c)
+    return state.summary(src.path)
+
+
+def load_recording(path: str | os.PathLike[str]) -> Recording:
+    """The whole recording of ``path`` after the evaluator's input checks (:func:`summarise`)."""
+    rec = read_whole(path)
+    s = summarise(Source(path, rec))
+    rec.name = s.name
+    return rec

@@ -1,0 +1,82 @@
+"""Parameter descriptions shared by the estimators, the input gate, the ROS nodes and the CLI (ROS-free).
+
+A :class:`ParamSpec` holds a parameter's default, description, range and whether it may change at run
+time. Every default and range is written once, in the module that owns the parameter (the estimators'
+``PARAMS``, :data:`riann_ros.stream.GATE_PARAMS`, the node base's own): the ROS node declares them from
+the specs, the evaluator parses and tunes them through the specs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: what the node declares, the CLI parses and the evaluator can tune."""
+
+    name: str
+    default: float | int | bool | str
+    description: str
+    min: float | None = None
+    max: float | None = None
+    runtime: bool = False  # may change while running (validated), without a reset
+    choices: tuple[str, ...] = ()  # allowed values of a string parameter (empty: any string)
+
+    def validate(self, value: Any) -> Any:
+        """Return ``value`` converted to the parameter's type, or raise ``ValueError``.
+
+        Integers are accepted for float parameters (``nominal_rate:=200``) and converted.
+        """
+        if isinstance(self.default, bool):
+            if not isinstance(value, bool):
+                raise ValueError(f"{self.name} must be a bool, got {value!r}")
+            return value
+        if isinstance(self.default, str):
+            if not isinstance(value, str):
+                raise ValueError(f"{self.name} must be a string, got {value!r}")
+            if self.choices and value not in self.choices:
+                raise ValueError(f"{self.name} must be one of {', '.join(self.choices)}, got {value!r}")
+            return value
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"{self.name} must be a number, got {value!r}")
+        if isinstance(self.default, int) and not float(value).is_integer():
+            raise ValueError(f"{self.name} must be an integer, got {value!r}")
+        v = float(value)
+        if not math.isfinite(v):
+            raise ValueError(f"{self.name} must be finite, got {value!r}")
+        if self.min is not None and v < self.min:
+            raise ValueError(f"{self.name}={v:g} is below its minimum {self.min:g}")
+        if self.max is not None and v > self.max:
+            raise ValueError(f"{self.name}={v:g} is above its maximum {self.max:g}")
+        return int(v) if isinstance(self.default, int) else v
+
+    def parse(self, text: str) -> Any:
+        """The value of a command-line string (``"0.1"``, ``"true"``, ``"sensor_data"``), validated."""
+        if isinstance(self.default, str):
+            return self.validate(text)
+        low = text.strip().lower()
+        if isinstance(self.default, bool):
+            if low not in ("true", "false"):
+                raise ValueError(f"{self.name} must be true or false, got {text!r}")
+            return low == "true"
+        try:
+            number = float(low)
+        except ValueError:
+            raise ValueError(f"{self.name} must be a number, got {text!r}") from None
+        return self.validate(number)
+
+
+def defaults(specs: tuple[ParamSpec, ...]) -> dict[str, Any]:
+    """``{name: default}`` of a tuple of specs."""
+    return {p.name: p.default for p in specs}
+
+
+def find(specs: tuple[ParamSpec, ...], name: str) -> ParamSpec:
+    """The spec called ``name`` (``KeyError`` otherwise)."""
+    for p in specs:
+        if p.name == name:
+            return p
+    raise KeyError(name)
