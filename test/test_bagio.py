@@ -228,15 +228,15 @@ def test_write_estimates(tmp_path: Path) -> None:
     # to sqlite3 directory from an mcap file
     d = bagio.write_estimates(src, tmp_path / "dstdir", est, storage="sqlite3")
     _same(rec, bagio.read_recording(d))
-    assert bagio._bag_compression(d) is None
+    assert bagio.bag_compression(d) is None
     # compression follows the source by default
     zsrc = bagio.write_recording(tmp_path / "zsrc.mcap", rec, compression="zstd")
     zdst = bagio.write_estimates(zsrc, tmp_path / "zdst.mcap", est)
-    assert bagio._bag_compression(zsrc) == bagio._bag_compression(zdst) == "zstd"
-    assert bagio._bag_compression(dst) is None
+    assert bagio.bag_compression(zsrc) == bagio.bag_compression(zdst) == "zstd"
+    assert bagio.bag_compression(dst) is None
     zdir = bagio.write_recording(tmp_path / "zdir", rec, storage="sqlite3", compression="zstd")
     zdir2 = bagio.write_estimates(zdir, tmp_path / "zdir2", est)
-    assert bagio._bag_compression(zdir2) == "zstd"
+    assert bagio.bag_compression(zdir2) == "zstd"
     _same(rec, bagio.read_recording(zdir2))
 
 
