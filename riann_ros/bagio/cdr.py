@@ -13,6 +13,25 @@ import numpy as np
 
 from riann_ros.bagio.layout import BOOL_TYPE, IMU_TYPE, QUAT_TYPE, STRING_TYPE, WORLD_FRAME, typestore
 
+NS_PER_S = 1_000_000_000
+
+# Little-endian CDR of a message that starts with a std_msgs/Header: 4-byte encapsulation header (byte 1
+# is 1 for little endian), stamp.sec (int32) at 4, stamp.nanosec (uint32) at 8, the frame_id length
+# (uint32, counting the terminating NUL) at 12 and the frame_id bytes from 16.
+_SEC, _NSEC, _FRAME_LEN, _FRAME = 4, 8, 12, 16
+
+
+def split_ns(stamps_ns):
+    """``(sec, nanosec)`` of ``builtin_interfaces/Time`` for nanosecond stamps (an int or an int64 array)."""
+    sec = stamps_ns // NS_PER_S
+    return sec, stamps_ns - sec * NS_PER_S
+
+
+def join_ns(sec, nanosec):
+    """Nanoseconds (int64) from ``builtin_interfaces/Time`` ``sec`` and ``nanosec`` (ints or integer arrays)."""
+    return np.asarray(sec, dtype=np.int64) * NS_PER_S + np.asarray(nanosec, dtype=np.int64)
+
+
 # --------------------------------------------------------------------------------------------------
 # Serialising
 # --------------------------------------------------------------------------------------------------
@@ -70,10 +89,9 @@ def _quat_template(frame_id: str) -> tuple[np.ndarray, list[int]]:
 
 
 def _patch_stamps(rows: np.ndarray, stamps_ns: np.ndarray) -> None:
-    sec = stamps_ns // 1_000_000_000
-    nsec = stamps_ns - sec * 1_000_000_000
-    rows[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(-1, 4)
-    rows[:, 8:12] = nsec.astype("<u4").view(np.uint8).reshape(-1, 4)
+    sec, nsec = split_ns(stamps_ns)
+    rows[:, _SEC : _SEC + 4] = sec.astype("<i4").view(np.uint8).reshape(-1, 4)
+    rows[:, _NSEC : _NSEC + 4] = nsec.astype("<u4").view(np.uint8).reshape(-1, 4)
 
 
 def _patch_f64(rows: np.ndarray, offsets: list[int], values: np.ndarray) -> None:
@@ -119,11 +137,6 @@ def _string_msg(text: str) -> bytes:
 # --------------------------------------------------------------------------------------------------
 
 
-def _parse_stamp(raw: bytes) -> int:
-    sec, nsec = struct.unpack_from("<iI", raw, 4)
-    return sec * 1_000_000_000 + nsec
-
-
 def _uniform_rows(raws: list[bytes], length: int) -> np.ndarray | None:
     """Stack little-endian CDR messages of equal length and identical frame_id into an (N, L) array."""
     if not raws or any(len(r) != length for r in raws):
@@ -131,16 +144,16 @@ def _uniform_rows(raws: list[bytes], length: int) -> np.ndarray | None:
     rows = np.frombuffer(b"".join(raws), dtype=np.uint8).reshape(len(raws), length)
     if not (rows[:, 1] == 1).all():  # big-endian CDR: use the generic deserialiser
         return None
-    head = rows[0, 12 : 16 + int.from_bytes(rows[0, 12:16].tobytes(), "little")]
-    if not (rows[:, 12 : 12 + len(head)] == head).all():
+    head = rows[0, _FRAME_LEN : _FRAME + int.from_bytes(rows[0, _FRAME_LEN:_FRAME].tobytes(), "little")]
+    if not (rows[:, _FRAME_LEN : _FRAME_LEN + len(head)] == head).all():
         return None
     return rows
 
 
 def _stamps_of(rows: np.ndarray) -> np.ndarray:
-    sec = rows[:, 4:8].copy().view("<i4").reshape(-1).astype(np.int64)
-    nsec = rows[:, 8:12].copy().view("<u4").reshape(-1).astype(np.int64)
-    return sec * 1_000_000_000 + nsec
+    sec = rows[:, _SEC : _SEC + 4].copy().view("<i4").reshape(-1)
+    nsec = rows[:, _NSEC : _NSEC + 4].copy().view("<u4").reshape(-1)
+    return join_ns(sec, nsec)
 
 
 def _f64_cols(rows: np.ndarray, offsets: list[int]) -> np.ndarray:
@@ -151,8 +164,8 @@ def _f64_cols(rows: np.ndarray, offsets: list[int]) -> np.ndarray:
 
 
 def _frame_of(raw: bytes) -> str:
-    (n,) = struct.unpack_from("<I", raw, 12)
-    return raw[16 : 16 + max(n - 1, 0)].decode("utf-8", errors="replace")
+    (n,) = struct.unpack_from("<I", raw, _FRAME_LEN)
+    return raw[_FRAME : _FRAME + max(n - 1, 0)].decode("utf-8", errors="replace")
 
 
 def parse_imu(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
@@ -170,7 +183,7 @@ def parse_imu(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray, st
     gyr = np.empty((len(raws), 3))
     for i, r in enumerate(raws):
         m = ts.deserialize_cdr(r, IMU_TYPE)
-        stamps[i] = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+        stamps[i] = join_ns(m.header.stamp.sec, m.header.stamp.nanosec)
         a, g = m.linear_acceleration, m.angular_velocity
         acc[i] = (a.x, a.y, a.z)
         gyr[i] = (g.x, g.y, g.z)
@@ -194,6 +207,6 @@ def parse_quats(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
     q = np.empty((len(raws), 4))
     for i, r in enumerate(raws):
         m = ts.deserialize_cdr(r, QUAT_TYPE)
-        stamps[i] = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+        stamps[i] = join_ns(m.header.stamp.sec, m.header.stamp.nanosec)
         q[i] = (m.quaternion.w, m.quaternion.x, m.quaternion.y, m.quaternion.z)
     return stamps, q

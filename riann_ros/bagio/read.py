@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Iterator
-from contextlib import suppress
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +45,17 @@ def _open_reader(path: Path):
     except Exception as e:
         raise BagError(path, f"cannot open bag ({type(e).__name__}: {e})") from e
     return reader
+
+
+@contextmanager
+def _opened(path: Path):
+    """``with _opened(path) as reader``: :func:`_open_reader`, closed (errors ignored) on leaving."""
+    reader = _open_reader(path)
+    try:
+        yield reader
+    finally:
+        with suppress(Exception):
+            reader.close()
 
 
 def bag_storage(path: Path) -> str:
@@ -95,12 +106,8 @@ def _topic_connections(path: Path, reader, topic: str, msgtype: str, required: b
 def read_info(path: str | os.PathLike[str]) -> dict:
     """The ``/dataset/info`` JSON of a bag ({} when absent or unparsable)."""
     path = Path(path)
-    reader = _open_reader(path)
-    try:
+    with _opened(path) as reader:
         return _info_from(path, reader)
-    finally:
-        with suppress(Exception):
-            reader.close()
 
 
 def _info_from(path: Path, reader) -> dict:
@@ -128,18 +135,15 @@ def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000) -> Itera
     path = Path(path)
     if chunk < 1:
         raise ValueError("chunk must be >= 1")
-    reader = _open_reader(path)
-    try:
-        yield from _iter_chunks(path, reader, chunk)
-    except BagError:
-        raise
-    except (KeyboardInterrupt, GeneratorExit):
-        raise
-    except Exception as e:
-        raise BagError(path, f"unreadable or truncated bag ({type(e).__name__}: {e})") from e
-    finally:
-        with suppress(Exception):
-            reader.close()
+    with _opened(path) as reader:
+        try:
+            yield from _iter_chunks(path, reader, chunk)
+        except BagError:
+            raise
+        except (KeyboardInterrupt, GeneratorExit):
+            raise
+        except Exception as e:
+            raise BagError(path, f"unreadable or truncated bag ({type(e).__name__}: {e})") from e
 
 
 def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:

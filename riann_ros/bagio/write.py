@@ -6,14 +6,13 @@ import heapq
 import json
 import os
 from collections.abc import Mapping
-from contextlib import suppress
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.bagio.atomic import _AtomicBag
-from riann_ros.bagio.cdr import _bool_msg, _string_msg, imu_messages, quat_messages
+from riann_ros.bagio.cdr import NS_PER_S, _bool_msg, _string_msg, imu_messages, quat_messages
 from riann_ros.bagio.layout import (
     BOOL_TYPE,
     IMU_TOPIC,
@@ -28,7 +27,7 @@ from riann_ros.bagio.layout import (
     dataset_info,
     typestore,
 )
-from riann_ros.bagio.read import _info_from, _open_reader, bag_compression, bag_storage
+from riann_ros.bagio.read import _info_from, _opened, bag_compression, bag_storage
 from riann_ros.recording import Recording
 
 _MSGDEFS: dict[str, tuple[str, str]] = {}
@@ -48,7 +47,7 @@ def _validate(rec: Recording) -> None:
     if n == 0:
         raise ValueError(f"recording {rec.name!r} has no samples")
     st = rec.stamps_ns
-    if st[0] < 0 or st[-1] >= 2**31 * 1_000_000_000:
+    if st[0] < 0 or st[-1] >= 2**31 * NS_PER_S:
         raise ValueError(f"recording {rec.name!r}: stamps outside the ROS time range (0 .. 2^31 s)")
     bad = np.flatnonzero(np.diff(st) <= 0)
     if len(bad):
@@ -147,52 +146,49 @@ def write_estimates(
         q = np.asarray(quats, dtype=np.float64).reshape(len(st), 4)
         ok = np.isfinite(q).all(axis=1)
         prepared.append((topic, st[ok], quat_messages(st[ok], q[ok])))
-    reader = _open_reader(src)
-    try:
-        with _AtomicBag(dst, storage, compression, force) as writer:
-            cmap = {}
-            info = _info_from(src, reader)
-            if info:
-                writer.set_custom_data(INFO_KEY, json.dumps(info, sort_keys=True))
-            for c in reader.connections:
-                key = (c.topic, c.msgtype)
-                if key in cmap.values():
-                    cmap[c.id] = next(v for k, v in cmap.items() if v == key)
-                    continue
-                known = c.msgtype in typestore().types
-                use_store = known and not (c.digest and c.msgdef.data)
-                if not use_store and not (c.digest and c.msgdef.data):
-                    raise BagError(src, f"topic {c.topic}: type {c.msgtype} has no definition or hash to copy")
-                cmap[c.id] = writer.add_connection(
-                    c.topic,
-                    c.msgtype,
-                    typestore=typestore() if use_store else None,
-                    msgdef=None if use_store else c.msgdef.data,
-                    rihs01=None if use_store else c.digest,
-                    serialization_format=getattr(c.ext, "serialization_format", "cdr"),
-                    offered_qos_profiles=getattr(c.ext, "offered_qos_profiles", []),
-                )
-            est_conns = [_add_connection(writer, topic, QUAT_TYPE) for topic, _, _ in prepared]
+    with _opened(src) as reader:
+        try:
+            with _AtomicBag(dst, storage, compression, force) as writer:
+                cmap = {}
+                info = _info_from(src, reader)
+                if info:
+                    writer.set_custom_data(INFO_KEY, json.dumps(info, sort_keys=True))
+                for c in reader.connections:
+                    key = (c.topic, c.msgtype)
+                    if key in cmap.values():
+                        cmap[c.id] = next(v for k, v in cmap.items() if v == key)
+                        continue
+                    known = c.msgtype in typestore().types
+                    use_store = known and not (c.digest and c.msgdef.data)
+                    if not use_store and not (c.digest and c.msgdef.data):
+                        raise BagError(src, f"topic {c.topic}: type {c.msgtype} has no definition or hash to copy")
+                    cmap[c.id] = writer.add_connection(
+                        c.topic,
+                        c.msgtype,
+                        typestore=typestore() if use_store else None,
+                        msgdef=None if use_store else c.msgdef.data,
+                        rihs01=None if use_store else c.digest,
+                        serialization_format=getattr(c.ext, "serialization_format", "cdr"),
+                        offered_qos_profiles=getattr(c.ext, "offered_qos_profiles", []),
+                    )
+                est_conns = [_add_connection(writer, topic, QUAT_TYPE) for topic, _, _ in prepared]
 
-            def source():
-                for c, t, raw in reader.messages():
-                    yield t, 0, cmap[c.id], raw
+                def source():
+                    for c, t, raw in reader.messages():
+                        yield t, 0, cmap[c.id], raw
 
-            def est(k):
-                _, st, rows = prepared[k]
-                conn = est_conns[k]
-                for t, row in zip(st.tolist(), rows, strict=True):
-                    yield t, k + 1, conn, row.tobytes()
+                def est(k):
+                    _, st, rows = prepared[k]
+                    conn = est_conns[k]
+                    for t, row in zip(st.tolist(), rows, strict=True):
+                        yield t, k + 1, conn, row.tobytes()
 
-            for t, _, conn, raw in heapq.merge(
-                source(), *(est(k) for k in range(len(prepared))), key=lambda x: (x[0], x[1])
-            ):
-                writer.write(conn, t, raw)
-    except (BagError, FileExistsError, ValueError, KeyboardInterrupt):
-        raise
-    except Exception as e:
-        raise BagError(src, f"copying to {dst} failed ({type(e).__name__}: {e})") from e
-    finally:
-        with suppress(Exception):
-            reader.close()
+                for t, _, conn, raw in heapq.merge(
+                    source(), *(est(k) for k in range(len(prepared))), key=lambda x: (x[0], x[1])
+                ):
+                    writer.write(conn, t, raw)
+        except (BagError, FileExistsError, ValueError, KeyboardInterrupt):
+            raise
+        except Exception as e:
+            raise BagError(src, f"copying to {dst} failed ({type(e).__name__}: {e})") from e
     return dst
