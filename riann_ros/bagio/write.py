@@ -114,6 +114,38 @@ def write_recording(
     return target
 
 
+def _copy_connections(src: Path, reader, writer) -> dict:
+    """Add the connections of ``reader`` to ``writer``; returns {input connection id: output connection}.
+
+    Input connections with the same topic, type and serialisation format (a topic recorded from several
+    publishers) share one output connection that offers all their QoS profiles, as rosbag2 records such a
+    topic; rosbags' Writer refuses a second connection identical to an existing one.
+    """
+    groups: dict[tuple[str, str, str], list] = {}
+    for c in reader.connections:
+        fmt = getattr(c.ext, "serialization_format", "cdr")
+        groups.setdefault((c.topic, c.msgtype, fmt), []).append(c)
+    cmap = {}
+    for (topic, msgtype, fmt), conns in groups.items():
+        c = conns[0]
+        known = msgtype in typestore().types
+        use_store = known and not (c.digest and c.msgdef.data)
+        if not use_store and not (c.digest and c.msgdef.data):
+            raise BagError(src, f"topic {topic}: type {msgtype} has no definition or hash to copy")
+        out = writer.add_connection(
+            topic,
+            msgtype,
+            typestore=typestore() if use_store else None,
+            msgdef=None if use_store else c.msgdef.data,
+            rihs01=None if use_store else c.digest,
+            serialization_format=fmt,
+            offered_qos_profiles=[q for x in conns for q in getattr(x.ext, "offered_qos_profiles", [])],
+        )
+        for x in conns:
+            cmap[x.id] = out
+    return cmap
+
+
 def write_estimates(
     src: str | os.PathLike[str],
     dst: str | os.PathLike[str],
@@ -149,28 +181,10 @@ def write_estimates(
     with _opened(src) as reader:
         try:
             with _AtomicBag(dst, storage, compression, force) as writer:
-                cmap = {}
                 info = _info_from(src, reader)
                 if info:
                     writer.set_custom_data(INFO_KEY, json.dumps(info, sort_keys=True))
-                for c in reader.connections:
-                    key = (c.topic, c.msgtype)
-                    if key in cmap.values():
-                        cmap[c.id] = next(v for k, v in cmap.items() if v == key)
-                        continue
-                    known = c.msgtype in typestore().types
-                    use_store = known and not (c.digest and c.msgdef.data)
-                    if not use_store and not (c.digest and c.msgdef.data):
-                        raise BagError(src, f"topic {c.topic}: type {c.msgtype} has no definition or hash to copy")
-                    cmap[c.id] = writer.add_connection(
-                        c.topic,
-                        c.msgtype,
-                        typestore=typestore() if use_store else None,
-                        msgdef=None if use_store else c.msgdef.data,
-                        rihs01=None if use_store else c.digest,
-                        serialization_format=getattr(c.ext, "serialization_format", "cdr"),
-                        offered_qos_profiles=getattr(c.ext, "offered_qos_profiles", []),
-                    )
+                cmap = _copy_connections(src, reader, writer)
                 est_conns = [_add_connection(writer, topic, QUAT_TYPE) for topic, _, _ in prepared]
 
                 def source():
