@@ -228,16 +228,82 @@ def test_write_estimates(tmp_path: Path) -> None:
     # to sqlite3 directory from an mcap file
     d = bagio.write_estimates(src, tmp_path / "dstdir", est, storage="sqlite3")
     _same(rec, bagio.read_recording(d))
-    assert bagio._bag_compression(d) is None
+    assert bagio.bag_compression(d) is None
     # compression follows the source by default
     zsrc = bagio.write_recording(tmp_path / "zsrc.mcap", rec, compression="zstd")
     zdst = bagio.write_estimates(zsrc, tmp_path / "zdst.mcap", est)
-    assert bagio._bag_compression(zsrc) == bagio._bag_compression(zdst) == "zstd"
-    assert bagio._bag_compression(dst) is None
+    assert bagio.bag_compression(zsrc) == bagio.bag_compression(zdst) == "zstd"
+    assert bagio.bag_compression(dst) is None
     zdir = bagio.write_recording(tmp_path / "zdir", rec, storage="sqlite3", compression="zstd")
     zdir2 = bagio.write_estimates(zdir, tmp_path / "zdir2", est)
-    assert bagio._bag_compression(zdir2) == "zstd"
+    assert bagio.bag_compression(zdir2) == "zstd"
     _same(rec, bagio.read_recording(zdir2))
+
+
+def _two_publisher_bag(path: Path, rec: Recording, identical: bool) -> Path:
+    """``rec``'s IMU samples alternately on two connections of one topic, as recorded from two publishers.
+
+    ``identical``: two MCAP channels with the same topic, type and metadata, written with the ``mcap``
+    library (rosbags' Writer refuses to add such a second connection, but reads the file as two
+    connections); otherwise rosbags' Writer with two connections that differ only in offered QoS.
+    """
+    rows = [row.tobytes() for row in bagio.imu_messages(rec.stamps_ns, rec.acc, rec.gyr, rec.frame_id)]
+    stamps = rec.stamps_ns.tolist()
+    ts = bagio.typestore()
+    if identical:
+        from mcap.writer import Writer as McapWriter
+
+        with path.open("wb") as f:
+            w = McapWriter(f)
+            w.start(profile="ros2", library="test_bagio")
+            msgdef = ts.generate_msgdef(bagio.IMU_TYPE, ros_version=2)[0]
+            schema = w.register_schema(name=bagio.IMU_TYPE, encoding="ros2msg", data=msgdef.encode())
+            chans = [w.register_channel(bagio.IMU_TOPIC, "cdr", schema) for _ in range(2)]
+            for i, (t, raw) in enumerate(zip(stamps, rows, strict=True)):
+                w.add_message(chans[i % 2], log_time=t, data=raw, publish_time=t)
+            w.finish()
+        return path
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    def qos(reliability: QosReliability) -> Qos:
+        never = QosTime(0, 0)
+        return Qos(QosHistory.KEEP_LAST, 10, reliability, QosDurability.VOLATILE, never, never,
+                   QosLiveliness.AUTOMATIC, never, False)  # fmt: skip
+
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = [
+            w.add_connection(bagio.IMU_TOPIC, bagio.IMU_TYPE, typestore=ts, offered_qos_profiles=[qos(r)])
+            for r in (QosReliability.RELIABLE, QosReliability.BEST_EFFORT)
+        ]
+        for i, (t, raw) in enumerate(zip(stamps, rows, strict=True)):
+            w.write(conns[i % 2], t, raw)
+    return path
+
+
+@pytest.mark.parametrize("identical", [True, False])
+def test_write_estimates_two_publishers_on_one_topic(tmp_path: Path, identical: bool) -> None:
+    """Several input connections with the same topic and type are copied to one output connection."""
+    from rosbags.rosbag2 import Reader
+
+    rec = _rec(n=200, with_ref=False)
+    src = _two_publisher_bag(tmp_path / ("src.mcap" if identical else "srcdir"), rec, identical)
+    with Reader(src) as r:
+        src_qos = [q for c in r.connections for q in c.ext.offered_qos_profiles]
+        assert [c.topic for c in r.connections] == [bagio.IMU_TOPIC] * 2
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (len(rec), 1))
+    est = {"/riann/attitude": (rec.stamps_ns, q)}
+    for name, storage in (("dst.mcap", "mcap"), ("dstdir", "sqlite3")):
+        dst = bagio.write_estimates(src, tmp_path / name, est, storage=storage)
+        with Reader(dst) as r:
+            conns = [c for c in r.connections if c.topic == bagio.IMU_TOPIC]
+            assert len(conns) == 1 and conns[0].msgcount == len(rec)
+            assert len(conns[0].ext.offered_qos_profiles) == len(src_qos)  # both publishers' QoS kept
+            assert sum(c.msgcount for c in r.connections if c.topic == "/riann/attitude") == len(rec)
+        back = bagio.read_recording(dst)
+        assert np.array_equal(back.stamps_ns, rec.stamps_ns)
+        assert np.array_equal(back.acc, rec.acc) and np.array_equal(back.gyr, rec.gyr)
+        assert back.quat_ref is None and back.frame_id == rec.frame_id
 
 
 # ---- BagError cases -------------------------------------------------------------------------------

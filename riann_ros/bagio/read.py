@@ -1,0 +1,256 @@
+"""Reading bags: opening a reader, the ``/dataset/info`` record, IMU recordings in bounded chunks, and the
+storage and compression of an existing bag."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
+from pathlib import Path
+
+import numpy as np
+
+from riann_ros.bagio.cdr import parse_imu, parse_quats
+from riann_ros.bagio.layout import (
+    BOOL_TYPE,
+    IMU_TOPIC,
+    IMU_TYPE,
+    INFO_TOPIC,
+    QUAT_TYPE,
+    REF_TOPIC,
+    SCORED_TOPIC,
+    STRING_TYPE,
+    BagError,
+    typestore,
+)
+from riann_ros.recording import Recording
+
+
+def _open_reader(path: Path):
+    """An open rosbags Reader, or BagError."""
+    from rosbags.rosbag2 import Reader
+
+    if not path.exists():
+        raise BagError(path, "no such file or directory")
+    if path.is_dir() and not (path / "metadata.yaml").exists():
+        raise BagError(path, "not a rosbag2 bag (directory without metadata.yaml)")
+    if path.is_file() and path.suffix not in (".mcap", ".db3"):
+        raise BagError(path, "not a bag (expected a rosbag2 directory, a .mcap or a .db3 file)")
+    try:
+        reader = Reader(path)
+        reader.open()
+    except BagError:
+        raise
+    except Exception as e:
+        raise BagError(path, f"cannot open bag ({type(e).__name__}: {e})") from e
+    return reader
+
+
+@contextmanager
+def _opened(path: Path):
+    """``with _opened(path) as reader``: :func:`_open_reader`, closed (errors ignored) on leaving."""
+    reader = _open_reader(path)
+    try:
+        yield reader
+    finally:
+        with suppress(Exception):
+            reader.close()
+
+
+def bag_storage(path: Path) -> str:
+    """``"sqlite3"`` for a ``.db3`` file or a directory bag with ``.db3`` storage, else ``"mcap"``."""
+    if path.is_file():
+        return "sqlite3" if path.suffix == ".db3" else "mcap"
+    return "sqlite3" if any(path.glob("*.db3*")) else "mcap"
+
+
+def bag_compression(path: Path) -> str | None:
+    """``"zstd"`` when the bag uses any compression (MCAP chunks, rosbag2 message/file mode), else None."""
+    try:
+        if path.is_dir():
+            import yaml
+
+            meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+            if meta.get("compression_mode"):
+                return "zstd"
+            files = sorted(path.glob("*.mcap"))
+            if not files:
+                return None
+            path = files[0]
+        if path.suffix != ".mcap":
+            return None
+        from mcap.reader import make_reader
+
+        with path.open("rb") as f:
+            summary = make_reader(f).get_summary()
+        chunks = summary.chunk_indexes if summary is not None else []
+        return "zstd" if any(c.compression for c in chunks) else None
+    except Exception:
+        return None
+
+
+def _topic_connections(path: Path, reader, topic: str, msgtype: str, required: bool) -> list:
+    conns = [c for c in reader.connections if c.topic == topic]
+    if not conns:
+        if required:
+            have = ", ".join(sorted({c.topic for c in reader.connections})) or "none"
+            raise BagError(path, f"no {topic} topic (topics: {have})")
+        return []
+    wrong = sorted({c.msgtype for c in conns if c.msgtype != msgtype})
+    if wrong:
+        raise BagError(path, f"topic {topic} has type {', '.join(wrong)}, expected {msgtype}")
+    return conns
+
+
+def read_info(path: str | os.PathLike[str]) -> dict:
+    """The ``/dataset/info`` JSON of a bag ({} when absent or unparsable)."""
+    path = Path(path)
+    with _opened(path) as reader:
+        return _info_from(path, reader)
+
+
+def _info_from(path: Path, reader) -> dict:
+    conns = _topic_connections(path, reader, INFO_TOPIC, STRING_TYPE, required=False)
+    if not conns:
+        return {}
+    try:
+        for _, _, raw in reader.messages(connections=conns):
+            text = typestore().deserialize_cdr(raw, STRING_TYPE).data
+            info = json.loads(text)
+            return info if isinstance(info, dict) else {}
+    except (ValueError, TypeError):
+        return {}
+    return {}
+
+
+def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000) -> Iterator[Recording]:
+    """Yield the bag as consecutive :class:`Recording` chunks of at most ``chunk`` samples, in stamp order.
+
+    Memory stays bounded by the chunk size. Each chunk carries its reference (NaN rows where no
+    ``/ground_truth/attitude`` message has the sample's stamp; ``quat_ref=None`` when the bag has no
+    reference topic), its score mask and the bag's name/dataset/source/frame_id/meta. Raises
+    :class:`BagError` for anything that is not a readable IMU bag.
+    """
+    path = Path(path)
+    if chunk < 1:
+        raise ValueError("chunk must be >= 1")
+    with _opened(path) as reader:
+        try:
+            yield from _iter_chunks(path, reader, chunk)
+        except BagError:
+            raise
+        except (KeyboardInterrupt, GeneratorExit):
+            raise
+        except Exception as e:
+            raise BagError(path, f"unreadable or truncated bag ({type(e).__name__}: {e})") from e
+
+
+def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
+    c_imu = _topic_connections(path, reader, IMU_TOPIC, IMU_TYPE, required=True)
+    c_ref = _topic_connections(path, reader, REF_TOPIC, QUAT_TYPE, required=False)
+    c_scored = _topic_connections(path, reader, SCORED_TOPIC, BOOL_TYPE, required=False)
+    info = _info_from(path, reader)
+    imu_ids = {c.id for c in c_imu}
+    ref_ids = {c.id for c in c_ref}
+    has_ref = bool(c_ref)
+
+    state = {"mask": True, "last": None, "index": 0, "frame": None}
+    imu_raw: list[bytes] = []
+    imu_log: list[int] = []
+    ref_raw: list[bytes] = []
+    events: list[tuple[int, bool]] = []
+
+    def flush(n: int) -> Recording:
+        raws = imu_raw[:n]
+        del imu_raw[:n]
+        del imu_log[:n]
+        stamps, acc, gyr, frame = parse_imu(raws)
+        if state["frame"] is None:
+            state["frame"] = frame
+        first = state["index"]
+        prev = np.concatenate([[state["last"]], stamps]) if state["last"] is not None else stamps
+        bad = np.flatnonzero(np.diff(prev) <= 0)
+        if len(bad):
+            i = first + int(bad[0]) + (0 if state["last"] is not None else 1)
+            raise BagError(path, f"{IMU_TOPIC} header stamps not strictly increasing at sample {i}")
+        last = int(stamps[-1])
+        quat = None
+        if has_ref:
+            quat = np.full((len(stamps), 4), np.nan)
+            rs, rq = parse_quats(ref_raw)
+            pos = np.searchsorted(stamps, rs)
+            ok = (pos < len(stamps)) & (stamps[np.minimum(pos, len(stamps) - 1)] == rs)
+            quat[pos[ok]] = rq[ok]
+            keep = [r for r, s in zip(ref_raw, rs, strict=True) if s > last]
+            ref_raw[:] = keep
+        # score mask from on-change events with log time <= stamp
+        mask = np.empty(len(stamps), dtype=bool)
+        ev = sorted(e for e in events if e[0] <= last)
+        later = [e for e in events if e[0] > last]
+        et = np.array([e[0] for e in ev], dtype=np.int64)
+        ev_vals = np.array([state["mask"]] + [e[1] for e in ev], dtype=bool)
+        mask[:] = ev_vals[np.searchsorted(et, stamps, side="right")]
+        if ev:
+            state["mask"] = ev[-1][1]
+        events[:] = later
+        state["last"] = last
+        state["index"] = first + len(stamps)
+        return Recording(
+            stamps_ns=stamps,
+            acc=acc,
+            gyr=gyr,
+            quat_ref=quat,
+            score_mask=mask,
+            name=str(info.get("name") or path.stem),
+            dataset=str(info.get("dataset") or ""),
+            source=str(info.get("source") or ""),
+            frame_id=str(info.get("frame_id") or state["frame"] or "imu_link"),
+            meta={str(k): str(v) for k, v in (info.get("meta") or {}).items()},
+        )
+
+    bool_deser = typestore().deserialize_cdr
+    for conn, t, raw in reader.messages(connections=[*c_imu, *c_ref, *c_scored]):
+        if len(imu_raw) >= chunk and t > imu_log[chunk - 1]:
+            yield flush(chunk)
+        cid = conn.id
+        if cid in imu_ids:
+            imu_raw.append(raw)
+            imu_log.append(t)
+        elif cid in ref_ids:
+            ref_raw.append(raw)
+        else:
+            events.append((t, bool(bool_deser(raw, BOOL_TYPE).data)))
+    while len(imu_raw) > chunk:
+        yield flush(chunk)
+    if imu_raw:
+        yield flush(len(imu_raw))
+    elif state["index"] == 0:
+        raise BagError(path, f"topic {IMU_TOPIC} has no messages")
+
+
+def concat(chunks: list[Recording]) -> Recording:
+    """Concatenate recordings of the same sequence (metadata from the first)."""
+    if not chunks:
+        raise ValueError("nothing to concatenate")
+    if len(chunks) == 1:
+        return chunks[0]
+    first = chunks[0]
+    has_ref = first.quat_ref is not None
+    return Recording(
+        stamps_ns=np.concatenate([c.stamps_ns for c in chunks]),
+        acc=np.concatenate([c.acc for c in chunks]),
+        gyr=np.concatenate([c.gyr for c in chunks]),
+        quat_ref=np.concatenate([c.quat_ref for c in chunks]) if has_ref else None,
+        score_mask=np.concatenate([c.score_mask for c in chunks]),
+        name=first.name,
+        dataset=first.dataset,
+        source=first.source,
+        frame_id=first.frame_id,
+        meta=dict(first.meta),
+    )
+
+
+def read_recording(path: str | os.PathLike[str]) -> Recording:
+    """Read a whole bag (the exact inverse of :func:`write_recording`)."""
+    return concat(list(iter_imu_chunks(path, chunk=100_000)))  # chunks keep the raw-bytes buffer small
