@@ -40,6 +40,9 @@ class ParamSpec:
             if self.choices and value not in self.choices:
                 raise ValueError(f"{self.name} must be one of {', '.join(self.choices)}, got {value!r}")
             return value
+        return self._validate_number(value)
+
+    def _validate_number(self, value: Any) -> float | int:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ValueError(f"{self.name} must be a number, got {value!r}")
         if isinstance(self.default, int) and not float(value).is_integer():

@@ -25,7 +25,7 @@ class Recording:
     acc: NDArray[np.float64]
     gyr: NDArray[np.float64]
     quat_ref: NDArray[np.float64] | None = None
-    score_mask: NDArray[np.bool_] | None = None
+    score_mask: NDArray[np.bool_] = None  # type: ignore[assignment]  # None: all scored (__post_init__)
     name: str = "sequence"
     dataset: str = ""
     source: str = ""
@@ -70,7 +70,7 @@ class Recording:
             acc=self.acc[s].copy(),
             gyr=self.gyr[s].copy(),
             quat_ref=None if self.quat_ref is None else self.quat_ref[s].copy(),
-            score_mask=None if self.score_mask is None else self.score_mask[s].copy(),
+            score_mask=self.score_mask[s].copy(),
             name=self.name,
             dataset=self.dataset,
             source=self.source,

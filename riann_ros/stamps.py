@@ -19,24 +19,28 @@ def to_ns(stamp: Any) -> int:
     return stamp.sec * NS_PER_S + stamp.nanosec
 
 
-def split_ns(ns: int) -> tuple[int, int]:
-    """(sec, nanosec) of a nanosecond count (nanosec in [0, 1e9), also for negative times)."""
-    sec, nsec = divmod(int(ns), NS_PER_S)
-    return sec, nsec
+def split_ns(ns: Any) -> tuple[Any, Any]:
+    """(sec, nanosec) of nanosecond stamps, an int or an int64 array (nanosec in [0, 1e9), also before 1970)."""
+    sec = ns // NS_PER_S
+    return sec, ns - sec * NS_PER_S
+
+
+def join_ns(sec: ArrayLike, nanosec: ArrayLike) -> NDArray[np.int64]:
+    """Nanoseconds (int64) from ``sec`` and ``nanosec`` (ints or integer arrays)."""
+    return np.asarray(sec, dtype=np.int64) * NS_PER_S + np.asarray(nanosec, dtype=np.int64)
 
 
 def set_ns(stamp: Any, ns: int) -> None:
     """Write a nanosecond count into a ``builtin_interfaces/Time``-like stamp."""
-    stamp.sec, stamp.nanosec = split_ns(ns)
-
-
-def seconds(ns: ArrayLike) -> NDArray[np.float64]:
-    """Nanoseconds (scalar or array) as seconds (float64)."""
-    return np.asarray(ns, dtype=np.int64) * 1e-9
+    stamp.sec, stamp.nanosec = split_ns(int(ns))
 
 
 def dts(stamps_ns: ArrayLike, first_dt: float) -> NDArray[np.float64]:
     """Per-sample dt (s) of a stamp sequence as the input gate gives it: ``first_dt`` (the gate's
     ``1 / nominal_rate``) for the first sample, stamp differences after it."""
     st = np.asarray(stamps_ns, dtype=np.int64)
-    return np.concatenate([[first_dt], np.diff(st) * 1e-9]) if len(st) else np.zeros(0)
+    out = np.empty(len(st), dtype=np.float64)
+    if len(st):
+        out[0] = first_dt
+        out[1:] = np.diff(st) * 1e-9
+    return out

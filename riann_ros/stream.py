@@ -120,7 +120,9 @@ class InputGate:
         self.accepted = 0
         self._warned: set[str] = set()
         self._g_norms: list[float] = []
-        self._clear_dt_stats()
+        self._dt_n = 0
+        self._dt_sum = self._dt_sq = 0.0
+        self._dt_min, self._dt_max = math.inf, -math.inf
         self.restart()
 
     def restart(self) -> None:
@@ -134,49 +136,56 @@ class InputGate:
 
     def check(self, stamp_ns: int, acc: ArrayLike, gyr: ArrayLike, receive_ns: int | None = None) -> GateResult:
         warnings: list[str] = []
-        cfg = self.config
         if stamp_ns == 0:
             if receive_ns is None:
                 self.rejected[NO_STAMP] += 1
                 return GateResult(False, reason=NO_STAMP)
             self._warn(ZERO_STAMP, warnings)
             stamp_ns = receive_ns
+        reason, acc_norm = self._sample_verdict(acc, gyr)
+        reset = None
+        if reason is None:
+            reason, reset = self._stamp_verdict(stamp_ns)
+        if reason is not None:
+            self.rejected[reason] += 1
+            return GateResult(False, stamp_ns=stamp_ns, reason=reason, warnings=warnings)
+        if reset is None:
+            dt = (stamp_ns - self._last_ns) * 1e-9  # type: ignore[operator]
+        else:
+            dt = 1.0 / self.config.nominal_rate
+            self.resets[reset] += 1
+        self._accept(stamp_ns, dt, acc_norm, warnings)
+        return GateResult(True, dt=dt, stamp_ns=stamp_ns, reset=reset, warnings=warnings)
+
+    def _sample_verdict(self, acc: ArrayLike, gyr: ArrayLike) -> tuple[str | None, float]:
+        """(rejection reason or None, |acc|) of one sample's values."""
         # plain floats: this runs once per message in the node
         # (Python floats also keep numpy's overflow warnings out of huge inputs: they just become inf)
-        ax, ay, az = (float(v) for v in acc)  # type: ignore[union-attr]
-        gx, gy, gz = (float(v) for v in gyr)  # type: ignore[union-attr]
+        ax, ay, az = (float(v) for v in acc)  # type: ignore[union-attr, arg-type]
+        gx, gy, gz = (float(v) for v in gyr)  # type: ignore[union-attr, arg-type]
         sa = ax * ax + ay * ay + az * az
         sg = gx * gx + gy * gy + gz * gz
         if not (math.isfinite(sa) and math.isfinite(sg)):  # NaN or inf in a component, or overflow
             finite = all(math.isfinite(v) for v in (ax, ay, az, gx, gy, gz))
-            reason = OUT_OF_RANGE if finite else NON_FINITE
-            self.rejected[reason] += 1
-            return GateResult(False, stamp_ns=stamp_ns, reason=reason, warnings=warnings)
+            return (OUT_OF_RANGE if finite else NON_FINITE), math.nan
         na = math.sqrt(sa)
-        if na > cfg.max_acc or math.sqrt(sg) > cfg.max_gyr:
-            self.rejected[OUT_OF_RANGE] += 1
-            return GateResult(False, stamp_ns=stamp_ns, reason=OUT_OF_RANGE, warnings=warnings)
-        reset: str | None = None
-        max_dt_ns = cfg.max_dt * 1e9
+        if na > self.config.max_acc or math.sqrt(sg) > self.config.max_gyr:
+            return OUT_OF_RANGE, na
+        return None, na
+
+    def _stamp_verdict(self, stamp_ns: int) -> tuple[str | None, str | None]:
+        """(rejection reason or None, restart cause or None) of a sample's stamp after the previous one."""
         if self._last_ns is None:
-            reset = START
-        else:
-            diff = stamp_ns - self._last_ns
-            if diff == 0:
-                self.rejected[STAMP_REPEAT] += 1
-                return GateResult(False, stamp_ns=stamp_ns, reason=STAMP_REPEAT, warnings=warnings)
-            if diff < 0:
-                if -diff <= max_dt_ns:
-                    self.rejected[STAMP_BACKWARDS] += 1
-                    return GateResult(False, stamp_ns=stamp_ns, reason=STAMP_BACKWARDS, warnings=warnings)
-                reset = CLOCK_JUMP
-            elif diff > max_dt_ns:
-                reset = GAP
-        if reset is None:
-            dt = (stamp_ns - self._last_ns) * 1e-9  # type: ignore[operator]
-        else:
-            dt = 1.0 / cfg.nominal_rate
-            self.resets[reset] += 1
+            return None, START
+        diff = stamp_ns - self._last_ns
+        max_dt_ns = self.config.max_dt * 1e9
+        if diff == 0:
+            return STAMP_REPEAT, None
+        if diff < 0:
+            return (STAMP_BACKWARDS, None) if -diff <= max_dt_ns else (None, CLOCK_JUMP)
+        return None, (GAP if diff > max_dt_ns else None)
+
+    def _accept(self, stamp_ns: int, dt: float, acc_norm: float, warnings: list[str]) -> None:
         self._last_ns = stamp_ns
         self.accepted += 1
         self._dt_n += 1
@@ -185,10 +194,9 @@ class InputGate:
         self._dt_min = min(self._dt_min, dt)
         self._dt_max = max(self._dt_max, dt)
         if len(self._g_norms) < G_CHECK_SAMPLES:
-            self._g_norms.append(na)
+            self._g_norms.append(acc_norm)
             if len(self._g_norms) == G_CHECK_SAMPLES and 0.5 < float(np.median(self._g_norms)) < 1.5:
                 self._warn(ACC_IN_G, warnings)
-        return GateResult(True, dt=dt, stamp_ns=stamp_ns, reset=reset, warnings=warnings)
 
     def check_clean_prefix(
         self, stamps_ns: NDArray[np.int64], acc: NDArray[np.float64], gyr: NDArray[np.float64]
@@ -286,11 +294,29 @@ class EstimatorStream:
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         acc = np.asarray(acc, dtype=float)
         gyr = np.asarray(gyr, dtype=float)
+        out = np.full((len(stamps), 4), np.nan)
+        accepted, dts, starts = self._gate_batch(stamps, acc, gyr)
+        idx = np.flatnonzero(accepted)
+        if len(idx) == 0:
+            return out, accepted
+        bounds = [*(int(np.searchsorted(idx, s)) for s in starts), len(idx)]
+        if bounds[0] != 0:
+            bounds.insert(0, 0)  # continuing a sequence begun by an earlier call
+        for lo, hi in itertools.pairwise(bounds):
+            seg = idx[lo:hi]
+            if len(seg) and seg[0] in starts:
+                self.estimator.reset()
+            self._run_segment(seg, acc, gyr, dts, out, accepted)
+        return out, accepted
+
+    def _gate_batch(
+        self, stamps: NDArray[np.int64], acc: NDArray[np.float64], gyr: NDArray[np.float64]
+    ) -> tuple[NDArray[np.bool_], NDArray[np.float64], list[int]]:
+        """The gate over a sequence: (accepted mask, dts, indices where the estimator restarts)."""
         n = len(stamps)
-        out = np.full((n, 4), np.nan)
         accepted = np.zeros(n, dtype=bool)
         dts = np.zeros(n)
-        starts: list[int] = []  # indices where the estimator restarts
+        starts: list[int] = []
         gate = self.gate
         i = 0
         while i < n:
@@ -309,30 +335,24 @@ class EstimatorStream:
                 if r.reset is not None:
                     starts.append(i)
             i += 1
-        idx = np.flatnonzero(accepted)
-        if len(idx) == 0:
-            return out, accepted
-        bounds = [*(int(np.searchsorted(idx, s)) for s in starts), len(idx)]
-        if not bounds or bounds[0] != 0:
-            bounds.insert(0, 0)  # continuing a sequence begun by an earlier call
-        for lo, hi in itertools.pairwise(bounds):
-            seg = idx[lo:hi]
-            if len(seg) and seg[0] in starts:
-                self.estimator.reset()
-            while len(seg):
-                q = self.estimator.update_batch(acc[seg], gyr[seg], dts[seg])
-                bad = ~_rows_unit(q)
-                if not bad.any():
-                    out[seg] = q
-                    break
-                # as in process(): the faulty sample is dropped and the estimator restarts after it
-                first = int(np.argmax(bad))
-                out[seg[:first]] = q[:first]
-                accepted[seg[first]] = False
-                self.estimator.reset()
-                self.gate.rejected[ESTIMATOR_FAULT] += 1
-                seg = seg[first + 1 :]
-        return out, accepted
+        return accepted, dts, starts
+
+    def _run_segment(self, seg: NDArray[np.intp], acc: NDArray[np.float64], gyr: NDArray[np.float64],
+                     dts: NDArray[np.float64], out: NDArray[np.float64], accepted: NDArray[np.bool_]) -> None:
+        """The estimator over accepted samples ``seg`` (no restart inside), outputs into ``out``."""
+        while len(seg):
+            q = self.estimator.update_batch(acc[seg], gyr[seg], dts[seg])
+            bad = ~_rows_unit(q)
+            if not bad.any():
+                out[seg] = q
+                return
+            # as in process(): the faulty sample is dropped and the estimator restarts after it
+            first = int(np.argmax(bad))
+            out[seg[:first]] = q[:first]
+            accepted[seg[first]] = False
+            self.estimator.reset()
+            self.gate.rejected[ESTIMATOR_FAULT] += 1
+            seg = seg[first + 1 :]
 
 
 def _is_unit(q: NDArray[np.float64]) -> bool:

@@ -7,6 +7,7 @@ import shutil
 import tempfile
 from contextlib import suppress
 from pathlib import Path
+from typing import Literal
 
 from riann_ros.bagio.layout import COMPRESSIONS, STORAGES
 
@@ -74,7 +75,7 @@ class _AtomicBag:
             shutil.rmtree(self.tmp, ignore_errors=True)
             self.tmp = None
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(self, exc_type, exc, tb) -> Literal[False]:
         try:
             if exc_type is not None:
                 with suppress(Exception):

@@ -12,24 +12,12 @@ import struct
 import numpy as np
 
 from riann_ros.bagio.layout import BOOL_TYPE, IMU_TYPE, QUAT_TYPE, STRING_TYPE, WORLD_FRAME, typestore
-
-NS_PER_S = 1_000_000_000
+from riann_ros.stamps import join_ns, split_ns, to_ns
 
 # Little-endian CDR of a message that starts with a std_msgs/Header: 4-byte encapsulation header (byte 1
 # is 1 for little endian), stamp.sec (int32) at 4, stamp.nanosec (uint32) at 8, the frame_id length
 # (uint32, counting the terminating NUL) at 12 and the frame_id bytes from 16.
 _SEC, _NSEC, _FRAME_LEN, _FRAME = 4, 8, 12, 16
-
-
-def split_ns(stamps_ns):
-    """``(sec, nanosec)`` of ``builtin_interfaces/Time`` for nanosecond stamps (an int or an int64 array)."""
-    sec = stamps_ns // NS_PER_S
-    return sec, stamps_ns - sec * NS_PER_S
-
-
-def join_ns(sec, nanosec):
-    """Nanoseconds (int64) from ``builtin_interfaces/Time`` ``sec`` and ``nanosec`` (ints or integer arrays)."""
-    return np.asarray(sec, dtype=np.int64) * NS_PER_S + np.asarray(nanosec, dtype=np.int64)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -183,7 +171,7 @@ def parse_imu(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray, st
     gyr = np.empty((len(raws), 3))
     for i, r in enumerate(raws):
         m = ts.deserialize_cdr(r, IMU_TYPE)
-        stamps[i] = join_ns(m.header.stamp.sec, m.header.stamp.nanosec)
+        stamps[i] = to_ns(m.header.stamp)
         a, g = m.linear_acceleration, m.angular_velocity
         acc[i] = (a.x, a.y, a.z)
         gyr[i] = (g.x, g.y, g.z)
@@ -207,6 +195,6 @@ def parse_quats(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
     q = np.empty((len(raws), 4))
     for i, r in enumerate(raws):
         m = ts.deserialize_cdr(r, QUAT_TYPE)
-        stamps[i] = join_ns(m.header.stamp.sec, m.header.stamp.nanosec)
+        stamps[i] = to_ns(m.header.stamp)
         q[i] = (m.quaternion.w, m.quaternion.x, m.quaternion.y, m.quaternion.z)
     return stamps, q

@@ -7,6 +7,7 @@ import json
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -146,6 +147,16 @@ def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000) -> Itera
             raise BagError(path, f"unreadable or truncated bag ({type(e).__name__}: {e})") from e
 
 
+@dataclass
+class _ChunkState:
+    """What :func:`_iter_chunks` carries from one chunk to the next."""
+
+    mask: bool = True  # score mask value in force
+    last: int | None = None  # stamp of the last sample
+    index: int = 0  # global index of the next sample
+    frame: str | None = None
+
+
 def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
     c_imu = _topic_connections(path, reader, IMU_TOPIC, IMU_TYPE, required=True)
     c_ref = _topic_connections(path, reader, REF_TOPIC, QUAT_TYPE, required=False)
@@ -155,7 +166,7 @@ def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
     ref_ids = {c.id for c in c_ref}
     has_ref = bool(c_ref)
 
-    state = {"mask": True, "last": None, "index": 0, "frame": None}
+    state = _ChunkState()
     imu_raw: list[bytes] = []
     imu_log: list[int] = []
     ref_raw: list[bytes] = []
@@ -166,13 +177,13 @@ def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
         del imu_raw[:n]
         del imu_log[:n]
         stamps, acc, gyr, frame = parse_imu(raws)
-        if state["frame"] is None:
-            state["frame"] = frame
-        first = state["index"]
-        prev = np.concatenate([[state["last"]], stamps]) if state["last"] is not None else stamps
+        if state.frame is None:
+            state.frame = frame
+        first = state.index
+        prev = np.concatenate([[state.last], stamps]) if state.last is not None else stamps
         bad = np.flatnonzero(np.diff(prev) <= 0)
         if len(bad):
-            i = first + int(bad[0]) + (0 if state["last"] is not None else 1)
+            i = first + int(bad[0]) + (0 if state.last is not None else 1)
             raise BagError(path, f"{IMU_TOPIC} header stamps not strictly increasing at sample {i}")
         last = int(stamps[-1])
         quat = None
@@ -189,13 +200,13 @@ def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
         ev = sorted(e for e in events if e[0] <= last)
         later = [e for e in events if e[0] > last]
         et = np.array([e[0] for e in ev], dtype=np.int64)
-        ev_vals = np.array([state["mask"]] + [e[1] for e in ev], dtype=bool)
+        ev_vals = np.array([state.mask] + [e[1] for e in ev], dtype=bool)
         mask[:] = ev_vals[np.searchsorted(et, stamps, side="right")]
         if ev:
-            state["mask"] = ev[-1][1]
+            state.mask = ev[-1][1]
         events[:] = later
-        state["last"] = last
-        state["index"] = first + len(stamps)
+        state.last = last
+        state.index = first + len(stamps)
         return Recording(
             stamps_ns=stamps,
             acc=acc,
@@ -205,7 +216,7 @@ def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
             name=str(info.get("name") or path.stem),
             dataset=str(info.get("dataset") or ""),
             source=str(info.get("source") or ""),
-            frame_id=str(info.get("frame_id") or state["frame"] or "imu_link"),
+            frame_id=str(info.get("frame_id") or state.frame or "imu_link"),
             meta={str(k): str(v) for k, v in (info.get("meta") or {}).items()},
         )
 
@@ -225,7 +236,7 @@ def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
         yield flush(chunk)
     if imu_raw:
         yield flush(len(imu_raw))
-    elif state["index"] == 0:
+    elif state.index == 0:
         raise BagError(path, f"topic {IMU_TOPIC} has no messages")
 
 

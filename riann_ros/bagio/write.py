@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.bagio.atomic import _AtomicBag
-from riann_ros.bagio.cdr import NS_PER_S, _bool_msg, _string_msg, imu_messages, quat_messages
+from riann_ros.bagio.cdr import _bool_msg, _string_msg, imu_messages, quat_messages
 from riann_ros.bagio.layout import (
     BOOL_TYPE,
     IMU_TOPIC,
@@ -29,6 +29,7 @@ from riann_ros.bagio.layout import (
 )
 from riann_ros.bagio.read import _info_from, _opened, bag_compression, bag_storage
 from riann_ros.recording import Recording
+from riann_ros.stamps import NS_PER_S
 
 _MSGDEFS: dict[str, tuple[str, str]] = {}
 
@@ -110,7 +111,7 @@ def write_recording(
                 write(c_scored, t, bool_bytes[bool(mask[i])])
             write(c_imu, t, imu_rows[i].tobytes())
             if is_ref[i]:
-                write(c_ref, t, ref_rows[ref_pos[i]].tobytes())
+                write(c_ref, t, ref_rows[ref_pos[i]].tobytes())  # type: ignore[index]  # is_ref: rows exist
     return target
 
 

@@ -64,7 +64,7 @@ def parse_time_ns(values: Sequence[str], unit: str, where: str, lines: Sequence[
             if v.isdigit():
                 out[i] = int(v) * scale
             else:
-                d = Decimal(v) * scale
+                d = Decimal(v) * Decimal(scale)
                 if not d.is_finite():
                     raise InvalidOperation
                 out[i] = int(d.to_integral_value())
@@ -234,7 +234,7 @@ def read_csv(
         acc=acc,
         gyr=gyr,
         quat_ref=quat,
-        score_mask=mask,
+        score_mask=mask,  # type: ignore[arg-type]  # None: all scored
         name=name or path.stem,
         dataset="csv",
         source=f"CSV file {path.name}",

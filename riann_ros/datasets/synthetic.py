@@ -176,7 +176,7 @@ def generate(
 
     if np.ndim(bias) == 0:
         d = rng.normal(size=3)
-        b = float(bias) * d / np.linalg.norm(d)
+        b = float(bias) * d / np.linalg.norm(d)  # type: ignore[arg-type]
     else:
         b = np.asarray(bias, dtype=float).reshape(3)
     f_world = a_world + np.array([0.0, 0.0, GRAVITY])

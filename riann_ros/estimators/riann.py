@@ -176,7 +176,7 @@ class RiannEstimator(AttitudeEstimator):
         self._clear_block()
         return row
 
-    def _run(self, rows: list[np.ndarray] | np.ndarray) -> Array:
+    def _run(self, rows: list[tuple[float, ...]] | np.ndarray) -> Array:
         """Run the network over ``rows`` (M, 7) from the current hidden state; return (M, 4)."""
         x = np.asarray(rows, dtype=np.float32).reshape(1, -1, 7)
         out, self._h = self._session.run(["output", "hn"], {"input": x, "h0": self._h})
@@ -201,9 +201,9 @@ class RiannEstimator(AttitudeEstimator):
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
         # The node's hot path: plain floats (numpy per-call overhead dominates for one sample). Same
         # arithmetic as update_batch's vectorised _compose.
-        a0, a1, a2 = acc  # type: ignore[misc]
-        g0, g1, g2 = gyr  # type: ignore[misc]
-        x = (float(a0), float(a1), float(a2), float(g0), float(g1), float(g2))
+        a0, a1, a2 = acc  # type: ignore[misc, str-unpack]
+        g0, g1, g2 = gyr  # type: ignore[misc, str-unpack]
+        x = (float(a0), float(a1), float(a2), float(g0), float(g1), float(g2))  # type: ignore[arg-type]
         rows: list[tuple[float, ...]] = []
         _, rot = self._plan_sample(x, float(dt), rows)
         self._prev = x
@@ -213,7 +213,7 @@ class RiannEstimator(AttitudeEstimator):
             raise RuntimeError("no network output yet")
         if rot is IDENTITY_T:
             return self._q_net.copy()
-        w, x1, y1, z1 = _qmul(tuple(self._q_net.tolist()), rot)  # type: ignore[arg-type]
+        w, x1, y1, z1 = _qmul(tuple(self._q_net.tolist()), rot)
         n = math.sqrt(w * w + x1 * x1 + y1 * y1 + z1 * z1)
         return np.array([w / n, x1 / n, y1 / n, z1 / n])
 

@@ -98,8 +98,9 @@ class VqfEstimator(AttitudeEstimator):
         self._vqf.setMotionBiasEstEnabled(bool(self.params["motion_bias_est"]))
         self._vqf.setRestBiasEstEnabled(bool(self.params["rest_bias_est"]))
 
-    def _ensure(self, first_dt: float) -> VQF:
-        if self._vqf is None:
+    def _ensure(self, first_dt: float) -> tuple[VQF, float]:
+        """The filter and its Ts, built at the first sample."""
+        if self._vqf is None or self._ts is None:
             self._ts = float(first_dt) if first_dt > 0.0 else DEFAULT_TS
             self._vqf = VQF(
                 self._ts,
@@ -107,19 +108,19 @@ class VqfEstimator(AttitudeEstimator):
                 motionBiasEstEnabled=bool(self.params["motion_bias_est"]),
                 restBiasEstEnabled=bool(self.params["rest_bias_est"]),
             )
-        return self._vqf
+        return self._vqf, self._ts
 
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
         a, g, h = sanitize_arrays(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])
-        v = self._ensure(float(h[0]))
-        v.update(np.ascontiguousarray(g[0] * (h[0] / self._ts)), np.ascontiguousarray(a[0]))
+        v, ts = self._ensure(float(h[0]))
+        v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]))
         return np.asarray(v.getQuat6D(), dtype=float).copy()
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
         a, g, h = sanitize_arrays(acc, gyr, dt)
         if len(a) == 0:
             return np.empty((0, 4))
-        v = self._ensure(float(h[0]))
-        g = np.ascontiguousarray(g * (h / self._ts)[:, None])
+        v, ts = self._ensure(float(h[0]))
+        g = np.ascontiguousarray(g * (h / ts)[:, None])
         out = v.updateBatch(g, np.ascontiguousarray(a))["quat6D"]
         return np.array(out, dtype=float)

@@ -77,14 +77,14 @@ def best_of(rows: Iterable[ResultRow], specs: list[EstimatorSpec], scenario: str
     for r in rows:
         if r.scenario == scenario:
             by_label.setdefault(r.estimator, []).append(r.rmse_deg)
-    table = []
+    table: list[dict[str, Any]] = []
     for s in specs:
         v = by_label.get(s.label)
         if v:
             table.append({"label": s.label, "params": s.kwargs, "mean": float(np.mean(v)), "max": float(np.max(v))})
     if not table:
         raise EvalError("tuning produced no scores")
-    table.sort(key=lambda d: d["mean"])
+    table.sort(key=lambda d: float(d["mean"]))
     return {"scenario": scenario, "best": table[0], "grid": table}
 
 

@@ -348,30 +348,34 @@ Progress = Callable[[int, int, SequenceResult], None]
 def evaluate_sources(sources: Sequence[str], settings: EvalSettings, jobs: int = 1,
                      progress: Progress | None = None, runner: Runner | None = None) -> list[SequenceResult]:
     """Evaluate inputs, in ``jobs`` worker processes when > 1 (offline only); results in input order."""
-    results: list[SequenceResult | None] = [None] * len(sources)
     if jobs <= 1 or len(sources) <= 1 or (runner is not None and not runner.interleaved):
+        results = []
         for i, src in enumerate(sources):
-            results[i] = r = evaluate_source(src, settings, runner)
+            results.append(evaluate_source(src, settings, runner))
             if progress:
-                progress(i + 1, len(sources), r)
-        return [r for r in results if r is not None]
+                progress(i + 1, len(sources), results[-1])
+        return results
+    return _evaluate_parallel(sources, settings, jobs, progress)
+
+
+def _evaluate_parallel(sources: Sequence[str], settings: EvalSettings, jobs: int,
+                       progress: Progress | None) -> list[SequenceResult]:
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
+    results: list[SequenceResult | None] = [None] * len(sources)
     ctx = mp.get_context("spawn" if os.name == "nt" else "forkserver")
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker)
-    done = 0
     try:
         futures = {pool.submit(evaluate_source, src, settings): i for i, src in enumerate(sources)}
-        for fut in as_completed(futures):
+        for done, fut in enumerate(as_completed(futures), 1):
             i = futures[fut]
             try:
-                results[i] = fut.result()
+                results[i] = r = fut.result()
             except Exception as exc:  # a worker died
-                results[i] = SequenceResult(source=str(sources[i]), error=f"{sources[i]}: worker failed: {exc}")
-            done += 1
+                results[i] = r = SequenceResult(source=str(sources[i]), error=f"{sources[i]}: worker failed: {exc}")
             if progress:
-                progress(done, len(sources), results[i])  # type: ignore[arg-type]
+                progress(done, len(sources), r)
     except BaseException:
         # Ctrl-C (or any error here): stop the workers now instead of waiting for their sequences
         procs = list(getattr(pool, "_processes", {}).values())
