@@ -10,7 +10,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export ROS_DOMAIN_ID ?= 42
 export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 
-.PHONY: setup demo test lint bench clean
+.PHONY: setup demo test test-fast check lint bench clean
 
 $(BIN)/.installed: requirements.txt requirements-dev.txt setup.py package.xml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -25,12 +25,22 @@ demo: $(BIN)/.installed
 	rm -rf demo_out
 	$(BIN)/riann-bag-eval bags/*.mcap --scenarios realistic --out demo_out
 
+# ruff (style, imports, complexity ≤ 10) on the whole tree, mypy on the package
 lint: $(BIN)/.installed
 	$(BIN)/ruff check .
+	$(BIN)/mypy
 
+# the whole suite: real DDS, BROAD accuracy, colcon (the README's second command)
 test: $(BIN)/.installed lint
 	$(BIN)/python -m pytest
 
+# the tests that need no DDS and are not slow (well under a minute): while you work
+test-fast: $(BIN)/.installed
+	$(BIN)/python -m pytest -m "not ros and not slow" -q
+
+check: lint test-fast
+
+# every benchmark in bench/, short form (bench/run_all.py --full for the BENCHMARKS.md durations)
 bench: $(BIN)/.installed
 	$(BIN)/python bench/run_all.py
 

@@ -218,8 +218,8 @@ def test_evaluate_source_rows_and_rates():
 
 def row(estimator: str, dataset: str, rmse: float, scenario: str = ev.REALISTIC) -> ev.ResultRow:
     return ev.ResultRow(sequence="s", dataset=dataset, source="", scenario=scenario, rate=ev.NATIVE, rate_hz=100.0,
-                        resampled=False, estimator=estimator, estimator_name=estimator, mode="offline", n_samples=1,
-                        n_scored=1, n_unestimated=0, rmse_deg=rmse, max_err_deg=rmse)
+                        resampled=False, estimator=estimator, estimator_name=estimator, mode="offline",
+                        score=ev.Score(n_samples=1, n_scored=1, n_unestimated=0, rmse_deg=rmse, max_err_deg=rmse))
 
 
 def test_aggregate_mean_median_max():

@@ -49,12 +49,12 @@ def aggregate(rows: Iterable[ResultRow], metric: str = "rmse_deg") -> list[Group
     """Per estimator × scenario × dataset × rate: n, mean, median, max, min of the per-sequence ``metric``
     (BROAD's group averaging: RMSE per trial, then the plain mean). With several datasets an ``all`` group
     over every sequence is added."""
-    rows = [r for r in rows if getattr(r, metric) is not None]
+    rows = [r for r in rows if getattr(r.score, metric) is not None]
     groups: dict[tuple[str, str, str, str | float], list[float]] = {}
     datasets = sorted({r.dataset for r in rows})
     for r in rows:
         for d in [r.dataset] + ([ALL_DATASETS] if len(datasets) > 1 else []):
-            groups.setdefault((r.estimator, r.scenario, d, r.rate), []).append(float(getattr(r, metric)))
+            groups.setdefault((r.estimator, r.scenario, d, r.rate), []).append(float(getattr(r.score, metric)))
     order_est = list(dict.fromkeys(r.estimator for r in rows))
     order_scn = scenario_order(r.scenario for r in rows)
     order_ds = [*datasets, ALL_DATASETS]

@@ -22,7 +22,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.scenarios import SCENARIOS, ScenarioPlan
-from riann_ros.evaluation.scoring import Accumulator, error_deg
+from riann_ros.evaluation.scoring import Accumulator, Score, error_deg
 from riann_ros.evaluation.sources import BROAD_SUFFIXES, STREAM_CHUNK, Source, open_source, read_whole, summarise
 from riann_ros.evaluation.specs import EstimatorSpec
 from riann_ros.recording import Recording
@@ -80,14 +80,13 @@ class ResultRow:
     estimator: str  # label
     estimator_name: str
     mode: str
-    n_samples: int
-    n_scored: int
-    n_unestimated: int
-    rmse_deg: float
-    max_err_deg: float
-    heading_rmse_deg: float | None = None
-    total_rmse_deg: float | None = None
+    score: Score
     stats: RunStats = field(default_factory=RunStats)
+
+    @property
+    def rmse_deg(self) -> float:
+        """The inclination RMSE (the metric everything ranks by)."""
+        return self.score.rmse_deg
 
     def to_dict(self) -> dict[str, Any]:
         """The flat row of results.csv / results.json."""
@@ -97,10 +96,7 @@ class ResultRow:
                       "estimator_name", "mode")
         }
         d["seconds"] = self.stats.seconds
-        d.update(n_samples=self.n_samples, n_scored=self.n_scored, n_unestimated=self.n_unestimated,
-                 rmse_deg=self.rmse_deg, max_err_deg=self.max_err_deg)
-        if self.heading_rmse_deg is not None:
-            d.update(heading_rmse_deg=self.heading_rmse_deg, total_rmse_deg=self.total_rmse_deg)
+        d.update((k, v) for k, v in asdict(self.score).items() if v is not None)
         d.update({f"rejected_{k}": v for k, v in self.stats.rejected.items()})
         d.update({f"reset_{k}": v for k, v in self.stats.resets.items()})
         d.update(self.stats.live or {})
@@ -227,28 +223,10 @@ class _ScenarioRun:
         stats = self.run.finish() if self.run is not None else [RunStats() for _ in self.specs]
         rows = []
         for spec, acc, st in zip(self.specs, self.acc, stats, strict=True):
-            s = acc.result()
             rows.append(
-                ResultRow(
-                    sequence=res.name,
-                    dataset=res.dataset,
-                    source=res.source,
-                    scenario=self.plan.scenario,
-                    rate=NATIVE if rate is None else float(rate),
-                    rate_hz=rate_hz,
-                    resampled=rate is not None,
-                    estimator=spec.label,
-                    estimator_name=spec.name,
-                    mode=mode,
-                    n_samples=s.n_samples,
-                    n_scored=s.n_scored,
-                    n_unestimated=s.n_unestimated,
-                    rmse_deg=s.rmse_deg,
-                    max_err_deg=s.max_err_deg,
-                    heading_rmse_deg=s.heading_rmse_deg,
-                    total_rmse_deg=s.total_rmse_deg,
-                    stats=st,
-                )
+                ResultRow(sequence=res.name, dataset=res.dataset, source=res.source, scenario=self.plan.scenario,
+                          rate=NATIVE if rate is None else float(rate), rate_hz=rate_hz, resampled=rate is not None,
+                          estimator=spec.label, estimator_name=spec.name, mode=mode, score=acc.result(), stats=st)
             )
         return rows
 
