@@ -72,7 +72,7 @@ def main() -> int:
         "--estimators",
         args.estimators,
         "--scenarios",
-        "all",
+        "paper",
         "--seed",
         "0",
         "--jobs",

@@ -55,7 +55,7 @@ def test_offline_run_writes_table_and_files(bags, tmp_path, capsys):
     ):
         assert (out / f).is_file(), f
     data = json.loads((out / "results.json").read_text())
-    assert len(data["results"]) == 2 * 3 * 3
+    assert len(data["results"]) == 2 * 3 * 4  # sequences × estimators × scenarios (the paper's three + as-recorded)
     assert data["settings"]["seed"] == 0
     assert data["versions"]["riann_model"]["sha256"]
     seq = {s["name"]: s for s in data["sequences"]}
@@ -113,6 +113,23 @@ def test_bad_inputs_are_named_and_others_still_evaluated(bags, tmp_path, capsys)
         assert str(p) in cap.err, p
     assert "no reference" in cap.err
     assert "no scored samples" in cap.err
+
+
+def test_perturb_conditions_on_the_command_line(bags, tmp_path, capsys):
+    out = tmp_path / "perturbed"
+    args = [str(bags[0]), "-e", "madgwick", "-s", "as-recorded", "-p", "none", "-p", "rate:50+bias:random:1",
+            "--out", str(out), "--no-plots", "-q"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "perturbation" in text and "rate:50+bias:random:1" in text
+    data = json.loads((out / "results.json").read_text())
+    assert data["settings"]["perturbations"] == ["none", "rate:50+bias:random:1"]
+    assert [r["perturbation"] for r in data["results"]] == ["none", "rate:50+bias:random:1"]
+    drawn = data["sequences"][0]["perturbations"]["rate:50+bias:random:1"]["as-recorded"][1]["bias_dps"]
+    assert len(drawn) == 3 and drawn != [0.0, 0.0, 0.0]
+    assert "perturbation" in (out / "results.csv").read_text().splitlines()[0]
+    assert main([str(bags[0]), "-p", "wobble:3"]) == 2
+    assert "bad perturbation 'wobble:3'" in capsys.readouterr().err
 
 
 def test_usage_errors_exit_2(bags, capsys):
@@ -336,13 +353,16 @@ def test_streamed_bag_equals_whole_recording(tmp_path, chunk, t0_ns):
         series_step=7,
         keep_estimates=True,
         chunk=chunk,
+        conditions=[ev.parse_condition("none"),
+                    ev.parse_condition("jitter:10/20/30ms+dropout:0.1-0.6s@3s+bias:random:1")],
     )
     streamed = ev.evaluate_source(bag, settings)
     whole = ev.evaluate_source(bag, settings, recording=ev.load_recording(bag))
     assert streamed.error is None and whole.error is None
     assert (streamed.name, streamed.dataset, streamed.citation) == (whole.name, whole.dataset, whole.citation)
     assert streamed.scenarios == whole.scenarios
-    assert len(streamed.rows) == len(whole.rows) == 4 * 3
+    assert len(streamed.rows) == len(whole.rows) == 4 * 4 * 2
+    assert streamed.perturbations == whole.perturbations
     timing = {"seconds", "cpu_seconds"}
     for ra, rb in zip(streamed.rows, whole.rows, strict=True):
         a, b = ra.to_dict(), rb.to_dict()

@@ -69,6 +69,8 @@ def test_parse_estimators_bool_and_errors():
 
 def test_parse_scenarios():
     assert ev.parse_scenarios("all") == list(ev.SCENARIOS)
+    assert ev.parse_scenarios("paper") == [ev.RESTRICTIVE, ev.PARTIAL, ev.REALISTIC]
+    assert ev.parse_scenarios("as-recorded,raw") == [ev.AS_RECORDED]
     assert ev.parse_scenarios("realistic,partial") == [ev.REALISTIC, ev.PARTIAL]
     with pytest.raises(ValueError, match="unknown scenario"):
         ev.parse_scenarios("easy")
@@ -111,6 +113,37 @@ def test_scenarios_bias_and_start():
 
     other, _ = ev.scenario_recording(rec, ev.PARTIAL, seed=1)
     assert not np.allclose(other.gyr, p.gyr)
+
+
+def test_as_recorded_is_the_recording_as_it_is():
+    rec = synthetic(t0_ns=5_000_000_000)
+    r, info = ev.scenario_recording(rec, ev.AS_RECORDED, seed=0)
+    np.testing.assert_array_equal(r.gyr, rec.gyr)  # turn-on bias kept, nothing added
+    np.testing.assert_array_equal(r.stamps_ns, rec.stamps_ns)
+    assert info.bias_removed_dps == [0.0, 0.0, 0.0] and info.bias_added_dps == [0.0, 0.0, 0.0]
+    assert info.start_index == 0 and info.rest_samples == 200
+
+
+def test_perturbation_conditions_are_an_axis_of_the_evaluation():
+    rec = synthetic(rate=200.0, move_s=20.0)
+    settings = ev.EvalSettings(
+        estimators=ev.parse_estimators("madgwick,vqf"),
+        scenarios=[ev.AS_RECORDED],
+        conditions=[ev.parse_condition("none"), ev.parse_condition("jitter:10/20/30ms+bias:3,3,0")],
+    )
+    res = ev.evaluate_source("x.mcap", settings, recording=rec)
+    assert res.error is None
+    assert [(r.perturbation, r.estimator) for r in res.rows] == [
+        ("none", "madgwick"), ("none", "vqf"),
+        ("jitter:10/20/30ms+bias:3,3,0", "madgwick"), ("jitter:10/20/30ms+bias:3,3,0", "vqf"),
+    ]
+    clean, jittered = res.rows[0], res.rows[2]
+    assert jittered.score.n_samples < clean.score.n_samples / 3  # ~50 Hz from 200 Hz
+    info = res.perturbations["jitter:10/20/30ms+bias:3,3,0"][ev.AS_RECORDED]
+    assert info[0]["samples"] == jittered.score.n_samples and info[1]["bias_dps"] == [3.0, 3.0, 0.0]
+    # the gate of the perturbed stream runs at its own nominal rate (VQF takes its sample time from it)
+    agg = ev.aggregate(res.rows)
+    assert {g.perturbation for g in agg} == {"none", "jitter:10/20/30ms+bias:3,3,0"}
 
 
 def test_scenario_without_rest_removes_nothing():
@@ -205,7 +238,7 @@ def test_evaluate_source_rows_and_rates():
     )
     res = ev.evaluate_source("x.mcap", settings, recording=rec)
     assert res.error is None
-    assert len(res.rows) == 6
+    assert len(res.rows) == 2 * 4
     assert {r.rate_hz for r in res.rows} == {200.0, 100.0}
     assert all(r.rmse_deg < 5.0 for r in res.rows)  # exact synthetic signals: RIANN tracks them
     assert set(res.scenarios) == set(ev.SCENARIOS)

@@ -342,3 +342,15 @@ def test_rmse_sanity_on_broad(broad_trial) -> None:
     for name, limit in limits.items():
         q = create(name).update_batch(rec.acc, rec.gyr, dt)
         assert rmse(rec, q) < limit, name
+
+
+def test_vqf_bias_clip_lets_a_larger_turn_on_bias_be_learned() -> None:
+    n = 3000  # 30 s at rest, level, with a turn-on bias of (3, -3, 1) deg/s
+    acc = np.tile([0.0, 0.0, G], (n, 1))
+    gyr = np.tile(np.radians([3.0, -3.0, 1.0]), (n, 1))
+    default, wide = create("vqf"), create("vqf", bias_clip=8.0)
+    default.update_batch(acc, gyr, np.full(n, 0.01))
+    q = wide.update_batch(acc, gyr, np.full(n, 0.01))
+    assert np.abs(np.degrees(default.bias)).max() <= 2.0 + 1e-9  # clipped, rest never detected
+    np.testing.assert_allclose(np.degrees(wide.bias), [3.0, -3.0, 1.0], atol=0.2)
+    assert np.degrees(quat.inclination_error(quat.IDENTITY, q[-1])) < 0.5

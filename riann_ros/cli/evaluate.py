@@ -42,7 +42,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--estimators", "-e", default=None,
                    help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed)")
     p.add_argument("--scenarios", "-s", default="all",
-                   help="restrictive, partially-restrictive, realistic or all (comma-separated; default all)")
+                   help="restrictive, partially-restrictive, realistic, as-recorded; paper (the first three) or all "
+                   "(comma-separated; default all)")
+    p.add_argument("--perturb", "-p", action="append", default=[], metavar="CONDITION",
+                   help="evaluate under this condition too: 'none', or perturbations joined with '+': "
+                   "jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, bias:random:2 (deg/s), "
+                   "dropout:0.1-0.6s@10s; repeatable, each one a condition (default: none)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random gyro bias (per sequence: seed + name)")
     p.add_argument("--rates", default=None,
                    help="comma-separated sampling rates (Hz) to resample to (FFT), e.g. 50,100,200,500; 'native' "
@@ -119,6 +124,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         scenarios=ev.parse_scenarios(args.scenarios),
         seed=args.seed,
         rates=parse_rates(args.rates),
+        conditions=[ev.parse_condition(c) for c in args.perturb] or [ev.Condition()],
         with_heading=args.heading,
         series_for=None if args.no_plots or not args.out else (args.plot_sequence or "*"),
         keep_estimates=args.write_estimates is not None,

@@ -74,6 +74,10 @@ class AttitudeEstimator(ABC):
     def _on_params_changed(self) -> None:  # noqa: B027 - optional hook, default does nothing
         """Hook for subclasses that cache derived values of their parameters."""
 
+    def diagnostics(self) -> dict[str, str]:
+        """Estimator-specific values for the node's ``/diagnostics`` (e.g. its gyro-bias estimate)."""
+        return {}
+
     # -- estimation -----------------------------------------------------------------------------
     @abstractmethod
     def reset(self) -> None:

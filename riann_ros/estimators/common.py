@@ -13,6 +13,12 @@ from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
 
 Quat = tuple[float, float, float, float]
+BIAS_KEY = "gyro bias estimate (deg/s)"
+
+
+def bias_text(bias_rad_s: ArrayLike) -> str:
+    """A gyro-bias estimate (rad/s) as diagnostics text in °/s."""
+    return ", ".join(f"{v:.3f}" for v in np.degrees(np.asarray(bias_rad_s, dtype=float)))
 
 
 def sanitize_arrays(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> tuple[Array, Array, Array]:

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.common import Quat, as_array, initialise, sanitize
+from riann_ros.estimators.common import BIAS_KEY, Quat, as_array, bias_text, initialise, sanitize
 
 #: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
 DEFAULT_KP = 1.0
@@ -125,6 +125,9 @@ class MahonyEstimator(AttitudeEstimator):
     def bias(self) -> Array:
         """Current gyro-bias estimate (rad/s, sensor frame)."""
         return np.array(self._b)
+
+    def diagnostics(self) -> dict[str, str]:
+        return {BIAS_KEY: bias_text(self._b)}
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
         a, g, h = sanitize(acc, gyr, dt)

@@ -21,9 +21,12 @@ The C++ implementation of the ``vqf`` package (MIT) does the work; this class on
   same numbers as per-sample ``update`` calls.
 * **degenerate input** — a zero (or non-finite) accelerometer sample is skipped by VQF (gyro-only
   step); a non-finite gyro sample counts as zero rate; non-finite or negative dt counts as 0.
-* **parameters** — ``tau_acc`` (VQF ``tauAcc``), ``motion_bias_est`` (``motionBiasEstEnabled``) and
-  ``rest_bias_est`` (``restBiasEstEnabled``), defaults from ``vqf.VQF().params``; all three can change at
-  run time through VQF's own setters (``setTauAcc`` adapts the filter states to the new coefficients).
+* **parameters** — ``tau_acc`` (VQF ``tauAcc``), ``motion_bias_est`` (``motionBiasEstEnabled``),
+  ``rest_bias_est`` (``restBiasEstEnabled``) and ``bias_clip`` (``biasClip``, °/s), defaults from
+  ``vqf.VQF().params``; all but ``bias_clip`` can change at run time through VQF's own setters
+  (``setTauAcc`` adapts the filter states to the new coefficients). ``bias_clip`` matters beyond the
+  clipping: VQF detects rest only while the low-passed gyro stays below it, so with the default 2 °/s a
+  turn-on bias of 3 °/s is learned neither at rest nor, fully, in motion.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from numpy.typing import ArrayLike
 from vqf import VQF
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.common import sanitize_arrays
+from riann_ros.estimators.common import BIAS_KEY, bias_text, sanitize_arrays
 
 DEFAULT_TS = 0.01  # s, used only when the first sample's dt is not positive
 
@@ -41,6 +44,7 @@ DEFAULT_TS = 0.01  # s, used only when the first sample's dt is not positive
 DEFAULT_TAU_ACC = 3.0
 DEFAULT_MOTION_BIAS_EST = True
 DEFAULT_REST_BIAS_EST = True
+DEFAULT_BIAS_CLIP = 2.0  # °/s
 
 
 class VqfEstimator(AttitudeEstimator):
@@ -69,6 +73,15 @@ class VqfEstimator(AttitudeEstimator):
             "Detect rest and estimate the gyro bias at rest (VQF restBiasEstEnabled). Default true = vqf default.",
             runtime=True,
         ),
+        ParamSpec(
+            "bias_clip",
+            DEFAULT_BIAS_CLIP,
+            "deg/s; largest gyro bias VQF estimates (VQF biasClip); rest is only detected while the low-passed gyro "
+            "stays below it, so a turn-on bias above it is never learned. Default 2.0 = the vqf default; raise it "
+            "for sensors with a larger turn-on bias.",
+            min=0.1,
+            max=100.0,
+        ),
     )
 
     def reset(self) -> None:
@@ -91,6 +104,9 @@ class VqfEstimator(AttitudeEstimator):
             return np.zeros(3)
         return np.asarray(self._vqf.getBiasEstimate()[0], dtype=float)
 
+    def diagnostics(self) -> dict[str, str]:
+        return {BIAS_KEY: bias_text(self.bias)}
+
     def _on_params_changed(self) -> None:
         if self._vqf is None:
             return
@@ -107,6 +123,7 @@ class VqfEstimator(AttitudeEstimator):
                 tauAcc=float(self.params["tau_acc"]),
                 motionBiasEstEnabled=bool(self.params["motion_bias_est"]),
                 restBiasEstEnabled=bool(self.params["rest_bias_est"]),
+                biasClip=float(self.params["bias_clip"]),
             )
         return self._vqf, self._ts
 

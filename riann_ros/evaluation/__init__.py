@@ -11,6 +11,7 @@ figures: :mod:`~riann_ros.evaluation.plots`.
 
 from riann_ros.evaluation.aggregate import ALL_DATASETS, Group, aggregate, best_of, rate_order, tune
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.perturb import Condition, parse_condition, parse_perturbation
 from riann_ros.evaluation.run import (
     NATIVE,
     EvalSettings,
@@ -22,7 +23,9 @@ from riann_ros.evaluation.run import (
     evaluate_sources,
 )
 from riann_ros.evaluation.scenarios import (
+    AS_RECORDED,
     BIAS_STD_DPS,
+    PAPER_SCENARIOS,
     PARTIAL,
     REALISTIC,
     RESTRICTIVE,
@@ -48,14 +51,17 @@ from riann_ros.evaluation.specs import (
 
 __all__ = [
     "ALL_DATASETS",
+    "AS_RECORDED",
     "BIAS_STD_DPS",
     "BROAD_SUFFIXES",
     "NATIVE",
+    "PAPER_SCENARIOS",
     "PARTIAL",
     "REALISTIC",
     "RESTRICTIVE",
     "SCENARIOS",
     "Accumulator",
+    "Condition",
     "EstimatorSpec",
     "EvalError",
     "EvalSettings",
@@ -77,9 +83,11 @@ __all__ = [
     "load_recording",
     "make_label",
     "open_source",
+    "parse_condition",
     "parse_estimator",
     "parse_estimators",
     "parse_grid",
+    "parse_perturbation",
     "parse_scenarios",
     "random_bias",
     "rate_order",

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.run import NATIVE, EvalSettings, Progress, ResultRow, evaluate_sources
 from riann_ros.evaluation.scenarios import SCENARIOS
 from riann_ros.evaluation.specs import EstimatorSpec, grid_specs, make_label, parse_grid
@@ -18,7 +19,7 @@ ALL_DATASETS = "all"
 
 @dataclass
 class Group:
-    """Statistics of the per-sequence RMSEs of one estimator × scenario × dataset × rate."""
+    """Statistics of the per-sequence RMSEs of one estimator × scenario × perturbation × dataset × rate."""
 
     estimator: str
     scenario: str
@@ -29,6 +30,7 @@ class Group:
     median: float
     max: float
     min: float
+    perturbation: str = NONE
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -46,33 +48,37 @@ def scenario_order(scenarios: Iterable[str]) -> list[str]:
 
 
 def aggregate(rows: Iterable[ResultRow], metric: str = "rmse_deg") -> list[Group]:
-    """Per estimator × scenario × dataset × rate: n, mean, median, max, min of the per-sequence ``metric``
-    (BROAD's group averaging: RMSE per trial, then the plain mean). With several datasets an ``all`` group
-    over every sequence is added."""
+    """Per estimator × scenario × perturbation × dataset × rate: n, mean, median, max, min of the per-sequence
+    ``metric`` (BROAD's group averaging: RMSE per trial, then the plain mean). With several datasets an ``all``
+    group over every sequence is added."""
     rows = [r for r in rows if getattr(r.score, metric) is not None]
-    groups: dict[tuple[str, str, str, str | float], list[float]] = {}
+    groups: dict[tuple[str, str, str, str, str | float], list[float]] = {}
     datasets = sorted({r.dataset for r in rows})
     for r in rows:
         for d in [r.dataset] + ([ALL_DATASETS] if len(datasets) > 1 else []):
-            groups.setdefault((r.estimator, r.scenario, d, r.rate), []).append(float(getattr(r.score, metric)))
+            key = (r.estimator, r.scenario, r.perturbation, d, r.rate)
+            groups.setdefault(key, []).append(float(getattr(r.score, metric)))
     order_est = list(dict.fromkeys(r.estimator for r in rows))
     order_scn = scenario_order(r.scenario for r in rows)
+    order_prt = list(dict.fromkeys(r.perturbation for r in rows))
     order_ds = [*datasets, ALL_DATASETS]
 
-    def key(kv: tuple[tuple[str, str, str, str | float], list[float]]) -> tuple:
-        est, scn, ds, rate = kv[0]
-        return (order_scn.index(scn), order_ds.index(ds), rate_order(rate), order_est.index(est))
+    def order(kv: tuple[tuple[str, str, str, str, str | float], list[float]]) -> tuple:
+        est, scn, prt, ds, rate = kv[0]
+        return (order_scn.index(scn), order_prt.index(prt), order_ds.index(ds), rate_order(rate),
+                order_est.index(est))
 
     out = []
-    for (est, scn, ds, rate), vals in sorted(groups.items(), key=key):
+    for (est, scn, prt, ds, rate), vals in sorted(groups.items(), key=order):
         v = np.asarray(vals)
         out.append(Group(est, scn, ds, rate, len(v), float(v.mean()), float(np.median(v)), float(v.max()),
-                         float(v.min())))
+                         float(v.min()), prt))
     return out
 
 
 def best_of(rows: Iterable[ResultRow], specs: list[EstimatorSpec], scenario: str) -> dict[str, Any]:
-    """The spec with the lowest mean RMSE over the sequences in ``scenario`` (all rates pooled)."""
+    """The spec with the lowest mean RMSE over the sequences in ``scenario`` (all rates and perturbations
+    pooled)."""
     by_label: dict[str, list[float]] = {}
     for r in rows:
         if r.scenario == scenario:

@@ -19,6 +19,8 @@ from typing import Any, TextIO
 import numpy as np
 
 from riann_ros.evaluation.aggregate import Group, aggregate, rate_order, scenario_order
+from riann_ros.evaluation.perturb import DEFINITIONS as PERTURB_DEFINITIONS
+from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.run import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
 
@@ -26,6 +28,7 @@ CSV_FIELDS = (
     "sequence",
     "dataset",
     "scenario",
+    "perturbation",
     "rate",
     "rate_hz",
     "estimator",
@@ -84,17 +87,25 @@ def rate_label(rate: str | float) -> str:
     return str(rate) if rate == NATIVE else f"{float(rate):g}"
 
 
-def format_table(agg: Sequence[Group], title: str = "attitude RMSE e_α (°) per sequence") -> str:
-    """Estimator × scenario × dataset (× rate when several): n, mean / median / max RMSE."""
-    if not agg:
-        return "(no results)"
+def _cells(agg: Sequence[Group]) -> tuple[list[str], list[list[str]]]:
+    """Headers and cells of the summary table: perturbation and rate columns only when they vary."""
+    prt = len({a.perturbation for a in agg}) > 1
     multi = len({a.rate for a in agg}) > 1
-    headers = ["scenario", "dataset", *(["rate"] if multi else []), "estimator", "n", "mean", "median", "max"]
-    lines = [
-        [a.scenario, a.dataset, *([rate_label(a.rate)] if multi else []), a.estimator, str(a.n), f"{a.mean:.2f}",
-         f"{a.median:.2f}", f"{a.max:.2f}"]
+    headers = ["scenario", *(["perturbation"] if prt else []), "dataset", *(["rate"] if multi else []), "estimator",
+               "n", "mean", "median", "max"]
+    rows = [
+        [a.scenario, *([a.perturbation] if prt else []), a.dataset, *([rate_label(a.rate)] if multi else []),
+         a.estimator, str(a.n), f"{a.mean:.2f}", f"{a.median:.2f}", f"{a.max:.2f}"]
         for a in agg
     ]
+    return headers, rows
+
+
+def format_table(agg: Sequence[Group], title: str = "attitude RMSE e_α (°) per sequence") -> str:
+    """Estimator × scenario × dataset (× perturbation, × rate when several): n, mean / median / max RMSE."""
+    if not agg:
+        return "(no results)"
+    headers, lines = _cells(agg)
     widths = [max(len(h), *(len(r[i]) for r in lines)) for i, h in enumerate(headers)]
     numeric = {"n", "mean", "median", "max", "rate"}
 
@@ -106,7 +117,7 @@ def format_table(agg: Sequence[Group], title: str = "attitude RMSE e_α (°) per
     out = [title, fmt(headers), "  ".join("-" * w for w in widths)]
     prev = None
     for row, a in zip(lines, agg, strict=True):
-        key = (a.scenario, a.dataset, a.rate)
+        key = (a.scenario, a.perturbation, a.dataset, a.rate)
         if prev is not None and key != prev:
             out.append("")
         prev = key
@@ -115,14 +126,12 @@ def format_table(agg: Sequence[Group], title: str = "attitude RMSE e_α (°) per
 
 
 def format_markdown_table(agg: Sequence[Group]) -> str:
-    multi = len({a.rate for a in agg}) > 1
-    head = "| scenario | dataset | " + ("rate Hz | " if multi else "") + "estimator | n | mean ° | median ° | max ° |"
-    sep = "|---|---|" + ("---:|" if multi else "") + "---|---:|---:|---:|---:|"
-    out = [head, sep]
-    for a in agg:
-        rate = f"{rate_label(a.rate)} | " if multi else ""
-        stats = f"{a.n} | {a.mean:.2f} | {a.median:.2f} | {a.max:.2f}"
-        out.append(f"| {a.scenario} | {a.dataset} | {rate}{a.estimator} | {stats} |")
+    headers, rows = _cells(agg)
+    units = {"mean": "mean °", "median": "median °", "max": "max °", "rate": "rate Hz"}
+    numeric = {"n", "mean", "median", "max", "rate"}
+    out = ["| " + " | ".join(units.get(h, h) for h in headers) + " |",
+           "|" + "".join("---:|" if h in numeric else "---|" for h in headers)]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
     return "\n".join(out)
 
 
@@ -162,9 +171,11 @@ class Report:
             "scenarios": s.scenarios,
             "seed": s.seed,
             "rates": s.rates,
+            "perturbations": [c.label for c in s.conditions],
             "jobs": self.jobs,
             "bias_std_dps": BIAS_STD_DPS,
             "scenario_definition": {k: v for k, v in DEFINITIONS.items() if k in s.scenarios},
+            "perturbation_definition": PERTURB_DEFINITIONS,
             "metric": METRIC,
         }
 
@@ -177,7 +188,7 @@ class Report:
             "summary": [g.to_dict() for g in self.summary],
             "sequences": [
                 {"source": r.source, "name": r.name, "dataset": r.dataset, "seconds": r.seconds,
-                 "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios}
+                 "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios, "perturbations": r.perturbations}
                 for r in self.results
                 if not r.error
             ],
@@ -246,16 +257,17 @@ def write_json(path: Path, payload: dict[str, Any]) -> None:
 def _per_sequence(rows: Sequence[ResultRow]) -> list[str]:
     lines: list[str] = []
     ests = list(dict.fromkeys(r.estimator for r in rows))
-    rmse = {(r.sequence, r.scenario, r.estimator, r.rate): r.rmse_deg for r in rows}
-    for scn in scenario_order(r.scenario for r in rows):
-        for rate in sorted({r.rate for r in rows if r.scenario == scn}, key=rate_order):
-            unit = "" if rate == NATIVE else " Hz"
-            lines += [f"### {scn}, {rate_label(rate)}{unit}", "", "| sequence | " + " | ".join(ests) + " |",
-                      "|---|" + "---:|" * len(ests)]
-            for seq in dict.fromkeys(r.sequence for r in rows if r.scenario == scn):
-                cells = [rmse.get((seq, scn, e, rate)) for e in ests]
-                lines.append(f"| {seq} | " + " | ".join("–" if v is None else f"{v:.2f}" for v in cells) + " |")
-            lines.append("")
+    rmse = {(r.sequence, r.scenario, r.perturbation, r.estimator, r.rate): r.rmse_deg for r in rows}
+    tables = dict.fromkeys((r.scenario, r.perturbation, r.rate) for r in rows)
+    order = scenario_order(r.scenario for r in rows)
+    for scn, prt, rate in sorted(tables, key=lambda k: (order.index(k[0]), rate_order(k[2]))):
+        unit = "" if rate == NATIVE else " Hz"
+        title = f"### {scn}, {rate_label(rate)}{unit}" + ("" if prt == NONE else f", {prt}")
+        lines += [title, "", "| sequence | " + " | ".join(ests) + " |", "|---|" + "---:|" * len(ests)]
+        for seq in dict.fromkeys(r.sequence for r in rows if (r.scenario, r.perturbation, r.rate) == (scn, prt, rate)):
+            cells = [rmse.get((seq, scn, prt, e, rate)) for e in ests]
+            lines.append(f"| {seq} | " + " | ".join("–" if v is None else f"{v:.2f}" for v in cells) + " |")
+        lines.append("")
     return lines
 
 
@@ -264,7 +276,8 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
     s = report.settings
     rates = ", ".join("native" if r is None else f"{r:g} Hz" for r in s.rates)
     lines = ["# riann-bag-eval report", "", f"Command: `{report.command}`", "",
-             f"Scenarios: {', '.join(s.scenarios)}; seed {s.seed}; rates: {rates}.",
+             f"Scenarios: {', '.join(s.scenarios)}; seed {s.seed}; rates: {rates}; perturbations: "
+             f"{', '.join(c.label for c in s.conditions)}.",
              "Metric: RMSE of the inclination error e_α (heading ignored, paper eq. 3) over the scored samples "
              "with a reference; table values summarise the per-sequence RMSEs."]
     citations = sorted({r.citation for r in report.results if r.citation and not r.error})

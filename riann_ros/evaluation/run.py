@@ -3,8 +3,9 @@
 For each input and rate, a :class:`~riann_ros.evaluation.sources.Source` yields chunks (a bag chunk by
 chunk; a BROAD file or a resampled recording as one chunk); after a first pass
 (:func:`~riann_ros.evaluation.sources.summarise`) each chunk goes through every scenario's
-:class:`~riann_ros.evaluation.scenarios.ScenarioPlan`, into a runner, and the runner's estimates into
-one :class:`~riann_ros.evaluation.scoring.Accumulator` per scenario × estimator. A whole recording is
+:class:`~riann_ros.evaluation.scenarios.ScenarioPlan`, then each condition's perturbations
+(:mod:`~riann_ros.evaluation.perturb`), into a runner, and the runner's estimates into one
+:class:`~riann_ros.evaluation.scoring.Accumulator` per condition × scenario × estimator. A whole recording is
 the one-chunk case of the same code, so streamed and whole evaluations cannot disagree.
 
 The runner is where the estimates come from:
@@ -31,7 +32,8 @@ from numpy.typing import NDArray
 
 from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.evaluation.errors import EvalError
-from riann_ros.evaluation.scenarios import SCENARIOS, ScenarioPlan
+from riann_ros.evaluation.perturb import NONE, Condition, Transform
+from riann_ros.evaluation.scenarios import PAPER_SCENARIOS, ScenarioPlan, sequence_seed
 from riann_ros.evaluation.scoring import Accumulator, Score, error_deg
 from riann_ros.evaluation.sources import BROAD_SUFFIXES, STREAM_CHUNK, Source, open_source, read_whole, summarise
 from riann_ros.evaluation.specs import EstimatorSpec
@@ -45,9 +47,10 @@ SERIES_POINTS = 6000  # points per curve kept for the error-over-time plot
 @dataclass
 class EvalSettings:
     estimators: list[EstimatorSpec]
-    scenarios: list[str] = field(default_factory=lambda: list(SCENARIOS))
+    scenarios: list[str] = field(default_factory=lambda: list(PAPER_SCENARIOS))
     seed: int = 0
     rates: list[float | None] = field(default_factory=lambda: [None])  # None = the recording's own rate
+    conditions: list[Condition] = field(default_factory=lambda: [Condition()])  # perturbations; () = none
     with_heading: bool = False
     series_for: str | None = None  # sequence name whose error-over-time series is kept ("*" = first)
     series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
@@ -81,6 +84,7 @@ class ResultRow:
     estimator_name: str
     mode: str
     score: Score
+    perturbation: str = NONE  # the condition's label
     stats: RunStats = field(default_factory=RunStats)
 
     @property
@@ -92,8 +96,8 @@ class ResultRow:
         """The flat row of results.csv / results.json."""
         d: dict[str, Any] = {
             k: getattr(self, k)
-            for k in ("sequence", "dataset", "source", "scenario", "rate", "rate_hz", "resampled", "estimator",
-                      "estimator_name", "mode")
+            for k in ("sequence", "dataset", "source", "scenario", "perturbation", "rate", "rate_hz", "resampled",
+                      "estimator", "estimator_name", "mode")
         }
         d["seconds"] = self.stats.seconds
         d.update((k, v) for k, v in asdict(self.score).items() if v is not None)
@@ -112,6 +116,7 @@ class SequenceResult:
     error: str | None = None
     rows: list[ResultRow] = field(default_factory=list)
     scenarios: dict[str, Any] = field(default_factory=dict)  # scenario → ScenarioInfo dict
+    perturbations: dict[str, Any] = field(default_factory=dict)  # condition → scenario → what each part did
     series: dict[str, Any] | None = None
     estimates: dict[str, Any] | None = None  # first scenario: {"scenario", "stamps", "quats": {label: (N, 4)}}
     seconds: float = 0.0
@@ -184,15 +189,25 @@ class OfflineRunner:
 # the pipeline
 # ---------------------------------------------------------------------------------------------------
 class _ScenarioRun:
-    """One scenario of one sequence at one rate: the plan, its runner run, one accumulator per estimator."""
+    """One condition × scenario of one sequence at one rate: the scenario plan, the condition's transforms, the
+    runner's run and one accumulator per estimator."""
 
-    def __init__(self, plan: ScenarioPlan, slot: int, settings: EvalSettings, series: bool, estimates: bool) -> None:
+    def __init__(self, plan: ScenarioPlan, condition: Condition, slot: int, settings: EvalSettings, name: str,
+                 series: bool, estimates: bool) -> None:
         self.plan = plan
+        self.condition = condition
         self.slot = slot
         self.specs = settings.estimators
+        rngs = [np.random.default_rng(sequence_seed(settings.seed, f"{name}:{condition.label}:{k}"))
+                for k in range(len(condition.parts))]
+        self.transforms: list[Transform] = condition.start(rngs)
+        rate = plan.gate.nominal_rate
+        self.gate = GateConfig.for_rate(condition.nominal_rate(rate)) if condition.parts else plan.gate
         self.acc = [Accumulator(settings.with_heading) for _ in self.specs]
         self.run: Run | None = None
-        self.step = settings.series_step if settings.series_step > 0 else -(-plan.length // SERIES_POINTS)
+        self.fed = 0  # samples fed so far
+        length = plan.length * (condition.nominal_rate(rate) / rate if condition.parts else 1.0)
+        self.step = settings.series_step if settings.series_step > 0 else max(1, -(-int(length) // SERIES_POINTS))
         self.series = series
         self.curves: list[list[NDArray[np.float32]]] = [[] for _ in self.specs]
         self.t: list[NDArray[np.float32]] = []
@@ -200,35 +215,44 @@ class _ScenarioRun:
         self.estimates: list[tuple[NDArray[np.int64], list[NDArray[np.float64]]]] | None = [] if estimates else None
 
     def begin(self, runner: Runner) -> None:
-        self.run = runner.start(self.specs, self.plan.gate, self.slot)
+        self.run = runner.start(self.specs, self.gate, self.slot)
 
     def feed(self, chunk: Recording, offset: int) -> None:
-        piece = self.plan.apply(chunk, offset)
-        if piece is None or self.run is None:
+        rec = self.plan.apply(chunk, offset)
+        for tr in self.transforms:
+            if rec is None or not len(rec):
+                return
+            rec = tr(rec)
+        if rec is None or not len(rec) or self.run is None:
             return
-        rec = piece.rec
         qs = self.run.feed(rec)
         for acc, q in zip(self.acc, qs, strict=True):
             acc.add(rec.quat_ref, rec.score_mask, q)
         if self.series and rec.quat_ref is not None:
-            pick = slice((-piece.local) % self.step, None, self.step)
+            pick = slice((-self.fed) % self.step, None, self.step)
             for curve, q in zip(self.curves, qs, strict=True):
                 curve.append(error_deg(rec.quat_ref[pick], q[pick]).astype(np.float32))
             self.t.append(((rec.stamps_ns[pick] - self.plan.first_stamp) * 1e-9).astype(np.float32))
             self.scored.append(rec.score_mask[pick])
         if self.estimates is not None:
-            self.estimates.append((piece.stamps, qs))
+            self.estimates.append((rec.stamps_ns - self.plan.shift, qs))
+        self.fed += len(rec)
 
     def rows(self, res: SequenceResult, rate: float | None, rate_hz: float, mode: str) -> list[ResultRow]:
         stats = self.run.finish() if self.run is not None else [RunStats() for _ in self.specs]
-        rows = []
-        for spec, acc, st in zip(self.specs, self.acc, stats, strict=True):
-            rows.append(
-                ResultRow(sequence=res.name, dataset=res.dataset, source=res.source, scenario=self.plan.scenario,
-                          rate=NATIVE if rate is None else float(rate), rate_hz=rate_hz, resampled=rate is not None,
-                          estimator=spec.label, estimator_name=spec.name, mode=mode, score=acc.result(), stats=st)
-            )
-        return rows
+        label = self.condition.label
+        if self.transforms:
+            res.perturbations.setdefault(label, {})[self.plan.scenario] = [
+                {"perturbation": p.text(), **tr.info()} for p, tr in zip(self.condition.parts, self.transforms,
+                                                                         strict=True)
+            ]
+        return [
+            ResultRow(sequence=res.name, dataset=res.dataset, source=res.source, scenario=self.plan.scenario,
+                      rate=NATIVE if rate is None else float(rate), rate_hz=rate_hz, resampled=rate is not None,
+                      estimator=spec.label, estimator_name=spec.name, mode=mode, score=acc.result(), stats=st,
+                      perturbation=label)
+            for spec, acc, st in zip(self.specs, self.acc, stats, strict=True)
+        ]
 
     def keep_series(self, res: SequenceResult) -> None:
         if res.series is None:
@@ -258,11 +282,12 @@ def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runn
         res.name, res.dataset, res.citation = summary.name, summary.dataset, summary.citation
     native = rate is None
     want_series = native and settings.series_for is not None and settings.series_for in ("*", res.name)
-    runs = [
-        _ScenarioRun(ScenarioPlan(scn, summary, settings.seed), slot, settings, want_series,
-                     native and settings.keep_estimates and slot == 0)
-        for slot, scn in enumerate(settings.scenarios)
-    ]
+    runs = []
+    for c, condition in enumerate(settings.conditions):
+        for s, scn in enumerate(settings.scenarios):
+            slot = c * len(settings.scenarios) + s
+            runs.append(_ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, res.name,
+                                     want_series and c == 0, native and settings.keep_estimates and slot == 0))
     for run in runs:
         res.scenarios.setdefault(run.plan.scenario, run.plan.info.to_dict())
     for group in [runs] if runner.interleaved else [[r] for r in runs]:
@@ -276,7 +301,7 @@ def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runn
         rate_hz = round(summary.rate_all, 3)
         for run in group:
             res.rows.extend(run.rows(res, rate, rate_hz, runner.mode))
-            if want_series:
+            if run.series:
                 run.keep_series(res)
             if run.estimates is not None:
                 run.keep_estimates(res)

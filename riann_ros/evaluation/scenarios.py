@@ -12,6 +12,8 @@ Paper, section "Performance Evaluation":
 - ``realistic`` — the ``partially-restrictive`` signals (de-biased, plus the same random bias; the
   paper: "the same gyroscope bias as in the partially restrictive scenario") with the initial rest cut
   away: the sequence starts at the first scored sample, in motion.
+- ``as-recorded`` (not in the paper) — the recording exactly as it is: no bias removed, none added,
+  estimators run from the first sample, scored on the score mask. What a user's own bag is.
 
 A :class:`ScenarioPlan` is made from the source's :class:`~riann_ros.evaluation.sources.Summary` and
 applied to each chunk in turn (:meth:`ScenarioPlan.apply`), so a bag never has to be held whole.
@@ -32,7 +34,9 @@ from riann_ros.stream import GateConfig
 RESTRICTIVE = "restrictive"
 PARTIAL = "partially-restrictive"
 REALISTIC = "realistic"
-SCENARIOS = (RESTRICTIVE, PARTIAL, REALISTIC)
+AS_RECORDED = "as-recorded"
+SCENARIOS = (RESTRICTIVE, PARTIAL, REALISTIC, AS_RECORDED)
+PAPER_SCENARIOS = (RESTRICTIVE, PARTIAL, REALISTIC)
 BIAS_STD_DPS = 0.5  # °/s, paper: N(0, 0.5 °/s) per axis
 STAMP_OFFSET_NS = 1_000_000_000  # added when a sequence starts at stamp ≤ 0 (the gate rejects stamp 0)
 
@@ -42,6 +46,7 @@ DEFINITIONS = {
     PARTIAL: "restrictive + constant gyro bias per axis ~ N(0, 0.5 deg/s), seeded per sequence "
     "(sha256 of '<seed>:<sequence name>')",
     REALISTIC: "partially-restrictive signals (same bias) starting at the first scored sample",
+    AS_RECORDED: "the recording as it is from its first sample: no bias removed or added",
 }
 
 
@@ -49,12 +54,14 @@ def parse_scenarios(text: str) -> list[str]:
     items = [s.strip().lower() for s in text.split(",") if s.strip()]
     if items == ["all"]:
         return list(SCENARIOS)
-    aliases = {"partial": PARTIAL, "partially_restrictive": PARTIAL}
+    if items == ["paper"]:
+        return list(PAPER_SCENARIOS)
+    aliases = {"partial": PARTIAL, "partially_restrictive": PARTIAL, "as_recorded": AS_RECORDED, "raw": AS_RECORDED}
     out = []
     for s in items:
         s = aliases.get(s, s)
         if s not in SCENARIOS:
-            raise ValueError(f"unknown scenario {s!r}; known: {', '.join(SCENARIOS)}, all")
+            raise ValueError(f"unknown scenario {s!r}; known: {', '.join(SCENARIOS)}, paper (the first three), all")
         if s not in out:
             out.append(s)
     if not out:
@@ -86,15 +93,6 @@ class ScenarioInfo:
         return asdict(self)
 
 
-@dataclass
-class Piece:
-    """One chunk after the scenario transform."""
-
-    rec: Recording  # the scenario's samples (gyro de-biased / biased, stamps shifted off zero)
-    stamps: NDArray[np.int64]  # the same samples' stamps in the source (not shifted)
-    local: int  # index of the first sample in the scenario sequence
-
-
 class ScenarioPlan:
     """One scenario of one sequence: where it starts, which biases it removes and adds, the stamp shift."""
 
@@ -103,7 +101,7 @@ class ScenarioPlan:
             raise ValueError(f"unknown scenario {scenario!r}")
         self.scenario = scenario
         self.start = summary.i0 if scenario == REALISTIC else 0
-        self.removed = summary.rest_gyr_mean
+        self.removed = np.zeros(3) if scenario == AS_RECORDED else summary.rest_gyr_mean
         self.added = random_bias(seed, summary.name) if scenario in (PARTIAL, REALISTIC) else np.zeros(3)
         first = summary.stamp_i0 if self.start else summary.first_stamp
         self.shift = STAMP_OFFSET_NS - first if first <= 0 else 0
@@ -120,16 +118,16 @@ class ScenarioPlan:
             bias_added_dps=np.degrees(self.added).round(6).tolist(),
         )
 
-    def apply(self, chunk: Recording, offset: int) -> Piece | None:
-        """The part of ``chunk`` (whose first sample has the global index ``offset``) in this scenario."""
+    def apply(self, chunk: Recording, offset: int) -> Recording | None:
+        """The part of ``chunk`` (whose first sample has the global index ``offset``) in this scenario: gyro
+        de-biased and biased, stamps shifted off zero (``shift``)."""
         k = max(0, self.start - offset)
         if k >= len(chunk):
             return None
         c = chunk.slice(k) if k else chunk
-        stamps = c.stamps_ns
         gyr = c.gyr - self.removed + self.added
-        rec = Recording(
-            stamps_ns=stamps + self.shift if self.shift else stamps,
+        return Recording(
+            stamps_ns=c.stamps_ns + self.shift if self.shift else c.stamps_ns,
             acc=c.acc,
             gyr=gyr,
             quat_ref=c.quat_ref,
@@ -140,7 +138,6 @@ class ScenarioPlan:
             frame_id=c.frame_id,
             meta=c.meta,
         )
-        return Piece(rec, stamps, offset + k - self.start)
 
 
 def scenario_recording(rec: Recording, scenario: str, seed: int = 0) -> tuple[Recording, ScenarioInfo]:
@@ -148,7 +145,7 @@ def scenario_recording(rec: Recording, scenario: str, seed: int = 0) -> tuple[Re
     from riann_ros.evaluation.sources import Source, summarise
 
     plan = ScenarioPlan(scenario, summarise(Source(rec.name, rec)), seed)
-    piece = plan.apply(rec, 0)
-    if piece is None:  # pragma: no cover - summarise guarantees scored samples, so the start is inside
+    out = plan.apply(rec, 0)
+    if out is None:  # pragma: no cover - summarise guarantees scored samples, so the start is inside
         raise ValueError(f"{rec.name}: empty {scenario} sequence")
-    return piece.rec, plan.info
+    return out, plan.info

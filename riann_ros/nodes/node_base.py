@@ -250,6 +250,7 @@ class EstimatorNode(Node):
             "processing time p99 (us)": f"{np.percentile(proc, 99):.1f}" if len(proc) else "nan",
             "processing time max (us)": f"{proc.max():.1f}" if len(proc) else "nan",
         }
+        values.update(self.stream.estimator.diagnostics())
         for reason in st.REJECT_REASONS:
             values[f"rejected {reason} (total)"] = str(gate.rejected[reason])
         for cause in (st.GAP, st.CLOCK_JUMP):

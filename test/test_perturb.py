@@ -1,0 +1,125 @@
+"""Perturbations of the evaluator (riann_ros.evaluation.perturb): jitter, rate, bias, dropout, conditions."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from riann_ros import quaternion as quat
+from riann_ros.evaluation import perturb as pt
+from riann_ros.recording import Recording
+
+
+def linear(n: int = 2000, rate: float = 200.0, t0_ns: int = 10**9) -> Recording:
+    """acc and gyr linear in time (so interval means are known exactly), a slowly turning reference."""
+    t = np.arange(n) / rate
+    acc = np.column_stack([1.0 + 2.0 * t, -0.5 * t, 9.81 + 0 * t])
+    gyr = np.column_stack([0.1 * t, 0.2 + 0 * t, -0.3 * t])
+    ref = quat.from_rotvec(np.column_stack([0.1 * t, 0 * t, 0 * t]))
+    mask = (t % 10.0) > 2.0  # 2 s of rest every 10 s
+    stamps = t0_ns + np.round(t * 1e9).astype(np.int64)
+    return Recording(stamps, acc, gyr, ref, mask, name="lin")
+
+
+def run(p: pt.Perturbation, rec: Recording, chunks: list[int] | None = None, seed: int = 0) -> tuple[Recording, dict]:
+    tr = p.start(np.random.default_rng(seed))
+    bounds = [0, *(chunks or []), len(rec)]
+    parts = [tr(rec.slice(a, b)) for a, b in itertools.pairwise(bounds)]
+    return pt._concat(*[q for q in parts if len(q)]), tr.info()
+
+
+def test_parse_conditions_and_errors():
+    c = pt.parse_condition("jitter:10/20/30ms+bias:3,3,0")
+    assert c.label == "jitter:10/20/30ms+bias:3,3,0"
+    assert c.nominal_rate(285.7) == pytest.approx(50.0)
+    assert pt.parse_condition("none").label == "none" and pt.parse_condition("").parts == ()
+    assert pt.parse_perturbation("jitter:8-32ms") == pt.Jitter(lo=0.008, hi=0.032)
+    assert pt.parse_perturbation("rate:50").text() == "rate:50"
+    assert pt.parse_perturbation("bias:random:2") == pt.Bias(sigma=2.0)
+    assert pt.parse_perturbation("bias:-1,0.5,0").text() == "bias:-1,0.5,0"
+    assert pt.parse_perturbation("dropout:0.1-0.6s@10s") == pt.Dropout(0.1, 0.6, 10.0)
+    for bad in ("jitter:0ms", "jitter:30-10ms", "rate:-5", "bias:1,2", "dropout:0.6-0.1s@10s", "noise:1"):
+        with pytest.raises(ValueError, match="bad perturbation"):
+            pt.parse_perturbation(bad)
+
+
+def test_jitter_intervals_from_the_set_and_exact_interval_means():
+    rec = linear()
+    out, info = run(pt.parse_perturbation("jitter:10/20/30ms"), rec)
+    steps = np.diff(out.stamps_ns)
+    assert set(steps.tolist()) == {10_000_000, 20_000_000, 30_000_000}
+    assert info["samples"] == len(out) and abs(np.mean(steps) - 2e7) < 1e6
+    assert out.stamps_ns[0] == rec.stamps_ns[0] and out.stamps_ns[-1] <= rec.stamps_ns[-1]
+    # a linear signal's mean over (a, b] is its value at (a + b) / 2
+    mid = 0.5 * (out.stamps_ns[1:] + out.stamps_ns[:-1])
+    t_mid = (mid - rec.stamps_ns[0]) * 1e-9
+    np.testing.assert_allclose(out.acc[1:, 0], 1.0 + 2.0 * t_mid, atol=1e-9)
+    np.testing.assert_allclose(out.gyr[1:, 2], -0.3 * t_mid, atol=1e-9)
+    # the reference is slerped at the sample time, the mask is the nearest sample's
+    t = (out.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    np.testing.assert_allclose(quat.total_error(out.quat_ref, quat.from_rotvec(np.outer(0.1 * t, [1, 0, 0]))), 0,
+                               atol=1e-9)
+    assert (out.score_mask == ((t % 10.0) > 2.0)).mean() > 0.99
+
+
+def test_jitter_range_averages_a_fast_signal_and_upsamples_a_slow_one():
+    rec = linear()
+    out, _ = run(pt.parse_perturbation("jitter:8-32ms"), rec)
+    steps = np.diff(out.stamps_ns)
+    assert steps.min() >= 8_000_000 and steps.max() <= 32_000_000 and len(set(steps.tolist())) > 100
+    fast, _ = run(pt.parse_perturbation("rate:1000"), rec)  # 5x the recording's rate: linear interpolation
+    assert set(np.diff(fast.stamps_ns).tolist()) == {1_000_000}
+    t = (fast.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    np.testing.assert_allclose(fast.gyr[1:, 0], 0.1 * (t[1:] - 0.0005), atol=1e-9)
+
+
+def test_rate_gives_exact_ns_stamps():
+    rec = linear()
+    out, _ = run(pt.parse_perturbation("rate:50"), rec)
+    assert set(np.diff(out.stamps_ns).tolist()) == {20_000_000}
+    third, _ = run(pt.parse_perturbation("rate:300"), rec)
+    assert set(np.diff(third.stamps_ns).tolist()) == {3_333_333, 3_333_334}
+    k = np.arange(len(third))
+    np.testing.assert_array_equal(third.stamps_ns, rec.stamps_ns[0] + np.round(k * 1e9 / 300).astype(np.int64))
+
+
+@pytest.mark.parametrize("text", ["jitter:10/20/30ms", "jitter:3-7ms", "rate:77", "dropout:0.1-0.6s@2s",
+                                  "bias:random:2"])
+def test_chunked_equals_whole(text):
+    rec = linear(n=5000)
+    whole, info_w = run(pt.parse_perturbation(text), rec, seed=5)
+    chunked, info_c = run(pt.parse_perturbation(text), rec, [1, 2, 700, 701, 2500, 4999], seed=5)
+    np.testing.assert_array_equal(chunked.stamps_ns, whole.stamps_ns)
+    np.testing.assert_allclose(chunked.acc, whole.acc, atol=1e-9)
+    np.testing.assert_allclose(chunked.gyr, whole.gyr, atol=1e-9)
+    np.testing.assert_allclose(chunked.quat_ref, whole.quat_ref, atol=1e-9)
+    np.testing.assert_array_equal(chunked.score_mask, whole.score_mask)
+    assert info_c == info_w
+
+
+def test_bias_constant_and_random_per_seed():
+    rec = linear()
+    out, info = run(pt.parse_perturbation("bias:3,3,0"), rec)
+    np.testing.assert_allclose(out.gyr - rec.gyr, np.tile(np.radians([3.0, 3.0, 0.0]), (len(rec), 1)), atol=1e-15)
+    assert info == {"bias_dps": [3.0, 3.0, 0.0]}
+    _, ia = run(pt.parse_perturbation("bias:random:2"), rec, seed=1)
+    _, ib = run(pt.parse_perturbation("bias:random:2"), rec, seed=1)
+    _, ic = run(pt.parse_perturbation("bias:random:2"), rec, seed=2)
+    assert ia == ib != ic
+    draws = np.array([run(pt.Bias(sigma=2.0), rec.slice(0, 2), seed=s)[1]["bias_dps"] for s in range(400)])
+    assert abs(draws.std() - 2.0) < 0.15 and abs(draws.mean()) < 0.2
+
+
+def test_dropout_holes_start_in_motion_and_have_the_drawn_lengths():
+    rec = linear(n=200 * 300)  # 5 min at 200 Hz
+    out, info = run(pt.parse_perturbation("dropout:0.1-0.6s@10s"), rec, seed=3)
+    steps = np.diff(out.stamps_ns) * 1e-9
+    holes = np.flatnonzero(steps > 0.006)
+    assert len(holes) == info["holes"] and 15 <= len(holes) <= 50  # about one every 10 s
+    assert np.all((steps[holes] >= 0.1) & (steps[holes] <= 0.6 + 0.005))
+    kept = set(out.stamps_ns.tolist())
+    first_missing = [int(np.searchsorted(rec.stamps_ns, out.stamps_ns[h])) + 1 for h in holes]
+    assert all(rec.score_mask[i] and rec.stamps_ns[i] not in kept for i in first_missing)  # starts in motion
+    assert info["samples_removed"] == len(rec) - len(out)
