@@ -7,7 +7,6 @@ import json
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -147,14 +146,118 @@ def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000) -> Itera
             raise BagError(path, f"unreadable or truncated bag ({type(e).__name__}: {e})") from e
 
 
-@dataclass
-class _ChunkState:
-    """What :func:`_iter_chunks` carries from one chunk to the next."""
+class _ChunkBuffer:
+    """The messages :func:`_iter_chunks` has read but not yet yielded, and what carries from one chunk to the next.
 
-    mask: bool = True  # score mask value in force
-    last: int | None = None  # stamp of the last sample
-    index: int = 0  # global index of the next sample
-    frame: str | None = None
+    IMU messages (raw CDR and log time), reference messages (raw CDR) and score-mask events (log time,
+    value) are buffered as they arrive in log-time order; :meth:`flush` turns the first ``n`` IMU
+    messages into a :class:`Recording` with their reference rows and score mask.
+    """
+
+    def __init__(self, path: Path, info: dict, has_ref: bool, imu_ids: set, ref_ids: set) -> None:
+        self.path = path
+        self.info = info
+        self.has_ref = has_ref
+        self.imu_ids = imu_ids
+        self.ref_ids = ref_ids
+        self.bool_deser = typestore().deserialize_cdr
+        self.imu_raw: list[bytes] = []
+        self.imu_log: list[int] = []
+        self.ref_raw: list[bytes] = []
+        self.events: list[tuple[int, bool]] = []
+        self.mask = True  # score mask value in force
+        self.last: int | None = None  # stamp of the last sample
+        self.index = 0  # global index of the next sample
+        self.frame: str | None = None
+
+    def add(self, conn_id: int, t: int, raw: bytes) -> None:
+        """Buffer one message (log time ``t``) of an IMU, reference or score-mask connection."""
+        if conn_id in self.imu_ids:
+            self.imu_raw.append(raw)
+            self.imu_log.append(t)
+        elif conn_id in self.ref_ids:
+            self.ref_raw.append(raw)
+        else:
+            self.events.append((t, bool(self.bool_deser(raw, BOOL_TYPE).data)))
+
+    def complete(self, chunk: int, t: int) -> bool:
+        """A full chunk is buffered and a message at log time ``t`` is past its last IMU message."""
+        return len(self.imu_raw) >= chunk and t > self.imu_log[chunk - 1]
+
+    def drain(self, chunk: int) -> Iterator[Recording]:
+        """The remaining chunks once all messages are read; BagError when there was no IMU message at all."""
+        while len(self.imu_raw) > chunk:
+            yield self.flush(chunk)
+        if self.imu_raw:
+            yield self.flush(len(self.imu_raw))
+        elif self.index == 0:
+            raise BagError(self.path, f"topic {IMU_TOPIC} has no messages")
+
+    def flush(self, n: int) -> Recording:
+        """The first ``n`` buffered IMU messages as a :class:`Recording`, removed from the buffer."""
+        raws = self.imu_raw[:n]
+        del self.imu_raw[:n]
+        del self.imu_log[:n]
+        stamps, acc, gyr, frame = parse_imu(raws)
+        if self.frame is None:
+            self.frame = frame
+        first = self.index
+        self._check_increasing(stamps, first)
+        last = int(stamps[-1])
+        quat = self._reference(stamps, last) if self.has_ref else None
+        mask = self._score_mask(stamps, last)
+        self.last = last
+        self.index = first + len(stamps)
+        return self._recording(stamps, acc, gyr, quat, mask)
+
+    def _check_increasing(self, stamps: np.ndarray, first: int) -> None:
+        """BagError naming the global sample index where header stamps stop increasing (across chunks too)."""
+        prev = np.concatenate([[self.last], stamps]) if self.last is not None else stamps
+        bad = np.flatnonzero(np.diff(prev) <= 0)
+        if len(bad):
+            i = first + int(bad[0]) + (0 if self.last is not None else 1)
+            raise BagError(self.path, f"{IMU_TOPIC} header stamps not strictly increasing at sample {i}")
+
+    def _reference(self, stamps: np.ndarray, last: int) -> np.ndarray:
+        """Reference rows at the chunk's stamps (NaN where none); keeps the messages stamped after ``last``."""
+        quat = np.full((len(stamps), 4), np.nan)
+        rs, rq = parse_quats(self.ref_raw)
+        pos = np.searchsorted(stamps, rs)
+        ok = (pos < len(stamps)) & (stamps[np.minimum(pos, len(stamps) - 1)] == rs)
+        quat[pos[ok]] = rq[ok]
+        keep = [r for r, s in zip(self.ref_raw, rs, strict=True) if s > last]
+        self.ref_raw[:] = keep
+        return quat
+
+    def _score_mask(self, stamps: np.ndarray, last: int) -> np.ndarray:
+        """Score mask from on-change events with log time <= stamp; keeps the events logged after ``last``."""
+        mask = np.empty(len(stamps), dtype=bool)
+        ev = sorted(e for e in self.events if e[0] <= last)
+        later = [e for e in self.events if e[0] > last]
+        et = np.array([e[0] for e in ev], dtype=np.int64)
+        ev_vals = np.array([self.mask] + [e[1] for e in ev], dtype=bool)
+        mask[:] = ev_vals[np.searchsorted(et, stamps, side="right")]
+        if ev:
+            self.mask = ev[-1][1]
+        self.events[:] = later
+        return mask
+
+    def _recording(
+        self, stamps: np.ndarray, acc: np.ndarray, gyr: np.ndarray, quat: np.ndarray | None, mask: np.ndarray
+    ) -> Recording:
+        info = self.info
+        return Recording(
+            stamps_ns=stamps,
+            acc=acc,
+            gyr=gyr,
+            quat_ref=quat,
+            score_mask=mask,
+            name=str(info.get("name") or self.path.stem),
+            dataset=str(info.get("dataset") or ""),
+            source=str(info.get("source") or ""),
+            frame_id=str(info.get("frame_id") or self.frame or "imu_link"),
+            meta={str(k): str(v) for k, v in (info.get("meta") or {}).items()},
+        )
 
 
 def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
@@ -162,82 +265,12 @@ def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
     c_ref = _topic_connections(path, reader, REF_TOPIC, QUAT_TYPE, required=False)
     c_scored = _topic_connections(path, reader, SCORED_TOPIC, BOOL_TYPE, required=False)
     info = _info_from(path, reader)
-    imu_ids = {c.id for c in c_imu}
-    ref_ids = {c.id for c in c_ref}
-    has_ref = bool(c_ref)
-
-    state = _ChunkState()
-    imu_raw: list[bytes] = []
-    imu_log: list[int] = []
-    ref_raw: list[bytes] = []
-    events: list[tuple[int, bool]] = []
-
-    def flush(n: int) -> Recording:
-        raws = imu_raw[:n]
-        del imu_raw[:n]
-        del imu_log[:n]
-        stamps, acc, gyr, frame = parse_imu(raws)
-        if state.frame is None:
-            state.frame = frame
-        first = state.index
-        prev = np.concatenate([[state.last], stamps]) if state.last is not None else stamps
-        bad = np.flatnonzero(np.diff(prev) <= 0)
-        if len(bad):
-            i = first + int(bad[0]) + (0 if state.last is not None else 1)
-            raise BagError(path, f"{IMU_TOPIC} header stamps not strictly increasing at sample {i}")
-        last = int(stamps[-1])
-        quat = None
-        if has_ref:
-            quat = np.full((len(stamps), 4), np.nan)
-            rs, rq = parse_quats(ref_raw)
-            pos = np.searchsorted(stamps, rs)
-            ok = (pos < len(stamps)) & (stamps[np.minimum(pos, len(stamps) - 1)] == rs)
-            quat[pos[ok]] = rq[ok]
-            keep = [r for r, s in zip(ref_raw, rs, strict=True) if s > last]
-            ref_raw[:] = keep
-        # score mask from on-change events with log time <= stamp
-        mask = np.empty(len(stamps), dtype=bool)
-        ev = sorted(e for e in events if e[0] <= last)
-        later = [e for e in events if e[0] > last]
-        et = np.array([e[0] for e in ev], dtype=np.int64)
-        ev_vals = np.array([state.mask] + [e[1] for e in ev], dtype=bool)
-        mask[:] = ev_vals[np.searchsorted(et, stamps, side="right")]
-        if ev:
-            state.mask = ev[-1][1]
-        events[:] = later
-        state.last = last
-        state.index = first + len(stamps)
-        return Recording(
-            stamps_ns=stamps,
-            acc=acc,
-            gyr=gyr,
-            quat_ref=quat,
-            score_mask=mask,
-            name=str(info.get("name") or path.stem),
-            dataset=str(info.get("dataset") or ""),
-            source=str(info.get("source") or ""),
-            frame_id=str(info.get("frame_id") or state.frame or "imu_link"),
-            meta={str(k): str(v) for k, v in (info.get("meta") or {}).items()},
-        )
-
-    bool_deser = typestore().deserialize_cdr
+    buf = _ChunkBuffer(path, info, bool(c_ref), {c.id for c in c_imu}, {c.id for c in c_ref})
     for conn, t, raw in reader.messages(connections=[*c_imu, *c_ref, *c_scored]):
-        if len(imu_raw) >= chunk and t > imu_log[chunk - 1]:
-            yield flush(chunk)
-        cid = conn.id
-        if cid in imu_ids:
-            imu_raw.append(raw)
-            imu_log.append(t)
-        elif cid in ref_ids:
-            ref_raw.append(raw)
-        else:
-            events.append((t, bool(bool_deser(raw, BOOL_TYPE).data)))
-    while len(imu_raw) > chunk:
-        yield flush(chunk)
-    if imu_raw:
-        yield flush(len(imu_raw))
-    elif state.index == 0:
-        raise BagError(path, f"topic {IMU_TOPIC} has no messages")
+        if buf.complete(chunk, t):
+            yield buf.flush(chunk)
+        buf.add(conn.id, t, raw)
+    yield from buf.drain(chunk)
 
 
 def concat(chunks: list[Recording]) -> Recording:

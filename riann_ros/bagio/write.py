@@ -5,8 +5,9 @@ from __future__ import annotations
 import heapq
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -147,6 +148,58 @@ def _copy_connections(src: Path, reader, writer) -> dict:
     return cmap
 
 
+class _Estimate(NamedTuple):
+    """One estimate topic ready to write: stamps and serialised messages of its finite rows."""
+
+    topic: str
+    stamps: NDArray[np.int64]
+    rows: NDArray[np.uint8]
+
+
+def _prepare_estimates(estimates: Mapping[str, tuple[NDArray[np.int64], NDArray[np.float64]]]) -> list[_Estimate]:
+    """Check the estimate topic names and serialise the rows with a finite quaternion, in ``estimates`` order."""
+    prepared = []
+    for topic, (stamps, quats) in estimates.items():
+        if not topic.startswith("/"):
+            raise ValueError(f"estimate topic {topic!r} must start with '/'")
+        if topic in (IMU_TOPIC, REF_TOPIC, SCORED_TOPIC, INFO_TOPIC):
+            raise ValueError(f"estimate topic {topic!r} clashes with the bag layout")
+        st = np.asarray(stamps, dtype=np.int64).reshape(-1)
+        q = np.asarray(quats, dtype=np.float64).reshape(len(st), 4)
+        ok = np.isfinite(q).all(axis=1)
+        prepared.append(_Estimate(topic, st[ok], quat_messages(st[ok], q[ok])))
+    return prepared
+
+
+def _source_messages(reader, cmap: dict) -> Iterator[tuple[int, int, object, bytes]]:
+    """``(log time, 0, output connection, raw)`` for every message of the input bag, in log-time order."""
+    for c, t, raw in reader.messages():
+        yield t, 0, cmap[c.id], raw
+
+
+def _estimate_messages(k: int, conn, est: _Estimate) -> Iterator[tuple[int, int, object, bytes]]:
+    """``(stamp, k + 1, conn, raw)`` for the messages of the ``k``-th estimate topic."""
+    for t, row in zip(est.stamps.tolist(), est.rows, strict=True):
+        yield t, k + 1, conn, row.tobytes()
+
+
+def _merge_write(src: Path, reader, writer, prepared: list[_Estimate]) -> None:
+    """Write the ``/dataset/info`` custom data, the input connections and messages and the estimate topics.
+
+    All messages are merged by log time; at equal times the input bag's message comes first, then the
+    estimate topics in ``prepared`` order.
+    """
+    info = _info_from(src, reader)
+    if info:
+        writer.set_custom_data(INFO_KEY, json.dumps(info, sort_keys=True))
+    cmap = _copy_connections(src, reader, writer)
+    est_conns = [_add_connection(writer, est.topic, QUAT_TYPE) for est in prepared]
+    streams = [_source_messages(reader, cmap)]
+    streams += [_estimate_messages(k, est_conns[k], est) for k, est in enumerate(prepared)]
+    for t, _, conn, raw in heapq.merge(*streams, key=lambda x: (x[0], x[1])):
+        writer.write(conn, t, raw)
+
+
 def write_estimates(
     src: str | os.PathLike[str],
     dst: str | os.PathLike[str],
@@ -169,39 +222,11 @@ def write_estimates(
     storage = storage or ("mcap" if dst.suffix == ".mcap" else bag_storage(src))
     if compression == "same":
         compression = bag_compression(src)
-    prepared = []
-    for topic, (stamps, quats) in estimates.items():
-        if not topic.startswith("/"):
-            raise ValueError(f"estimate topic {topic!r} must start with '/'")
-        if topic in (IMU_TOPIC, REF_TOPIC, SCORED_TOPIC, INFO_TOPIC):
-            raise ValueError(f"estimate topic {topic!r} clashes with the bag layout")
-        st = np.asarray(stamps, dtype=np.int64).reshape(-1)
-        q = np.asarray(quats, dtype=np.float64).reshape(len(st), 4)
-        ok = np.isfinite(q).all(axis=1)
-        prepared.append((topic, st[ok], quat_messages(st[ok], q[ok])))
+    prepared = _prepare_estimates(estimates)
     with _opened(src) as reader:
         try:
             with _AtomicBag(dst, storage, compression, force) as writer:
-                info = _info_from(src, reader)
-                if info:
-                    writer.set_custom_data(INFO_KEY, json.dumps(info, sort_keys=True))
-                cmap = _copy_connections(src, reader, writer)
-                est_conns = [_add_connection(writer, topic, QUAT_TYPE) for topic, _, _ in prepared]
-
-                def source():
-                    for c, t, raw in reader.messages():
-                        yield t, 0, cmap[c.id], raw
-
-                def est(k):
-                    _, st, rows = prepared[k]
-                    conn = est_conns[k]
-                    for t, row in zip(st.tolist(), rows, strict=True):
-                        yield t, k + 1, conn, row.tobytes()
-
-                for t, _, conn, raw in heapq.merge(
-                    source(), *(est(k) for k in range(len(prepared))), key=lambda x: (x[0], x[1])
-                ):
-                    writer.write(conn, t, raw)
+                _merge_write(src, reader, writer, prepared)
         except (BagError, FileExistsError, ValueError, KeyboardInterrupt):
             raise
         except Exception as e:

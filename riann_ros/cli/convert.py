@@ -33,6 +33,7 @@ from riann_ros.datasets.csvfile import (
     TIME_UNITS,
 )
 from riann_ros.datasets.synthetic import MOTIONS
+from riann_ros.recording import Recording
 
 
 def _cols(n: int):
@@ -193,69 +194,109 @@ def _say(args: argparse.Namespace, text: str) -> None:
         print(text, file=sys.stderr)
 
 
+def _plan_jobs(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[tuple[Path | None, str]] | None:
+    """The (input, format) jobs: one synthetic job, or the expanded inputs.
+
+    Bad usage ends in ``parser.error`` (exit status 2); an input that cannot be expanded prints an error
+    and gives None.
+    """
+    if args.format == "synthetic":
+        if args.inputs:
+            parser.error("--format synthetic takes no inputs")
+        return [(None, "synthetic")]
+    if not args.inputs:
+        parser.error("no input given (or use --format synthetic)")
+    try:
+        return list(_expand(args.inputs, args.format))
+    except (OSError, ValueError) as e:
+        print(f"riann-bag-convert: error: {e}", file=sys.stderr)
+        return None
+
+
+def _many_outputs(args: argparse.Namespace, jobs: list[tuple[Path | None, str]]) -> bool:
+    """Whether the output is a folder of bags: several jobs, or one input folder that is not an EuRoC folder."""
+    return bool(
+        len(jobs) > 1 or (args.inputs and len(args.inputs) == 1 and args.inputs[0].is_dir() and jobs[0][1] != "euroc")
+    )
+
+
+def _output_problem(args: argparse.Namespace, many: bool) -> str | None:
+    """Why the output (or --name) does not fit the jobs, or None."""
+    out: Path = args.output
+    if many:
+        if out.suffix == ".mcap" or (out.exists() and not out.is_dir()):
+            return f"{out}: several inputs need an output folder"
+        if args.name:
+            return "--name only works with one input"
+    if not many and out.suffix == ".mcap" and args.storage != "mcap":
+        return f"{out}: a .mcap output needs --storage mcap"
+    return None
+
+
+def _convert(args: argparse.Namespace, inp: Path | None, fmt: str, target: Path, compression: str | None) -> Recording:
+    """Read one input and write it as the bag ``target``; the recording written."""
+    if target.exists() and not args.force:
+        raise FileExistsError(f"{target}: output exists, not overwriting (use --force to replace it)")
+    rec = read_any(inp, fmt, **_reader_opts(fmt, args))
+    if args.name and fmt == "broad":
+        rec.name = args.name
+    bagio.write_recording(target, rec, storage=args.storage, compression=compression, force=args.force)
+    return rec
+
+
+def _summary(label: str, target: Path, rec: Recording, t0: float) -> str:
+    n_ref = 0 if rec.quat_ref is None else int((~(rec.quat_ref != rec.quat_ref).any(axis=1)).sum())
+    return (
+        f"{label} → {target}: {len(rec)} samples at {rec.rate_hz:.6g} Hz, {n_ref} reference, "
+        f"{int(rec.score_mask.sum())} scored ({time.perf_counter() - t0:.1f} s)"
+    )
+
+
+_OK, _FAILED, _INTERRUPTED = 0, 1, 130
+
+
+def _convert_one(args: argparse.Namespace, inp: Path | None, fmt: str, target: Path, compression: str | None) -> int:
+    """Convert one job, reporting to stderr: ``_OK``, ``_FAILED`` or ``_INTERRUPTED`` (Ctrl-C)."""
+    label = str(inp) if inp is not None else "synthetic"
+    t0 = time.perf_counter()
+    try:
+        rec = _convert(args, inp, fmt, target, compression)
+    except KeyboardInterrupt:
+        print(f"riann-bag-convert: interrupted while converting {label}; no partial bag left", file=sys.stderr)
+        return _INTERRUPTED
+    except (OSError, ValueError, bagio.BagError) as e:
+        print(
+            f"riann-bag-convert: error: {label}: {e}" if str(label) not in str(e) else f"riann-bag-convert: error: {e}",
+            file=sys.stderr,
+        )
+        return _FAILED
+    _say(args, _summary(label, target, rec, t0))
+    return _OK
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     compression = None if args.compression == "none" else args.compression
     out: Path = args.output
 
-    if args.format == "synthetic":
-        if args.inputs:
-            parser.error("--format synthetic takes no inputs")
-        jobs: list[tuple[Path | None, str]] = [(None, "synthetic")]
-    else:
-        if not args.inputs:
-            parser.error("no input given (or use --format synthetic)")
-        try:
-            jobs = list(_expand(args.inputs, args.format))
-        except (OSError, ValueError) as e:
-            print(f"riann-bag-convert: error: {e}", file=sys.stderr)
-            return 1
-
-    many = len(jobs) > 1 or (
-        args.inputs and len(args.inputs) == 1 and args.inputs[0].is_dir() and jobs[0][1] != "euroc"
-    )
-    if many:
-        if out.suffix == ".mcap" or (out.exists() and not out.is_dir()):
-            print(f"riann-bag-convert: error: {out}: several inputs need an output folder", file=sys.stderr)
-            return 1
-        if args.name:
-            print("riann-bag-convert: error: --name only works with one input", file=sys.stderr)
-            return 1
-    if not many and out.suffix == ".mcap" and args.storage != "mcap":
-        print(f"riann-bag-convert: error: {out}: a .mcap output needs --storage mcap", file=sys.stderr)
+    jobs = _plan_jobs(parser, args)
+    if jobs is None:
+        return 1
+    many = _many_outputs(args, jobs)
+    problem = _output_problem(args, many)
+    if problem is not None:
+        print(f"riann-bag-convert: error: {problem}", file=sys.stderr)
         return 1
 
     failures = 0
     for inp, fmt in jobs:
         target = out / _bag_name(inp, args.storage) if many and inp is not None else out
-        label = str(inp) if inp is not None else "synthetic"
-        t0 = time.perf_counter()
-        try:
-            if target.exists() and not args.force:
-                raise FileExistsError(f"{target}: output exists, not overwriting (use --force to replace it)")
-            rec = read_any(inp, fmt, **_reader_opts(fmt, args))
-            if args.name and fmt == "broad":
-                rec.name = args.name
-            bagio.write_recording(target, rec, storage=args.storage, compression=compression, force=args.force)
-        except KeyboardInterrupt:
-            print(f"riann-bag-convert: interrupted while converting {label}; no partial bag left", file=sys.stderr)
-            return 130
-        except (OSError, ValueError, bagio.BagError) as e:
+        status = _convert_one(args, inp, fmt, target, compression)
+        if status == _INTERRUPTED:
+            return status
+        if status == _FAILED:
             failures += 1
-            print(
-                f"riann-bag-convert: error: {label}: {e}"
-                if str(label) not in str(e)
-                else f"riann-bag-convert: error: {e}",
-                file=sys.stderr,
-            )
-            continue
-        n_ref = 0 if rec.quat_ref is None else int((~(rec.quat_ref != rec.quat_ref).any(axis=1)).sum())
-        _say(
-            args,
-            f"{label} → {target}: {len(rec)} samples at {rec.rate_hz:.6g} Hz, {n_ref} reference, "
-            f"{int(rec.score_mask.sum())} scored ({time.perf_counter() - t0:.1f} s)",
-        )
     if failures:
         print(f"riann-bag-convert: {failures} of {len(jobs)} input(s) failed", file=sys.stderr)
         return 1

@@ -164,6 +164,86 @@ def normalise_quats(q: np.ndarray, path: Path, lines: Sequence[int]) -> np.ndarr
     return q / norm[:, None]
 
 
+def _check_options(
+    time_unit: str,
+    acc_unit: str,
+    gyr_unit: str,
+    quat_order: str,
+    acc_cols: Sequence[str],
+    gyr_cols: Sequence[str],
+    quat_cols: Sequence[str] | None,
+) -> tuple[float | int, float | int]:
+    """Validate units, quaternion order and column counts before reading; the acc and gyr scale factors."""
+    unit_factor("time", time_unit, TIME_UNITS)
+    a_scale = unit_factor("accelerometer", acc_unit, ACC_UNITS)
+    g_scale = unit_factor("gyroscope", gyr_unit, GYR_UNITS)
+    if quat_order not in QUAT_ORDERS:
+        raise InputError(f"unknown quaternion order {quat_order!r}; expected wxyz or xyzw")
+    for what, cols in (("accelerometer", acc_cols), ("gyroscope", gyr_cols)):
+        if len(cols) != 3:
+            raise InputError(f"{what} needs 3 column names, got {len(cols)}: {', '.join(cols)}")
+    if quat_cols is not None and len(quat_cols) != 4:
+        raise InputError(f"quaternion needs 4 column names, got {len(quat_cols)}: {', '.join(quat_cols)}")
+    return a_scale, g_scale
+
+
+def _optional_columns(
+    header: list[str], quat_cols: Sequence[str] | None, quat_order: str, mask_col: str | None
+) -> tuple[Sequence[str] | None, str | None]:
+    """The quaternion and score-mask columns to read: those given, else the defaults when all present in ``header``."""
+    if quat_cols is None:
+        default = DEFAULT_QUAT if quat_order == "wxyz" else (*DEFAULT_QUAT[1:], DEFAULT_QUAT[0])
+        quat_cols = default if all(c in header for c in default) else None
+    if mask_col is None and DEFAULT_MASK in header:
+        mask_col = DEFAULT_MASK
+    return quat_cols, mask_col
+
+
+class _CsvTable:
+    """The header, cell rows and line numbers of one CSV file, and the column parsers (errors name the line)."""
+
+    def __init__(self, path: Path, delimiter: str | None) -> None:
+        self.path = path
+        self.header, self.rows, self.lines = read_table(path, delimiter)
+        dup = sorted({h for h in self.header if self.header.count(h) > 1})
+        if dup:
+            raise InputError(f"{path}: duplicated column name(s) {', '.join(dup)} in the header")
+
+    def columns(self, names: Sequence[str], what: str) -> list[int]:
+        return column_index(self.header, list(names), self.path, what)
+
+    def floats(self, idx: list[int], what: str, allow_nan: bool = False) -> np.ndarray:
+        return float_columns(self.rows, idx, self.path, self.lines, what, allow_nan=allow_nan)
+
+    def stamps(self, ti: int, time_unit: str) -> np.ndarray:
+        """Exact int64 ns stamps of column ``ti``, checked strictly increasing."""
+        stamps = parse_time_ns([r[ti] for r in self.rows], time_unit, str(self.path), self.lines)
+        check_stamps(stamps, str(self.path), self.lines)
+        return stamps
+
+    def quaternions(self, quat_cols: Sequence[str], quat_order: str) -> np.ndarray:
+        """Normalised w, x, y, z reference rows (NaN where a cell is empty or NaN)."""
+        qi = self.columns(quat_cols, "quaternion")
+        q = self.floats(qi, "quaternion", allow_nan=True)
+        if quat_order == "xyzw":
+            q = q[:, [3, 0, 1, 2]]
+        return normalise_quats(q, self.path, self.lines)
+
+    def score_mask(self, mask_col: str) -> np.ndarray:
+        """The score mask column as bools (1/0, true/false, yes/no, ...)."""
+        (mi,) = self.columns([mask_col], "score mask")
+        mask = np.empty(len(self.rows), dtype=bool)
+        for r, cells in enumerate(self.rows):
+            v = cells[mi].strip().lower()
+            if v in _TRUE:
+                mask[r] = True
+            elif v in _FALSE:
+                mask[r] = False
+            else:
+                raise InputError(f"{self.path}:{self.lines[r]}: score mask value {cells[mi]!r} is not 1/0/true/false")
+        return mask
+
+
 def read_csv(
     path: str | os.PathLike[str],
     *,
@@ -182,53 +262,18 @@ def read_csv(
 ) -> Recording:
     """Read a generic CSV file (format in the module docstring)."""
     path = Path(path)
-    t_scale = unit_factor("time", time_unit, TIME_UNITS)  # validate units before reading
-    a_scale = unit_factor("accelerometer", acc_unit, ACC_UNITS)
-    g_scale = unit_factor("gyroscope", gyr_unit, GYR_UNITS)
-    del t_scale
-    if quat_order not in QUAT_ORDERS:
-        raise InputError(f"unknown quaternion order {quat_order!r}; expected wxyz or xyzw")
-    for what, cols in (("accelerometer", acc_cols), ("gyroscope", gyr_cols)):
-        if len(cols) != 3:
-            raise InputError(f"{what} needs 3 column names, got {len(cols)}: {', '.join(cols)}")
-    if quat_cols is not None and len(quat_cols) != 4:
-        raise InputError(f"quaternion needs 4 column names, got {len(quat_cols)}: {', '.join(quat_cols)}")
-    header, rows, lines = read_table(path, delimiter)
-    dup = sorted({h for h in header if header.count(h) > 1})
-    if dup:
-        raise InputError(f"{path}: duplicated column name(s) {', '.join(dup)} in the header")
-    (ti,) = column_index(header, [time_col], path, "time")
-    ai = column_index(header, list(acc_cols), path, "accelerometer")
-    gi = column_index(header, list(gyr_cols), path, "gyroscope")
-    if quat_cols is None:
-        default = DEFAULT_QUAT if quat_order == "wxyz" else (*DEFAULT_QUAT[1:], DEFAULT_QUAT[0])
-        quat_cols = default if all(c in header for c in default) else None
-    if mask_col is None and DEFAULT_MASK in header:
-        mask_col = DEFAULT_MASK
+    a_scale, g_scale = _check_options(time_unit, acc_unit, gyr_unit, quat_order, acc_cols, gyr_cols, quat_cols)
+    table = _CsvTable(path, delimiter)
+    (ti,) = table.columns([time_col], "time")
+    ai = table.columns(acc_cols, "accelerometer")
+    gi = table.columns(gyr_cols, "gyroscope")
+    quat_cols, mask_col = _optional_columns(table.header, quat_cols, quat_order, mask_col)
 
-    stamps = parse_time_ns([r[ti] for r in rows], time_unit, str(path), lines)
-    check_stamps(stamps, str(path), lines)
-    acc = float_columns(rows, ai, path, lines, "accelerometer") * a_scale
-    gyr = float_columns(rows, gi, path, lines, "gyroscope") * g_scale
-    quat = None
-    if quat_cols is not None:
-        qi = column_index(header, list(quat_cols), path, "quaternion")
-        q = float_columns(rows, qi, path, lines, "quaternion", allow_nan=True)
-        if quat_order == "xyzw":
-            q = q[:, [3, 0, 1, 2]]
-        quat = normalise_quats(q, path, lines)
-    mask = None
-    if mask_col is not None:
-        (mi,) = column_index(header, [mask_col], path, "score mask")
-        mask = np.empty(len(rows), dtype=bool)
-        for r, cells in enumerate(rows):
-            v = cells[mi].strip().lower()
-            if v in _TRUE:
-                mask[r] = True
-            elif v in _FALSE:
-                mask[r] = False
-            else:
-                raise InputError(f"{path}:{lines[r]}: score mask value {cells[mi]!r} is not 1/0/true/false")
+    stamps = table.stamps(ti, time_unit)
+    acc = table.floats(ai, "accelerometer") * a_scale
+    gyr = table.floats(gi, "gyroscope") * g_scale
+    quat = table.quaternions(quat_cols, quat_order) if quat_cols is not None else None
+    mask = table.score_mask(mask_col) if mask_col is not None else None
     return Recording(
         stamps_ns=stamps,
         acc=acc,
