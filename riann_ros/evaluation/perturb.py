@@ -366,43 +366,53 @@ def _seconds(text: str, unit: str) -> float:
     return float(text) * (1e-3 if unit == "ms" else 1.0)
 
 
+def _jitter(args: str) -> Perturbation | None:
+    m = re.fullmatch(rf"({_NUM}(?:/{_NUM})*)(ms|s)", args)
+    if m:
+        vals = tuple(_seconds(v, m.group(2)) for v in m.group(1).split("/"))
+        return Jitter(choices=vals) if all(v > 0 for v in vals) else None
+    m = re.fullmatch(rf"({_NUM})-({_NUM})(ms|s)", args)
+    if m:
+        lo, hi = _seconds(m.group(1), m.group(3)), _seconds(m.group(2), m.group(3))
+        return Jitter(lo=lo, hi=hi) if 0 < lo <= hi else None
+    return None
+
+
+def _rate(args: str) -> Perturbation | None:
+    m = re.fullmatch(rf"({_NUM})(?:hz)?", args)
+    return Rate(hz=float(m.group(1))) if m and float(m.group(1)) > 0 else None
+
+
+def _bias(args: str) -> Perturbation | None:
+    m = re.fullmatch(rf"random:({_NUM})", args)
+    if m:
+        return Bias(sigma=float(m.group(1)))
+    m = re.fullmatch(rf"(-?{_NUM}),(-?{_NUM}),(-?{_NUM})", args)
+    return Bias(dps=(float(m.group(1)), float(m.group(2)), float(m.group(3)))) if m else None
+
+
+def _dropout(args: str) -> Perturbation | None:
+    m = re.fullmatch(rf"({_NUM})-({_NUM})s@({_NUM})s", args)
+    if not m:
+        return None
+    lo, hi, every = (float(v) for v in m.groups())
+    return Dropout(lo, hi, every) if 0 < lo <= hi and every > 0 else None
+
+
+_PARSERS = {"jitter": _jitter, "rate": _rate, "bias": _bias, "dropout": _dropout}
+
+
 def parse_perturbation(text: str) -> Perturbation:
     """One ``kind:args`` item (see the module docstring); ``ValueError`` with the accepted forms."""
-    t = text.strip().lower().replace(" ", "")
-    kind, _, args = t.partition(":")
-    m = None
-    if kind == "jitter":
-        m = re.fullmatch(rf"({_NUM}(?:/{_NUM})*)(ms|s)", args)
-        if m:
-            vals = tuple(_seconds(v, m.group(2)) for v in m.group(1).split("/"))
-            if all(v > 0 for v in vals):
-                return Jitter(choices=vals)
-        m = re.fullmatch(rf"({_NUM})-({_NUM})(ms|s)", args)
-        if m:
-            lo, hi = _seconds(m.group(1), m.group(3)), _seconds(m.group(2), m.group(3))
-            if 0 < lo <= hi:
-                return Jitter(lo=lo, hi=hi)
-    elif kind == "rate":
-        m = re.fullmatch(rf"({_NUM})(?:hz)?", args)
-        if m and float(m.group(1)) > 0:
-            return Rate(hz=float(m.group(1)))
-    elif kind == "bias":
-        m = re.fullmatch(rf"random:({_NUM})", args)
-        if m:
-            return Bias(sigma=float(m.group(1)))
-        m = re.fullmatch(rf"(-?{_NUM}),(-?{_NUM}),(-?{_NUM})", args)
-        if m:
-            return Bias(dps=(float(m.group(1)), float(m.group(2)), float(m.group(3))))
-    elif kind == "dropout":
-        m = re.fullmatch(rf"({_NUM})-({_NUM})s@({_NUM})s", args)
-        if m:
-            lo, hi, every = (float(v) for v in m.groups())
-            if 0 < lo <= hi and every > 0:
-                return Dropout(lo, hi, every)
-    raise ValueError(
-        f"bad perturbation {text!r}; accepted: jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, "
-        "bias:random:2 (deg/s), dropout:0.1-0.6s@10s"
-    )
+    kind, _, args = text.strip().lower().replace(" ", "").partition(":")
+    parser = _PARSERS.get(kind)
+    p = parser(args) if parser else None
+    if p is None:
+        raise ValueError(
+            f"bad perturbation {text!r}; accepted: jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, "
+            "bias:random:2 (deg/s), dropout:0.1-0.6s@10s"
+        )
+    return p
 
 
 def parse_condition(text: str) -> Condition:

@@ -35,7 +35,15 @@ from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import NONE, Condition, Transform
 from riann_ros.evaluation.scenarios import PAPER_SCENARIOS, ScenarioPlan, sequence_seed
 from riann_ros.evaluation.scoring import Accumulator, Score, error_deg
-from riann_ros.evaluation.sources import BROAD_SUFFIXES, STREAM_CHUNK, Source, open_source, read_whole, summarise
+from riann_ros.evaluation.sources import (
+    BROAD_SUFFIXES,
+    STREAM_CHUNK,
+    Source,
+    Summary,
+    open_source,
+    read_whole,
+    summarise,
+)
 from riann_ros.evaluation.specs import EstimatorSpec
 from riann_ros.recording import Recording
 from riann_ros.stream import EstimatorStream, GateConfig
@@ -275,21 +283,27 @@ class _ScenarioRun:
         res.estimates = {"scenario": self.plan.scenario, "stamps": stamps, "quats": quats}
 
 
+def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool) -> list[_ScenarioRun]:
+    """One run per condition × scenario (series for the first condition, estimates for the very first run)."""
+    want_series = native and settings.series_for is not None and settings.series_for in ("*", name)
+    runs = []
+    for c, condition in enumerate(settings.conditions):
+        for s, scn in enumerate(settings.scenarios):
+            slot = c * len(settings.scenarios) + s
+            runs.append(_ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, name,
+                                     want_series and c == 0, native and settings.keep_estimates and slot == 0))
+    return runs
+
+
 def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runner: Runner,
                    res: SequenceResult) -> None:
     summary = summarise(src)
     if not res.name:
         res.name, res.dataset, res.citation = summary.name, summary.dataset, summary.citation
-    native = rate is None
-    want_series = native and settings.series_for is not None and settings.series_for in ("*", res.name)
-    runs = []
-    for c, condition in enumerate(settings.conditions):
-        for s, scn in enumerate(settings.scenarios):
-            slot = c * len(settings.scenarios) + s
-            runs.append(_ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, res.name,
-                                     want_series and c == 0, native and settings.keep_estimates and slot == 0))
+    runs = _plan_runs(summary, settings, res.name, rate is None)
     for run in runs:
         res.scenarios.setdefault(run.plan.scenario, run.plan.info.to_dict())
+    rate_hz = round(summary.rate_all, 3)
     for group in [runs] if runner.interleaved else [[r] for r in runs]:
         for run in group:
             run.begin(runner)
@@ -298,7 +312,6 @@ def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runn
             for run in group:
                 run.feed(chunk, offset)
             offset += len(chunk)
-        rate_hz = round(summary.rate_all, 3)
         for run in group:
             res.rows.extend(run.rows(res, rate, rate_hz, runner.mode))
             if run.series:
