@@ -33,6 +33,7 @@ from riann_ros.datasets.csvfile import (
     TIME_UNITS,
 )
 from riann_ros.datasets.synthetic import MOTIONS
+from riann_ros.datasets.units import Finding, check_units
 from riann_ros.recording import Recording
 
 
@@ -87,6 +88,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", help="sequence name (default: from the input)")
     p.add_argument("--force", action="store_true", help="replace existing output bags")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--force-units",
+        action="store_true",
+        help="write the bag even when the unit checks (sample rate, gravity at rest, gyro range) fail; "
+        "their findings are then warnings",
+    )
 
     c = p.add_argument_group("generic CSV")
     c.add_argument("--time-col", default=DEFAULT_TIME, help=f"time column (default {DEFAULT_TIME})")
@@ -233,13 +240,54 @@ def _output_problem(args: argparse.Namespace, many: bool) -> str | None:
     return None
 
 
+class UnitCheckFailed(ValueError):
+    """The unit checks found implausible values and --force-units was not given; ``lines``: the messages."""
+
+    def __init__(self, lines: list[str]) -> None:
+        self.lines = lines
+        super().__init__("\n".join(lines))
+
+
+# The units each format fixes (the unit checks read the numbers in these; CSV units come from the options).
+_FIXED_UNITS = {"broad": {"time_unit": "s"}, "euroc": {"time_unit": "ns"}}
+
+
+def _advice(finding: Finding, fmt: str) -> str:
+    """What fixes ``finding``: the CSV option, or for formats with fixed units, a look at the input."""
+    if fmt == "csv":
+        return f"use {finding.flag} {finding.suggest}" if finding.suggest else f"check the columns and {finding.flag}"
+    return f"the {fmt} format fixes the units (stamps, m/s², rad/s): check the input"
+
+
+def _check_units(args: argparse.Namespace, label: str, fmt: str, rec: Recording) -> None:
+    """Refuse a recording whose units look wrong (UnitCheckFailed), or warn with --force-units.
+
+    Synthetic recordings are made in the right units and not checked. With --force-units the findings
+    are also recorded in the bag (``/dataset/info`` ``meta.unit_check``).
+    """
+    if fmt == "synthetic":
+        return
+    findings = check_units(rec, **_FIXED_UNITS.get(fmt, {}))
+    if not findings:
+        return
+    lines = [f"{label}: {f}, {_advice(f, fmt)}" for f in findings]
+    if not args.force_units:
+        raise UnitCheckFailed(
+            [*lines, f"{label}: no bag written (the units look wrong; --force-units writes it anyway)"]
+        )
+    for line in lines:
+        print(f"riann-bag-convert: warning: {line} (written anyway: --force-units)", file=sys.stderr)
+    rec.meta["unit_check"] = "failed, written with --force-units: " + "; ".join(str(f) for f in findings)
+
+
 def _convert(args: argparse.Namespace, inp: Path | None, fmt: str, target: Path, compression: str | None) -> Recording:
-    """Read one input and write it as the bag ``target``; the recording written."""
+    """Read one input, check its units and write it as the bag ``target``; the recording written."""
     if target.exists() and not args.force:
         raise FileExistsError(f"{target}: output exists, not overwriting (use --force to replace it)")
     rec = read_any(inp, fmt, **_reader_opts(fmt, args))
     if args.name and fmt == "broad":
         rec.name = args.name
+    _check_units(args, str(inp), fmt, rec)
     bagio.write_recording(target, rec, storage=args.storage, compression=compression, force=args.force)
     return rec
 
@@ -264,6 +312,10 @@ def _convert_one(args: argparse.Namespace, inp: Path | None, fmt: str, target: P
     except KeyboardInterrupt:
         print(f"riann-bag-convert: interrupted while converting {label}; no partial bag left", file=sys.stderr)
         return _INTERRUPTED
+    except UnitCheckFailed as e:
+        for line in e.lines:
+            print(f"riann-bag-convert: error: {line}", file=sys.stderr)
+        return _FAILED
     except (OSError, ValueError, bagio.BagError) as e:
         print(
             f"riann-bag-convert: error: {label}: {e}" if str(label) not in str(e) else f"riann-bag-convert: error: {e}",
