@@ -199,12 +199,33 @@ def test_example_bags_are_reproducible_and_small(tmp_path: Path) -> None:
         i = argv.index("-o")
         committed = root / argv[i + 1]
         assert committed.is_file() and committed.stat().st_size < 2_000_000
+        # the script names the compression (the converter's default changed from none to zstd in issue 12)
+        compression = argv[argv.index("--compression") + 1]
+        assert bagio.bag_compression(committed) == (None if compression == "none" else compression)
         out = tmp_path / committed.name
         assert main([*argv[:i], *argv[i + 2 :], "-o", str(out), "-q"]) == 0
         _check_regenerated(bagio.read_recording(committed), bagio.read_recording(out))
     assert sorted(p.name for p in (root / "bags").glob("*.mcap")) == sorted(
         Path(c[c.index("-o") + 1]).name for c in commands
     )
+
+
+@pytest.mark.parametrize(
+    ("name", "extra", "expected"),
+    [
+        ("default.mcap", [], "zstd"),  # mcap: zstd chunk compression by default
+        ("none.mcap", ["--compression", "none"], None),
+        ("dir_mcap", ["--storage", "mcap"], "zstd"),  # directory bag with mcap storage: same default
+        ("dir_sqlite3", ["--storage", "sqlite3"], None),  # sqlite3 keeps no compression by default
+        ("dir_sqlite3_zstd", ["--storage", "sqlite3", "--compression", "zstd"], "zstd"),
+    ],
+)
+def test_cli_compression_default(tmp_path: Path, name: str, extra: list[str], expected: str | None) -> None:
+    out = tmp_path / name
+    assert main(["--format", "synthetic", "--duration", "5", "-o", str(out), "-q", *extra]) == 0
+    assert bagio.bag_compression(out) == expected
+    rec = bagio.read_recording(out)
+    assert len(rec) == 1001
 
 
 def test_empty_imu_topic_is_an_error(tmp_path: Path) -> None:

@@ -83,7 +83,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True, help="output bag (.mcap file or folder) or folder")
     p.add_argument("--format", choices=("auto", *FORMATS), default="auto", help="input format (default: detect)")
     p.add_argument("--storage", choices=bagio.STORAGES, default="mcap", help="bag storage (default mcap)")
-    p.add_argument("--compression", choices=("none", "zstd"), default="none", help="zstd compression")
+    p.add_argument(
+        "--compression",
+        choices=("none", "zstd"),
+        help="zstd | none (default: zstd for mcap storage (MCAP chunk compression), none for sqlite3)",
+    )
     p.add_argument("--frame-id", default="imu_link", help="IMU frame_id (default imu_link)")
     p.add_argument("--name", help="sequence name (default: from the input)")
     p.add_argument("--force", action="store_true", help="replace existing output bags")
@@ -326,10 +330,17 @@ def _convert_one(args: argparse.Namespace, inp: Path | None, fmt: str, target: P
     return _OK
 
 
+def _compression(args: argparse.Namespace) -> str | None:
+    """The bag compression: --compression, else zstd for mcap storage (MCAP chunks) and none for sqlite3."""
+    if args.compression is None:
+        return "zstd" if args.storage == "mcap" else None
+    return None if args.compression == "none" else args.compression
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    compression = None if args.compression == "none" else args.compression
+    compression = _compression(args)
     out: Path = args.output
 
     jobs = _plan_jobs(parser, args)
