@@ -162,7 +162,7 @@ def test_cli_folder_continues_after_failure(tmp_path: Path, capsys: pytest.Captu
     out = tmp_path / "out"
     assert main([str(src), "-o", str(out), "--format", "csv", "-q"]) == 1
     err = capsys.readouterr().err
-    assert "b.csv" in err and "gyr_z" in err and "1 of 2" in err
+    assert "b.csv" in err and "no gyroscope column 'gyr_z'" in err and "use --gyr-cols" in err and "1 of 2" in err
     assert [p.name for p in out.iterdir()] == ["a.mcap"]
 
 

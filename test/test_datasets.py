@@ -170,19 +170,42 @@ def test_csv_units(tmp_path: Path) -> None:
         (
             "t,acc_x,acc_y,acc_z,gyr_x,gyr_y\n0,0,0,1,0,0\n",
             {},
-            r"in\.csv: line 1 header lacks gyroscope column\(s\) gyr_z",
+            r"in\.csv: no gyroscope column 'gyr_z' \(use --gyr-cols to name them; columns: t, acc_x, .*, gyr_y\)$",
         ),
-        ("time,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n", {}, r"lacks time column\(s\) t;"),
-        ("t,Acc_X,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n", {}, r"did you mean Acc_X"),
+        (
+            "time,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n",
+            {},
+            r"no time column 't' \(did you mean 'time'\? use --time-col to name it; columns: time, acc_x",
+        ),
+        (
+            "t,Acc_X,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n",
+            {},
+            r"no accelerometer column 'acc_x' \(did you mean 'Acc_X'\? use --acc-cols",
+        ),
         (
             "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n",
             {"quat_cols": ("w", "x", "y", "z")},
-            r"quaternion column\(s\) w, x, y, z",
+            r"no quaternion columns 'w', 'x', 'y', 'z' \(use --quat-cols to name them",
         ),
         (
             "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n1,0,0,1,0,0,0\n0.5,0,0,1,0,0,0\n",
             {},
             r"in\.csv:4: non-monotonic",
+        ),
+        (
+            "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,Scored\n0,0,0,1,0,0,0,1\n",
+            {"mask_col": "scored"},
+            r"no score mask column 'scored' \(did you mean 'Scored'\? use --mask-col to name it",
+        ),
+        (
+            "#time(ns),ax,ay,az,gyro_x,gyro_y,gyro_z\n0,0,0,1,0,0,0\n",
+            {"time_col": "time(ns)", "acc_cols": ("ax", "ay", "az")},
+            r"no gyroscope columns 'gyr_x', 'gyr_y', 'gyr_z' \(did you mean 'gyro_x', 'gyro_y', 'gyro_z'\? use --gyr",
+        ),
+        (
+            "#time(ns),acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n",
+            {},
+            r"no time column 't' \(did you mean 'time\(ns\)'\? use --time-col to name it",
         ),
         ("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,1,0,0,0\n0,0,0,1,0,0,0\n", {}, r"in\.csv:3: duplicated"),
         (
