@@ -108,12 +108,123 @@ def test_euroc_bad_inputs(tmp_path: Path) -> None:
     f = root / "mav0" / "imu0" / "data.csv"
     text = f.read_text().splitlines()
     f.write_text("\n".join([text[0].replace("w_RS_S_y", "w_RS_S_Y"), *text[1:]]) + "\n")
-    with pytest.raises(InputError, match=r"data\.csv: line 1 header lacks column\(s\) w_RS_S_y"):
+    with pytest.raises(InputError, match=r"data\.csv: no EuRoC IMU column 'w_RS_S_y' \(did you mean 'w_RS_S_Y \[rad"):
         read_euroc(root)
     text[5], text[6] = text[6], text[5]
     f.write_text("\n".join(text) + "\n")
     with pytest.raises(InputError, match=r"data\.csv:7: non-monotonic"):
         read_euroc(root)
+
+
+def _gt_cell(name: str, t: str, quat: dict[str, str]) -> str:
+    """The cell of column ``name``: a quaternion component (q*/rot* ending in w/x/y/z), the time (t*/stamp*), or 0."""
+    n = name.strip().lstrip("#").split("[")[0].split("(")[0].strip().lower()
+    if n.startswith(("q", "rot")):
+        return quat[n[-1]]
+    return t if n.startswith(("t", "stamp")) else "0"
+
+
+def _gt_file(path: Path, header: str, stamps_ns: np.ndarray, q: np.ndarray, scale: int = 1, sep: str = ",") -> Path:
+    """A ground-truth CSV with columns ``header``: time ``stamps_ns / scale`` (exact decimal), ``q`` (w, x, y, z)."""
+    rows = [header]
+    for s, qi in zip(stamps_ns, q, strict=True):
+        t = str(int(s) // scale) if scale <= 1000 else f"{int(s) // scale}.{int(s) % scale:0{len(str(scale)) - 1}d}"
+        quat = dict(zip("wxyz", (repr(float(v)) for v in qi), strict=True))
+        rows.append(sep.join(_gt_cell(name, t, quat) for name in header.split(sep)))
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def _gt_case(tmp_path: Path):
+    root, _, _ = _euroc(tmp_path, gt=False)
+    gt_st = T0 + 50_000_000 + np.arange(0, 150) * 5_000_000 + 1_000_000
+    return root, gt_st, _yaw(np.linspace(0, 1.0, len(gt_st)))
+
+
+def test_euroc_open_vins_ground_truth(tmp_path: Path) -> None:
+    """#time(ns),px,py,pz,qw,qx,qy,qz[,...] (open_vins / vicon2gt): columns by name, any order, ns."""
+    root, gt_st, q = _gt_case(tmp_path)
+    asl = _gt_file(tmp_path / "asl.csv", GT_HEADER.replace(", ", ","), gt_st, q)
+    expected = read_euroc(root, ground_truth=asl).quat_ref
+    assert np.isfinite(expected).all(axis=1).sum() == 149  # the IMU samples inside the ground truth's span
+    ov = _gt_file(tmp_path / "room1_gt.csv", "#time(ns),px,py,pz,qw,qx,qy,qz,vx,vy,vz", gt_st, q)
+    assert np.array_equal(read_euroc(root, ground_truth=ov).quat_ref, expected, equal_nan=True)
+    _gt_file(ov, "qx,pz,#time(ns),qz,px,qw,qy", gt_st, q)  # any order, fewer columns
+    assert np.array_equal(read_euroc(root, ground_truth=ov).quat_ref, expected, equal_nan=True)
+    _gt_file(ov, "Timestamp [s];qw;qx;qy;qz", gt_st, q, scale=10**9, sep=";")  # the unit in the name is used
+    assert np.allclose(read_euroc(root, ground_truth=ov).quat_ref, expected, equal_nan=True, atol=1e-12)
+
+
+def test_euroc_gt_cols_and_time_unit(tmp_path: Path) -> None:
+    """--gt-cols TIME,QW,QX,QY,QZ maps other names; --gt-time-unit sets the unit; through the CLI."""
+    from riann_ros.cli.convert import main
+
+    root, gt_st, q = _gt_case(tmp_path)
+    expected = read_euroc(root, ground_truth=_gt_file(tmp_path / "ov.csv", "#time(ns),qw,qx,qy,qz", gt_st, q)).quat_ref
+    header = "stamp,x,y,z,rot_w,rot_x,rot_y,rot_z"
+    gt = _gt_file(tmp_path / "mocap.csv", header, gt_st, q, scale=10**9)  # seconds, no unit in the name
+    out = tmp_path / "m.mcap"
+    argv = [str(root), "--ground-truth", str(gt), "--gt-cols", "stamp,rot_w,rot_x,rot_y,rot_z", "-o", str(out), "-q"]
+    assert main([*argv, "--gt-time-unit", "s"]) == 0
+    assert np.allclose(bagio.read_recording(out).quat_ref, expected, equal_nan=True, atol=1e-12)
+    # without --gt-time-unit the seconds are read as ns: 5 ms steps round to the same ns, and the message says why
+    cols = ("stamp", "rot_w", "rot_x", "rot_y", "rot_z")
+    with pytest.raises(InputError, match=r"mocap\.csv:3: duplicated time stamp .*read in ns.*--gt-time-unit\)$"):
+        read_euroc(root, ground_truth=gt, gt_cols=cols)
+    # microseconds read as ns: no overlap with the IMU, a clear error instead of a bag without reference
+    _gt_file(gt, header, gt_st, q, scale=1000)
+    with pytest.raises(
+        InputError,
+        match=r"mocap\.csv: the ground truth \(1403636\.580 s – 1403636\.581 s\) does not overlap the IMU data "
+        r"\(1403636579\.759 s – .*is its time unit right \(--gt-time-unit\)\?$",
+    ):
+        read_euroc(root, ground_truth=gt, gt_cols=cols)
+    us = read_euroc(root, ground_truth=gt, gt_cols=cols, gt_time_unit="us").quat_ref
+    both = np.isfinite(us).all(axis=1) & np.isfinite(expected).all(axis=1)
+    assert both.sum() >= 148 and np.allclose(us[both], expected[both], atol=1e-6)  # stamps truncated to 1 us
+    with pytest.raises(SystemExit) as e:  # 5 names needed: usage error
+        main([str(root), "-o", str(out), "--gt-cols", "stamp,rot_w"])
+    assert e.value.code == 2
+
+
+@pytest.mark.parametrize(
+    ("header", "opts", "pattern"),
+    [
+        (
+            "#time(ns),px,py,pz,q_w,q_x,q_y,q_z",
+            {},
+            r"gt\.csv: no ground-truth columns 'qw', 'qx', 'qy', 'qz' \(did you mean 'q_w', 'q_x', 'q_y', 'q_z'\? "
+            r"use --gt-cols to name them; columns: time\(ns\), px.*known layouts: ASL",
+        ),
+        ("sec,px,py,pz,qw,qx,qy,qz", {}, r"no ground-truth column 'time' \(did you mean 'sec'\? use --gt-cols"),
+        (
+            "stamp,x,y,z,rot_w,rot_x,rot_y,rot_z",
+            {"gt_cols": ("stamp", "rot_w", "rotx", "rot_y", "rot_z")},
+            r"gt\.csv: no ground-truth column 'rotx' \(did you mean 'rot_x'\? use --gt-cols",
+        ),
+        (
+            "stamp,x,y,z,rot_w,rot_x,rot_y,rot_z",
+            {"gt_cols": ("time", "rot_w", "rot_x", "rot_y", "rot_z")},
+            r"no ground-truth column 'time' \(did you mean 'stamp'\?",
+        ),
+    ],
+)
+def test_euroc_ground_truth_column_errors(tmp_path: Path, header: str, opts: dict, pattern: str) -> None:
+    root, gt_st, q = _gt_case(tmp_path)
+    gt = _gt_file(tmp_path / "gt.csv", header, gt_st, q)
+    with pytest.raises(InputError, match=pattern):
+        read_euroc(root, ground_truth=gt, **opts)
+
+
+def test_euroc_ground_truth_all_in_gaps(tmp_path: Path) -> None:
+    root, _, _ = _gt_case(tmp_path)
+    gt_st = T0 - 10**9 + np.array([0, 5 * 10**9])  # spans the IMU data, but one 5 s gap
+    gt = _gt_file(tmp_path / "gt.csv", "#time(ns),qw,qx,qy,qz", gt_st, _yaw(np.zeros(2)))
+    with pytest.raises(
+        InputError, match=r"gt\.csv: every IMU sample falls in a ground-truth gap longer than --max-gap"
+    ):
+        read_euroc(root, ground_truth=gt)
+    assert np.isfinite(read_euroc(root, ground_truth=gt, max_gap_s=10).quat_ref).all()
 
 
 def test_interpolate_gaps() -> None:

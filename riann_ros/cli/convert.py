@@ -5,6 +5,7 @@ Examples::
     riann-bag-convert 02_undisturbed_slow_rotation_B.hdf5 -o broad02.mcap
     riann-bag-convert ../shared/datasets/broad -o broad_bags/          # every BROAD file → one bag each
     riann-bag-convert MH_01_easy/ -o mh01.mcap                        # EuRoC/ASL folder
+    riann-bag-convert room1/ --ground-truth room1_gt.csv -o room1.mcap  # open_vins-style ground truth
     riann-bag-convert --format csv imu.csv --time-unit ms --gyr-unit deg/s -o imu.mcap
     riann-bag-convert --format synthetic --rate 200 --duration 60 --seed 1 -o bags/synthetic.mcap
 
@@ -112,7 +113,23 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--delimiter", help="column delimiter (default: detect , ; tab or blanks)")
 
     e = p.add_argument_group("EuRoC/ASL")
-    e.add_argument("--ground-truth", type=Path, help="ground truth: ASL data.csv or TUM file (t tx ty tz qx qy qz qw)")
+    e.add_argument(
+        "--ground-truth",
+        type=Path,
+        help="ground truth: ASL data.csv, open_vins CSV (#time(ns),px,py,pz,qw,qx,qy,qz) or TUM file "
+        "(t tx ty tz qx qy qz qw)",
+    )
+    e.add_argument(
+        "--gt-cols",
+        type=_cols(5),
+        metavar="TIME,QW,QX,QY,QZ",
+        help="ground-truth column names (any CSV with a header; default: detect ASL/open_vins/TUM)",
+    )
+    e.add_argument(
+        "--gt-time-unit",
+        choices=tuple(TIME_UNITS),
+        help="ground-truth time unit (default: from the column name, e.g. time(ns); else ns, s for TUM)",
+    )
     e.add_argument("--max-gap", type=float, default=0.1, help="no reference across ground-truth gaps > s (0.1)")
     e.add_argument(
         "--imu-to-body",
@@ -155,6 +172,8 @@ def _reader_opts(fmt: str, args: argparse.Namespace) -> dict:
         return {
             **common,
             "ground_truth": args.ground_truth,
+            "gt_cols": args.gt_cols,
+            "gt_time_unit": args.gt_time_unit,
             "max_gap_s": args.max_gap,
             "imu_to_body": args.imu_to_body,
         }
