@@ -11,8 +11,11 @@ Examples::
 
 An output ending in ``.mcap`` is a single MCAP file; any other output is a rosbag2 directory. With
 several inputs (or a folder of BROAD/CSV files) the output is a folder receiving one bag per input,
-named after the input (``<stem>.mcap``, or ``<stem>/`` for sqlite3). Exit status 0 on success, 1 when
-any input failed, 2 on bad usage; messages go to stderr.
+named after the input (``<stem>.mcap``, or ``<stem>/`` for sqlite3). MCAP storage is zstd-compressed
+unless ``--compression none``. Every input except synthetic ones passes unit checks (sample rate,
+gravity at rest, gyro range: :mod:`riann_ros.datasets.units`); an input that fails them is not written
+unless ``--force-units``. Exit status 0 on success, 1 when any input failed, 2 on bad usage; messages go
+to stderr. Reference: docs/converter.md.
 """
 
 from __future__ import annotations

@@ -47,11 +47,11 @@ REST_MIN_SAMPLES = 10
 
 # Gyroscope range. MEMS gyros have full-scale ranges of ±125 … ±2000 °/s (a few reach ±4000 °/s), so a
 # rad/s recording whose 99th percentile of |gyr| exceeds 2000 °/s ≈ 34.9 rad/s would have at least 1 % of
-# its samples beyond the range of nearly every gyro (a saturating ±2000 °/s gyro clips at 34.9). Human
-# motion stays below that too (fast BROAD trials: 99th percentile 13–19 rad/s; even sports swings peak at
-# 20–40 rad/s for milliseconds). The same numbers in deg/s (35–2000 °/s) are ordinary. The percentile
-# ignores up to 1 % of glitches. Not detectable by magnitude: deg/s data whose motion stays below 35 °/s,
-# and rad/s data read as deg/s (57× too small looks like slow motion).
+# its samples beyond the range of nearly every gyro (a saturating ±2000 °/s gyro clips at 34.9). Everyday
+# human and robot motion stays well below (fast BROAD trials: 99th percentile 11–19 rad/s); faster motion
+# saturates the gyro rather than exceeding it. The same numbers in deg/s (35–2000 °/s) are ordinary. The
+# percentile ignores up to 1 % of glitches. Not detectable by magnitude: deg/s data whose motion stays
+# below 35 °/s, and rad/s data read as deg/s (57× too small looks like slow motion).
 GYR_MAX_RAD_S = 35.0
 GYR_PERCENTILE = 99.0
 
