@@ -276,13 +276,14 @@ class UnitCheckFailed(ValueError):
 
 # The units each format fixes (the unit checks read the numbers in these; CSV units come from the options).
 _FIXED_UNITS = {"broad": {"time_unit": "s"}, "euroc": {"time_unit": "ns"}}
+_FIXED_TEXT = {"broad": "sampling_rate in Hz, m/s², rad/s", "euroc": "ns stamps, m/s², rad/s"}
 
 
 def _advice(finding: Finding, fmt: str) -> str:
     """What fixes ``finding``: the CSV option, or for formats with fixed units, a look at the input."""
     if fmt == "csv":
         return f"use {finding.flag} {finding.suggest}" if finding.suggest else f"check the columns and {finding.flag}"
-    return f"the {fmt} format fixes the units (stamps, m/s², rad/s): check the input"
+    return f"the {fmt} format fixes the units ({_FIXED_TEXT.get(fmt, 'SI')}): check the input"
 
 
 def _check_units(args: argparse.Namespace, label: str, fmt: str, rec: Recording) -> None:
