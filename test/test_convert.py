@@ -162,7 +162,7 @@ def test_cli_folder_continues_after_failure(tmp_path: Path, capsys: pytest.Captu
     out = tmp_path / "out"
     assert main([str(src), "-o", str(out), "--format", "csv", "-q"]) == 1
     err = capsys.readouterr().err
-    assert "b.csv" in err and "gyr_z" in err and "1 of 2" in err
+    assert "b.csv" in err and "no gyroscope column 'gyr_z'" in err and "use --gyr-cols" in err and "1 of 2" in err
     assert [p.name for p in out.iterdir()] == ["a.mcap"]
 
 
@@ -199,12 +199,33 @@ def test_example_bags_are_reproducible_and_small(tmp_path: Path) -> None:
         i = argv.index("-o")
         committed = root / argv[i + 1]
         assert committed.is_file() and committed.stat().st_size < 2_000_000
+        # the script names the compression (the converter's default changed from none to zstd in issue 12)
+        compression = argv[argv.index("--compression") + 1]
+        assert bagio.bag_compression(committed) == (None if compression == "none" else compression)
         out = tmp_path / committed.name
         assert main([*argv[:i], *argv[i + 2 :], "-o", str(out), "-q"]) == 0
         _check_regenerated(bagio.read_recording(committed), bagio.read_recording(out))
     assert sorted(p.name for p in (root / "bags").glob("*.mcap")) == sorted(
         Path(c[c.index("-o") + 1]).name for c in commands
     )
+
+
+@pytest.mark.parametrize(
+    ("name", "extra", "expected"),
+    [
+        ("default.mcap", [], "zstd"),  # mcap: zstd chunk compression by default
+        ("none.mcap", ["--compression", "none"], None),
+        ("dir_mcap", ["--storage", "mcap"], "zstd"),  # directory bag with mcap storage: same default
+        ("dir_sqlite3", ["--storage", "sqlite3"], None),  # sqlite3 keeps no compression by default
+        ("dir_sqlite3_zstd", ["--storage", "sqlite3", "--compression", "zstd"], "zstd"),
+    ],
+)
+def test_cli_compression_default(tmp_path: Path, name: str, extra: list[str], expected: str | None) -> None:
+    out = tmp_path / name
+    assert main(["--format", "synthetic", "--duration", "5", "-o", str(out), "-q", *extra]) == 0
+    assert bagio.bag_compression(out) == expected
+    rec = bagio.read_recording(out)
+    assert len(rec) == 1001
 
 
 def test_empty_imu_topic_is_an_error(tmp_path: Path) -> None:
@@ -215,3 +236,107 @@ def test_empty_imu_topic_is_an_error(tmp_path: Path) -> None:
         w.add_connection(bagio.IMU_TOPIC, bagio.IMU_TYPE, typestore=bagio.typestore())
     with pytest.raises(bagio.BagError, match="no messages"):
         bagio.read_recording(p)
+
+
+# ---- unit checks (issue 12) ------------------------------------------------------------------------
+
+
+def _csv_in_units(path: Path, time_unit: str = "ms", acc_unit: str = "g", gyr_unit: str = "deg/s") -> Path:
+    """A 20 s, 200 Hz synthetic recording (rest and motion) written as a CSV in the given units."""
+    from riann_ros.datasets.synthetic import generate
+
+    rec = generate(rate=200, duration=20, seed=3)
+    t = rec.stamps_ns / {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}[time_unit]
+    acc = rec.acc / (9.80665 if acc_unit == "g" else 1.0)
+    gyr = np.rad2deg(rec.gyr) if gyr_unit == "deg/s" else rec.gyr
+    rows = ["t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z"]
+    rows += [f"{float(t[k])!r}," + ",".join(f"{v:.7g}" for v in (*acc[k], *gyr[k])) for k in range(len(rec))]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+UNIT_FLAGS = {"time": ("--time-unit", "ms"), "acc": ("--acc-unit", "g"), "gyr": ("--gyr-unit", "deg/s")}
+
+
+def test_cli_refuses_csv_in_ms_g_degs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The issue's case: ms / g / deg/s read with the defaults used to give '0.2 Hz' and exit 0."""
+    csv = _csv_in_units(tmp_path / "imu.csv")
+    out = tmp_path / "imu.mcap"
+    assert main([str(csv), "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["imu.csv"]  # nothing written
+    lines = [line for line in err.splitlines() if line.startswith("riann-bag-convert: error:")]
+    assert all(str(csv) in line for line in lines)  # every message names the file
+    assert any("median time step 5 s (0.2 Hz)" in x and "use --time-unit ms" in x for x in lines), err
+    assert any("median |acc| 1 m/s²" in x and "looks like g" in x and "use --acc-unit g" in x for x in lines), err
+    assert any("|gyr| 192.4 rad/s" in x and "looks like deg/s" in x and "use --gyr-unit deg/s" in x for x in lines)
+    assert "no bag written" in err and "--force-units" in err
+
+    # the right flags convert, and the result is physical
+    assert main([str(csv), "-o", str(out), "--time-unit", "ms", "--acc-unit", "g", "--gyr-unit", "deg/s", "-q"]) == 0
+    assert capsys.readouterr().err == ""
+    rec = bagio.read_recording(out)
+    assert rec.rate_hz == pytest.approx(200.0) and "unit_check" not in rec.meta
+    rest = np.linalg.norm(rec.gyr, axis=1) < 0.1
+    assert np.median(np.linalg.norm(rec.acc[rest], axis=1)) == pytest.approx(9.81, abs=0.05)
+
+
+def test_cli_force_units_writes_with_warnings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    csv = _csv_in_units(tmp_path / "imu.csv")
+    out = tmp_path / "forced.mcap"
+    assert main([str(csv), "-o", str(out), "--force-units", "-q"]) == 0  # warnings even with -q
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if line.startswith("riann-bag-convert: warning:")]
+    assert len(warnings) == 3 and "error" not in err
+    assert all(str(csv) in w and "--force-units" in w for w in warnings)
+    rec = bagio.read_recording(out)
+    assert rec.rate_hz == pytest.approx(0.2)  # written as read: the user insisted
+    assert "--time-unit" not in rec.meta["unit_check"] and "0.2 Hz" in rec.meta["unit_check"]  # recorded in the bag
+
+
+@pytest.mark.parametrize("wrong", ["time", "acc", "gyr"])
+def test_cli_unit_check_names_only_the_wrong_unit(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], wrong: str
+) -> None:
+    """One wrong unit at a time: exactly its message (the checks do not trip each other), and its flag fixes it."""
+    units = {"time_unit": "s", "acc_unit": "m/s2", "gyr_unit": "rad/s"}
+    units[f"{wrong}_unit"] = UNIT_FLAGS[wrong][1]
+    csv = _csv_in_units(tmp_path / f"{wrong}.csv", **units)
+    out = tmp_path / "o.mcap"
+    assert main([str(csv), "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    flag, unit = UNIT_FLAGS[wrong]
+    assert f"use {flag} {unit}" in err and sum(f"use --{k}-unit" in err for k in ("time", "acc", "gyr")) == 1, err
+    assert not out.exists()
+    assert main([str(csv), "-o", str(out), flag, unit, "-q"]) == 0
+
+
+def test_cli_unit_check_other_direction_and_implausible(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A unit given wrongly the other way is named too; values no unit explains say so."""
+    csv = _csv_in_units(tmp_path / "si.csv", time_unit="us", acc_unit="m/s2", gyr_unit="rad/s")
+    out = tmp_path / "o.mcap"
+    assert main([str(csv), "-o", str(out), "--time-unit", "ms", "--acc-unit", "g"]) == 1  # data in us and m/s²
+    err = capsys.readouterr().err
+    assert "looks like us stamps read as ms" in err and "use --time-unit us" in err
+    assert "looks like m/s2 read as g" in err and "use --acc-unit m/s2" in err and "--gyr-unit" not in err
+    bad = tmp_path / "counts.csv"  # raw ADC counts: no unit explains them
+    bad.write_text("t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n" + "".join(
+        f"{k / 100},0,0,16384,{30000 * (k % 2)},0,0\n" for k in range(300)))  # fmt: skip
+    assert main([str(bad), "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "median |acc| 1.638e+04 m/s²" in err and "implausible in any unit" in err and "check the columns" in err
+    assert "|gyr| 3e+04 rad/s" in err
+
+
+def test_cli_euroc_units_checked(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """EuRoC has fixed units (no flag): data in g is refused, pointing at the input; --force-units writes it."""
+    imu = tmp_path / "seq" / "mav0" / "imu0"
+    imu.mkdir(parents=True)
+    rows = ["#timestamp [ns],w_RS_S_x,w_RS_S_y,w_RS_S_z,a_RS_S_x,a_RS_S_y,a_RS_S_z"]
+    rows += [f"{10**18 + k * 5_000_000},0.001,0,0,0,0,1.0" for k in range(400)]  # acc in g
+    (imu / "data.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "e.mcap"
+    assert main([str(tmp_path / "seq"), "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "median |acc| 1 m/s²" in err and "euroc format fixes the units (ns stamps" in err and not out.exists()
+    assert main([str(tmp_path / "seq"), "-o", str(out), "--force-units", "-q"]) == 0

@@ -5,13 +5,17 @@ Examples::
     riann-bag-convert 02_undisturbed_slow_rotation_B.hdf5 -o broad02.mcap
     riann-bag-convert ../shared/datasets/broad -o broad_bags/          # every BROAD file → one bag each
     riann-bag-convert MH_01_easy/ -o mh01.mcap                        # EuRoC/ASL folder
+    riann-bag-convert room1/ --ground-truth room1_gt.csv -o room1.mcap  # open_vins-style ground truth
     riann-bag-convert --format csv imu.csv --time-unit ms --gyr-unit deg/s -o imu.mcap
     riann-bag-convert --format synthetic --rate 200 --duration 60 --seed 1 -o bags/synthetic.mcap
 
 An output ending in ``.mcap`` is a single MCAP file; any other output is a rosbag2 directory. With
 several inputs (or a folder of BROAD/CSV files) the output is a folder receiving one bag per input,
-named after the input (``<stem>.mcap``, or ``<stem>/`` for sqlite3). Exit status 0 on success, 1 when
-any input failed, 2 on bad usage; messages go to stderr.
+named after the input (``<stem>.mcap``, or ``<stem>/`` for sqlite3). MCAP storage is zstd-compressed
+unless ``--compression none``. Every input except synthetic ones passes unit checks (sample rate,
+gravity at rest, gyro range: :mod:`riann_ros.datasets.units`); an input that fails them is not written
+unless ``--force-units``. Exit status 0 on success, 1 when any input failed, 2 on bad usage; messages go
+to stderr. Reference: docs/converter.md.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from riann_ros.datasets.csvfile import (
     TIME_UNITS,
 )
 from riann_ros.datasets.synthetic import MOTIONS
+from riann_ros.datasets.units import Finding, check_units
 from riann_ros.recording import Recording
 
 
@@ -82,11 +87,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True, help="output bag (.mcap file or folder) or folder")
     p.add_argument("--format", choices=("auto", *FORMATS), default="auto", help="input format (default: detect)")
     p.add_argument("--storage", choices=bagio.STORAGES, default="mcap", help="bag storage (default mcap)")
-    p.add_argument("--compression", choices=("none", "zstd"), default="none", help="zstd compression")
+    p.add_argument(
+        "--compression",
+        choices=("none", "zstd"),
+        help="zstd | none (default: zstd for mcap storage (MCAP chunk compression), none for sqlite3)",
+    )
     p.add_argument("--frame-id", default="imu_link", help="IMU frame_id (default imu_link)")
     p.add_argument("--name", help="sequence name (default: from the input)")
     p.add_argument("--force", action="store_true", help="replace existing output bags")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--force-units",
+        action="store_true",
+        help="write the bag even when the unit checks (sample rate, gravity at rest, gyro range) fail; "
+        "their findings are then warnings",
+    )
 
     c = p.add_argument_group("generic CSV")
     c.add_argument("--time-col", default=DEFAULT_TIME, help=f"time column (default {DEFAULT_TIME})")
@@ -101,7 +116,23 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--delimiter", help="column delimiter (default: detect , ; tab or blanks)")
 
     e = p.add_argument_group("EuRoC/ASL")
-    e.add_argument("--ground-truth", type=Path, help="ground truth: ASL data.csv or TUM file (t tx ty tz qx qy qz qw)")
+    e.add_argument(
+        "--ground-truth",
+        type=Path,
+        help="ground truth: ASL data.csv, open_vins CSV (#time(ns),px,py,pz,qw,qx,qy,qz) or TUM file "
+        "(t tx ty tz qx qy qz qw)",
+    )
+    e.add_argument(
+        "--gt-cols",
+        type=_cols(5),
+        metavar="TIME,QW,QX,QY,QZ",
+        help="ground-truth column names (any CSV with a header; default: detect ASL/open_vins/TUM)",
+    )
+    e.add_argument(
+        "--gt-time-unit",
+        choices=tuple(TIME_UNITS),
+        help="ground-truth time unit (default: from the column name, e.g. time(ns); else ns, s for TUM)",
+    )
     e.add_argument("--max-gap", type=float, default=0.1, help="no reference across ground-truth gaps > s (0.1)")
     e.add_argument(
         "--imu-to-body",
@@ -144,6 +175,8 @@ def _reader_opts(fmt: str, args: argparse.Namespace) -> dict:
         return {
             **common,
             "ground_truth": args.ground_truth,
+            "gt_cols": args.gt_cols,
+            "gt_time_unit": args.gt_time_unit,
             "max_gap_s": args.max_gap,
             "imu_to_body": args.imu_to_body,
         }
@@ -233,13 +266,55 @@ def _output_problem(args: argparse.Namespace, many: bool) -> str | None:
     return None
 
 
+class UnitCheckFailed(ValueError):
+    """The unit checks found implausible values and --force-units was not given; ``lines``: the messages."""
+
+    def __init__(self, lines: list[str]) -> None:
+        self.lines = lines
+        super().__init__("\n".join(lines))
+
+
+# The units each format fixes (the unit checks read the numbers in these; CSV units come from the options).
+_FIXED_UNITS = {"broad": {"time_unit": "s"}, "euroc": {"time_unit": "ns"}}
+_FIXED_TEXT = {"broad": "sampling_rate in Hz, m/s², rad/s", "euroc": "ns stamps, m/s², rad/s"}
+
+
+def _advice(finding: Finding, fmt: str) -> str:
+    """What fixes ``finding``: the CSV option, or for formats with fixed units, a look at the input."""
+    if fmt == "csv":
+        return f"use {finding.flag} {finding.suggest}" if finding.suggest else f"check the columns and {finding.flag}"
+    return f"the {fmt} format fixes the units ({_FIXED_TEXT.get(fmt, 'SI')}): check the input"
+
+
+def _check_units(args: argparse.Namespace, label: str, fmt: str, rec: Recording) -> None:
+    """Refuse a recording whose units look wrong (UnitCheckFailed), or warn with --force-units.
+
+    Synthetic recordings are made in the right units and not checked. With --force-units the findings
+    are also recorded in the bag (``/dataset/info`` ``meta.unit_check``).
+    """
+    if fmt == "synthetic":
+        return
+    findings = check_units(rec, **_FIXED_UNITS.get(fmt, {}))
+    if not findings:
+        return
+    lines = [f"{label}: {f}, {_advice(f, fmt)}" for f in findings]
+    if not args.force_units:
+        raise UnitCheckFailed(
+            [*lines, f"{label}: no bag written (the units look wrong; --force-units writes it anyway)"]
+        )
+    for line in lines:
+        print(f"riann-bag-convert: warning: {line} (written anyway: --force-units)", file=sys.stderr)
+    rec.meta["unit_check"] = "failed, written with --force-units: " + "; ".join(str(f) for f in findings)
+
+
 def _convert(args: argparse.Namespace, inp: Path | None, fmt: str, target: Path, compression: str | None) -> Recording:
-    """Read one input and write it as the bag ``target``; the recording written."""
+    """Read one input, check its units and write it as the bag ``target``; the recording written."""
     if target.exists() and not args.force:
         raise FileExistsError(f"{target}: output exists, not overwriting (use --force to replace it)")
     rec = read_any(inp, fmt, **_reader_opts(fmt, args))
     if args.name and fmt == "broad":
         rec.name = args.name
+    _check_units(args, str(inp), fmt, rec)
     bagio.write_recording(target, rec, storage=args.storage, compression=compression, force=args.force)
     return rec
 
@@ -264,6 +339,10 @@ def _convert_one(args: argparse.Namespace, inp: Path | None, fmt: str, target: P
     except KeyboardInterrupt:
         print(f"riann-bag-convert: interrupted while converting {label}; no partial bag left", file=sys.stderr)
         return _INTERRUPTED
+    except UnitCheckFailed as e:
+        for line in e.lines:
+            print(f"riann-bag-convert: error: {line}", file=sys.stderr)
+        return _FAILED
     except (OSError, ValueError, bagio.BagError) as e:
         print(
             f"riann-bag-convert: error: {label}: {e}" if str(label) not in str(e) else f"riann-bag-convert: error: {e}",
@@ -274,10 +353,17 @@ def _convert_one(args: argparse.Namespace, inp: Path | None, fmt: str, target: P
     return _OK
 
 
+def _compression(args: argparse.Namespace) -> str | None:
+    """The bag compression: --compression, else zstd for mcap storage (MCAP chunks) and none for sqlite3."""
+    if args.compression is None:
+        return "zstd" if args.storage == "mcap" else None
+    return None if args.compression == "none" else args.compression
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    compression = None if args.compression == "none" else args.compression
+    compression = _compression(args)
     out: Path = args.output
 
     jobs = _plan_jobs(parser, args)

@@ -22,6 +22,7 @@ they are required. IMU cells must be finite numbers. Errors name the file and li
 
 from __future__ import annotations
 
+import difflib
 import os
 import re
 from collections.abc import Sequence
@@ -119,17 +120,65 @@ def read_table(path: Path, delimiter: str | None = None) -> tuple[list[str], lis
     return header, rows, numbers
 
 
+# The riann-bag-convert option naming each kind of column, for "missing column" messages.
+COLUMN_FLAGS = {
+    "time": "--time-col",
+    "accelerometer": "--acc-cols",
+    "gyroscope": "--gyr-cols",
+    "quaternion": "--quat-cols",
+    "score mask": "--mask-col",
+}
+_TIME_LIKE = {"t", "time", "times", "timestamp", "timestamps", "stamp", "sec", "secs", "seconds"}
+
+
+def bare_name(name: str) -> str:
+    """A column name without ``#``, a unit in brackets or parentheses and blanks: ``'#time(ns)'`` → ``'time'``."""
+    return re.sub(r"\s*[\[(].*$", "", name.strip().lstrip("#")).strip()
+
+
+def _key(name: str) -> str:
+    return re.sub(r"[\W_]", "", bare_name(name)).lower()
+
+
+def did_you_mean(name: str, header: Sequence[str], time_like: bool = False, taken: Sequence[str] = ()) -> list[str]:
+    """Header names that ``name`` was probably meant to be: equal up to case, punctuation and a unit suffix,
+    else close spellings (difflib), else, for a time column, the header's time-like names; never the
+    names in ``taken`` (the other columns asked for: ``gyr_y`` is no hint for a missing ``gyr_z``)."""
+    free = [h for h in header if h != name and h not in taken]
+    close = [h for h in free if _key(h) == _key(name)]
+    if not close:
+        close = difflib.get_close_matches(name, free, n=2, cutoff=0.75)
+    if not close and time_like:
+        close = [h for h in free if _key(h) in _TIME_LIKE]
+    return close
+
+
+def missing_columns_message(
+    path: Path,
+    missing: Sequence[str],
+    header: Sequence[str],
+    what: str,
+    flag: str | None,
+    time_like: bool = False,
+    taken: Sequence[str] = (),
+) -> str:
+    """``"<path>: no <what> column 'x' (did you mean 'X'? use <flag> to name it; columns: ...)"``."""
+    names = ", ".join(repr(m) for m in missing)
+    close: list[str] = []
+    for m in missing:
+        close += [c for c in did_you_mean(m, header, time_like, taken) if c not in close]
+    hint = f"did you mean {', '.join(repr(c) for c in close)}? " if close else ""
+    use = f"use {flag} to name {'it' if flag in ('--time-col', '--mask-col') else 'them'}; " if flag else ""
+    plural = "s" if len(missing) > 1 else ""
+    return f"{path}: no {what} column{plural} {names} ({hint}{use}columns: {', '.join(header)})"
+
+
 def column_index(header: list[str], names: Sequence[str], path: Path, what: str) -> list[int]:
+    """Indices of ``names`` in ``header``, else InputError naming the missing columns and the flag that names them."""
     missing = [n for n in names if n not in header]
     if missing:
-        close = []
-        for m in missing:
-            low = [h for h in header if h.lower() == m.lower() or re.sub(r"\W", "", h) == re.sub(r"\W", "", m)]
-            close += low
-        hint = f" (did you mean {', '.join(close)}?)" if close else ""
-        raise InputError(
-            f"{path}: line 1 header lacks {what} column(s) {', '.join(missing)}{hint}; columns are: {', '.join(header)}"
-        )
+        flag = COLUMN_FLAGS.get(what)
+        raise InputError(missing_columns_message(path, missing, header, what, flag, what == "time", names))
     return [header.index(n) for n in names]
 
 

@@ -4,10 +4,21 @@ Input: a folder containing ``mav0/imu0/data.csv`` (or ``imu0/data.csv``, or the 
 with columns ``#timestamp [ns], w_RS_S_x, w_RS_S_y, w_RS_S_z [rad s^-1], a_RS_S_x, a_RS_S_y, a_RS_S_z
 [m s^-2]`` (checked by name). Ground truth, the first that exists:
 
-1. the ``ground_truth`` argument: an ASL ground-truth CSV or a TUM trajectory file
-   (``t tx ty tz qx qy qz qw``, t in seconds, blank-separated, ``#`` comments);
-2. ``mav0/state_groundtruth_estimate0/data.csv`` (``#timestamp, p_RS_R_xyz, q_RS_w, q_RS_x, q_RS_y,
-   q_RS_z, ...``).
+1. the ``ground_truth`` argument, one of
+   * an ASL ground-truth CSV (``#timestamp, p_RS_R_xyz, q_RS_w, q_RS_x, q_RS_y, q_RS_z, ...``, ns);
+   * an open_vins / vicon2gt-style CSV (``#time(ns),px,py,pz,qw,qx,qy,qz,...``): a time column named
+     ``timestamp``, ``time`` or ``t`` (any case; a unit in the name such as ``(ns)`` or ``[s]`` is used,
+     else ns) and columns ``qw, qx, qy, qz``, found by name in any order;
+   * a TUM trajectory file (``t tx ty tz qx qy qz qw``, t in seconds, blank-separated, no header,
+     ``#`` comments);
+   * any CSV with a header, with ``gt_cols`` naming its time, qw, qx, qy, qz columns;
+2. ``mav0/state_groundtruth_estimate0/data.csv`` (ASL, as above).
+
+``gt_time_unit`` overrides the time unit of the ground-truth file. A ground truth that gives no IMU
+sample a reference (time spans that do not overlap: usually a wrong time unit) is an error.
+
+open_vins and vicon2gt write the JPL quaternion ``q_GtoI``; JPL ``q_GtoI`` and Hamilton ``q_ItoG`` (IMU →
+gravity-aligned world, what this reader wants) have the same four numbers, so they are used as they are.
 
 The reference is slerp-interpolated onto the IMU stamps inside the ground truth's time span only
 (NaN outside it and across gaps longer than ``max_gap_s``).
@@ -23,6 +34,8 @@ the body frame): the reference becomes ``q_world_body ⊗ q_body_imu``.
 from __future__ import annotations
 
 import os
+import re
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +43,10 @@ import numpy as np
 from riann_ros import quaternion as quat
 from riann_ros.datasets.csvfile import (
     InputError,
+    bare_name,
     check_stamps,
     float_columns,
+    missing_columns_message,
     normalise_quats,
     parse_time_ns,
     read_table,
@@ -41,6 +56,10 @@ from riann_ros.recording import Recording
 SOURCE = "EuRoC MAV / ASL format (Burri et al., IJRR 2016)"
 IMU_COLS = ("timestamp", "w_RS_S_x", "w_RS_S_y", "w_RS_S_z", "a_RS_S_x", "a_RS_S_y", "a_RS_S_z")
 GT_QUAT_COLS = ("q_RS_w", "q_RS_x", "q_RS_y", "q_RS_z")
+# open_vins / vicon2gt ground truth (``#time(ns),px,py,pz,qw,qx,qy,qz,vx,...``): time column names tried in
+# this order (case-insensitive, unit suffix removed) and the quaternion columns.
+GT_TIME_NAMES = ("timestamp", "time", "t")
+OV_QUAT_COLS = ("qw", "qx", "qy", "qz")
 
 
 def find_imu_csv(path: Path) -> Path:
@@ -56,46 +75,104 @@ def is_euroc(path: Path) -> bool:
     return path.is_dir() and ((path / "mav0" / "imu0" / "data.csv").is_file() or (path / "imu0" / "data.csv").is_file())
 
 
-def _bare(name: str) -> str:
-    """``'#timestamp [ns]'`` → ``'timestamp'``."""
-    return name.lstrip("#").split("[")[0].strip()
-
-
 def _indices(header: list[str], names: tuple[str, ...], path: Path) -> list[int]:
-    bare = [_bare(h) for h in header]
+    bare = [bare_name(h) for h in header]
     missing = [n for n in names if n not in bare]
     if missing:
-        raise InputError(
-            f"{path}: line 1 header lacks column(s) {', '.join(missing)}; columns are: {', '.join(header)}"
-        )
+        raise InputError(missing_columns_message(path, missing, header, "EuRoC IMU", None, taken=names))
     return [bare.index(n) for n in names]
 
 
-def read_ground_truth(path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Stamps (ns) and quaternions (w, x, y, z) from an ASL ground-truth CSV or a TUM file."""
+def _unit_in_name(name: str) -> str | None:
+    """The time unit written in a column name: ``'time(ns)'``, ``'#timestamp [ns]'`` → ``'ns'``; else None."""
+    m = re.search(r"[\[(]\s*(s|ms|us|µs|ns)\s*[\])]", name)
+    return m.group(1) if m else None
+
+
+def _find_named(header: list[str], names: Sequence[str]) -> list[int | None]:
+    """Index of each of ``names`` in ``header`` (as written, without ``#``, or without a unit suffix), or None."""
+    out: list[int | None] = []
+    for n in names:
+        hits = [i for i, h in enumerate(header) if n in (h, h.lstrip("#").strip(), bare_name(h))]
+        out.append(hits[0] if hits else None)
+    return out
+
+
+def _named_layout(path: Path, header: list[str], cols: Sequence[str]) -> list[int]:
+    """Indices of the --gt-cols columns TIME, QW, QX, QY, QZ, else InputError with a hint."""
+    found = _find_named(header, cols)
+    missing = [c for c, i in zip(cols, found, strict=True) if i is None]
+    if missing:
+        raise InputError(
+            missing_columns_message(path, missing, header, "ground-truth", "--gt-cols", cols[0] in missing, cols)
+        )
+    return [i for i in found if i is not None]
+
+
+def _auto_layout(path: Path, header: list[str]) -> list[int] | None:
+    """Indices of time, qw, qx, qy, qz in an ASL or open_vins-style header; None for a TUM file (no header).
+
+    ASL: ``#timestamp, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z``. open_vins / vicon2gt:
+    ``#time(ns),px,py,pz,qw,qx,qy,qz,...``: a time column named timestamp, time or t (any case, unit
+    suffix allowed) and columns qw, qx, qy, qz, in any order.
+    """
+    bare = [bare_name(h) for h in header]
+    if "timestamp" in bare and all(c in bare for c in GT_QUAT_COLS):
+        return [bare.index(c) for c in ("timestamp", *GT_QUAT_COLS)]
+    low = [b.lower() for b in bare]
+    t = next((low.index(n) for n in GT_TIME_NAMES if n in low), None)
+    if t is not None and all(q in low for q in OV_QUAT_COLS):
+        return [t, *(low.index(q) for q in OV_QUAT_COLS)]
+    if _is_number_row(header):
+        return None
+    missing = ([] if t is not None else ["time"]) + [q for q in OV_QUAT_COLS if q not in low]
+    raise InputError(
+        missing_columns_message(path, missing, header, "ground-truth", "--gt-cols", t is None, OV_QUAT_COLS)
+        + "; known layouts: ASL (#timestamp, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z), open_vins "
+        "(#time(ns), ..., qw, qx, qy, qz) and TUM (t tx ty tz qx qy qz qw, no header); "
+        "--gt-cols TIME,QW,QX,QY,QZ names other columns"
+    )
+
+
+def _read_tum(path: Path, header: list[str], rows: list[list[str]], lines: list[int], time_unit: str):
+    """A TUM file: the "header" read_table found is the first data row (a ``#`` comment header is skipped)."""
+    rows = [header, *rows]
+    lines = [lines[0] - 1, *lines]
+    if any(len(r) != 8 for r in rows):
+        raise InputError(
+            f"{path}: neither an ASL ground-truth CSV (#timestamp, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z), an "
+            "open_vins one (#time(ns),px,py,pz,qw,qx,qy,qz) nor a TUM file (t tx ty tz qx qy qz qw)"
+        )
+    stamps = parse_time_ns([r[0] for r in rows], time_unit, str(path), lines)
+    xyzw = float_columns(rows, [4, 5, 6, 7], path, lines, "quaternion")
+    return stamps, xyzw[:, [3, 0, 1, 2]], lines
+
+
+def read_ground_truth(
+    path: str | os.PathLike[str], cols: Sequence[str] | None = None, time_unit: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Stamps (ns) and quaternions (w, x, y, z) from a ground-truth file.
+
+    Layouts: ``cols`` (names of the time, qw, qx, qy, qz columns, any order in the file); else an ASL
+    CSV (``#timestamp, ..., q_RS_w..z``), an open_vins-style CSV (``#time(ns),px,py,pz,qw,qx,qy,qz``,
+    columns found by name) or a TUM file (``t tx ty tz qx qy qz qw``, no header). ``time_unit``: the unit
+    of the time column; default: the unit in its name (``time(ns)``, ``timestamp [s]``), else ns for CSVs
+    with a header and s for TUM files.
+    """
     path = Path(path)
     header, rows, lines = read_table(path)
-    bare = [_bare(h) for h in header]
-    if "timestamp" in bare and all(c in bare for c in GT_QUAT_COLS):  # ASL csv
-        ti = bare.index("timestamp")
-        stamps = parse_time_ns([r[ti] for r in rows], "ns", str(path), lines)
-        q = float_columns(rows, [bare.index(c) for c in GT_QUAT_COLS], path, lines, "quaternion")
-    else:  # TUM: the "header" read_table found is the first data row unless it was a comment
-        text_rows = rows
-        text_lines = lines
-        if _is_number_row(header):
-            text_rows = [header, *rows]
-            text_lines = [lines[0] - 1, *lines]
-        if any(len(r) != 8 for r in text_rows) or not _is_number_row(text_rows[0]):
-            raise InputError(
-                f"{path}: neither an ASL ground-truth CSV (#timestamp, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z) "
-                "nor a TUM file (t tx ty tz qx qy qz qw)"
-            )
-        stamps = parse_time_ns([r[0] for r in text_rows], "s", str(path), text_lines)
-        xyzw = float_columns(text_rows, [4, 5, 6, 7], path, text_lines, "quaternion")
-        q = xyzw[:, [3, 0, 1, 2]]
-        lines = text_lines
-    check_stamps(stamps, str(path), lines)
+    idx = _named_layout(path, header, cols) if cols is not None else _auto_layout(path, header)
+    if idx is None:
+        unit = time_unit or "s"
+        stamps, q, lines = _read_tum(path, header, rows, lines, unit)
+    else:
+        unit = time_unit or _unit_in_name(header[idx[0]]) or "ns"
+        stamps = parse_time_ns([r[idx[0]] for r in rows], unit, str(path), lines)
+        q = float_columns(rows, idx[1:], path, lines, "quaternion")
+    try:
+        check_stamps(stamps, str(path), lines)
+    except InputError as e:  # e.g. seconds read as ns: 5 ms steps round to the same ns
+        raise InputError(f"{e} (time read in {unit}; if that is wrong, use --gt-time-unit)") from None
     return stamps, normalise_quats(q, path, lines)
 
 
@@ -105,6 +182,25 @@ def _is_number_row(cells: list[str]) -> bool:
     except ValueError:
         return False
     return True
+
+
+def _span(ns: np.ndarray) -> str:
+    return f"{ns[0] * 1e-9:.3f} s – {ns[-1] * 1e-9:.3f} s"
+
+
+def _check_overlap(gt_path: Path, gt_ns: np.ndarray, stamps: np.ndarray, quat_ref: np.ndarray, max_gap_s: float):
+    """InputError when no IMU sample got a reference: the time spans do not overlap, or every one is in a gap."""
+    if np.isfinite(quat_ref).all(axis=1).any():
+        return
+    if stamps[-1] < gt_ns[0] or stamps[0] > gt_ns[-1]:
+        raise InputError(
+            f"{gt_path}: the ground truth ({_span(gt_ns)}) does not overlap the IMU data ({_span(stamps)}), so no "
+            "sample would have a reference; is its time unit right (--gt-time-unit)?"
+        )
+    raise InputError(
+        f"{gt_path}: every IMU sample falls in a ground-truth gap longer than --max-gap {max_gap_s:g} s "
+        f"(ground truth: {len(gt_ns)} poses, {_span(gt_ns)})"
+    )
 
 
 def interpolate(gt_ns: np.ndarray, gt_q: np.ndarray, stamps_ns: np.ndarray, max_gap_s: float = 0.1) -> np.ndarray:
@@ -130,6 +226,8 @@ def read_euroc(
     path: str | os.PathLike[str],
     *,
     ground_truth: str | os.PathLike[str] | None = None,
+    gt_cols: Sequence[str] | None = None,
+    gt_time_unit: str | None = None,
     imu_to_body: np.ndarray | None = None,
     max_gap_s: float = 0.1,
     name: str | None = None,
@@ -156,10 +254,11 @@ def read_euroc(
     if gt_path is not None:
         if not gt_path.is_file():
             raise InputError(f"{gt_path}: ground-truth file not found")
-        gt_ns, gt_q = read_ground_truth(gt_path)
+        gt_ns, gt_q = read_ground_truth(gt_path, gt_cols, gt_time_unit)
         if imu_to_body is not None:
             gt_q = quat.multiply(gt_q, np.asarray(imu_to_body, dtype=float))
         quat_ref = interpolate(gt_ns, gt_q, stamps, max_gap_s)
+        _check_overlap(gt_path, gt_ns, stamps, quat_ref, max_gap_s)
         meta["ground_truth_file"] = gt_path.name
     seq = name or (path.name if path.is_dir() else imu_csv.parent.name)
     return Recording(
