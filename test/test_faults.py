@@ -329,8 +329,9 @@ def _sigint_when(cmd: list[str], cond, timeout: float = 60.0) -> subprocess.Comp
 @pytest.mark.slow
 def test_converter_interrupted_half_way_leaves_nothing_and_rerun_succeeds(tmp_path):
     out = tmp_path / "out" / "long.mcap"
+    # uncompressed (zstd is the default for mcap): the bag grows to ~58 MB, plenty of time after the 4 MB mark
     cmd = [str(executable("riann-bag-convert")), "--format", "synthetic", "--rate", "1000", "--duration", "150",
-           "-o", str(out)]
+           "--compression", "none", "-o", str(out)]
 
     def writing() -> bool:  # the hidden temporary bag exists and has grown: the write is half-way
         return any(f.stat().st_size > 4_000_000 for f in out.parent.glob(".long.mcap.*/**/*.mcap"))
