@@ -250,8 +250,10 @@ def test_best_effort_and_reliable_publishers_at_once(ros, start_node):
     pub_be = ros.publisher(Imu, "imu/data_raw", reliable=False)
     pub_rel = ros.publisher(Imu, "imu/data_raw", reliable=True)
     att = ros.collect(QuaternionStamped, "imu/attitude")
+    imu_out = ros.collect(Imu, "imu/data")  # keeps the input's frame_id (imu/attitude carries fixed_frame)
     wait_for(lambda: pub_be.get_subscription_count() > 0 and pub_rel.get_subscription_count() > 0
-             and att.sub.get_publisher_count() > 0, 20, f"both publishers to connect (log: {node.output()})")
+             and att.sub.get_publisher_count() > 0 and imu_out.sub.get_publisher_count() > 0, 20,
+             f"both publishers to connect (log: {node.output()})")
     time.sleep(0.3)
     s, a, g = motion(200)
     for k in range(4):  # alternate blocks of 50: best effort, reliable, best effort, reliable
@@ -260,11 +262,12 @@ def test_best_effort_and_reliable_publishers_at_once(ros, start_node):
             pub.publish(imu_msg(s[i], a[i], g[i], frame_id=frame))
             time.sleep(0.003)
     settle(att, 200)
+    settle(imu_out, 200)
     got = att.messages
-    frames = [m.header.frame_id for m in got]
+    frames = [m.header.frame_id for m in imu_out.messages]
     assert frames.count("driver_rel") == 100 and frames.count("driver_be") == 100
     check_against_core(got, s, a, g)
-    ros.destroy(pub_be, pub_rel, att)
+    ros.destroy(pub_be, pub_rel, att, imu_out)
 
 
 # ---- node killed and restarted ---------------------------------------------------------------------

@@ -45,7 +45,7 @@ def test_node_output_equals_core_on_a_broad_trial(ros, start_node, broad_trial):
     got = att.messages
     assert len(got) == len(msgs), f"{len(got)} outputs for {len(msgs)} inputs"
     assert [stamp_ns(m) for m in got] == stamps.tolist()
-    assert all(m.header.frame_id == "imu_link" for m in got[:100])
+    assert all(m.header.frame_id == "odom" for m in got[:100])  # fixed_frame: the orientation's frame
     q_node = quats(got)
     q_core, ok = EstimatorStream(create("riann"), GateConfig(nominal_rate=rec.rate_hz)).process_batch(
         stamps, rec.acc, rec.gyr)
@@ -125,7 +125,8 @@ def test_imu_data_carries_input_with_orientation_and_covariance(ros, start_node)
     wait_for(lambda: len(imu_out.messages) >= 50 and len(att.messages) >= 50, 10, "outputs")
     for m_imu, m_att, s, a, g in zip(imu_out.messages, att.messages, stamps, acc, gyr, strict=True):
         assert stamp_ns(m_imu) == stamp_ns(m_att) == s
-        assert m_imu.header.frame_id == m_att.header.frame_id == "my_imu"
+        assert m_imu.header.frame_id == "my_imu"  # imu/data: the input's sensor frame (REP-145)
+        assert m_att.header.frame_id == "odom"  # imu/attitude: expressed in fixed_frame
         o, q = m_imu.orientation, m_att.quaternion
         assert (o.x, o.y, o.z, o.w) == (q.x, q.y, q.z, q.w)
         assert abs(o.x**2 + o.y**2 + o.z**2 + o.w**2 - 1.0) < 1e-6

@@ -75,6 +75,11 @@ def test_launch_file_starts_every_node_executable_with_its_config():
         assert f'"{name}_node = riann_ros.nodes.{name}_node:main"' in setup
         assert (ROOT / "config" / f"{name}.yaml").is_file()
     assert 'glob("launch/*.py")' in setup  # installed into share/riann_ros/launch
+    # riann.launch.py (its arguments and the node it starts: test_node_files.py, with stand-in launch modules)
+    tree = ast.parse((ROOT / "launch" / "riann.launch.py").read_text())
+    consts = {t.id: ast.literal_eval(n.value) for n in tree.body if isinstance(n, ast.Assign)
+              for t in n.targets if isinstance(t, ast.Name) and t.id in ("NODE", "PACKAGE", "INPUT_TOPIC")}
+    assert consts == {"NODE": "riann", "PACKAGE": "riann_ros", "INPUT_TOPIC": "imu/data_raw"}
 
 
 def test_launch_description_when_launch_ros_is_present(tmp_path, monkeypatch):
@@ -94,8 +99,28 @@ def test_launch_description_when_launch_ros_is_present(tmp_path, monkeypatch):
     ld = mod.generate_launch_description()
     args = [e for e in ld.entities if isinstance(e, DeclareLaunchArgument)]
     nodes = [e for e in ld.entities if isinstance(e, Node)]
-    assert {a.name for a in args} == {"input_topic", "nominal_rate"}
+    assert {a.name for a in args} == {"input_topic", "nominal_rate", "world_frame", "fixed_frame", "publish_tf",
+                                      "publish_rpy"}
     assert len(nodes) == 4
+
+
+def test_riann_launch_description_when_launch_ros_is_present(tmp_path, monkeypatch):
+    pytest.importorskip("launch_ros")
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction
+
+    (tmp_path / "share" / "ament_index" / "resource_index" / "packages").mkdir(parents=True)
+    (tmp_path / "share" / "ament_index" / "resource_index" / "packages" / "riann_ros").touch()
+    (tmp_path / "share" / "riann_ros").mkdir()
+    (tmp_path / "share" / "riann_ros" / "config").symlink_to(ROOT / "config")
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(tmp_path))
+    spec = importlib.util.spec_from_file_location("riann_launch", ROOT / "launch" / "riann.launch.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ld = mod.generate_launch_description()
+    args = [e for e in ld.entities if isinstance(e, DeclareLaunchArgument)]
+    assert {a.name for a in args} == {"params_file", "input_topic", "attitude_topic", "imu_topic", "rpy_topic",
+                                      "nominal_rate", "world_frame", "fixed_frame", "publish_tf", "publish_rpy"}
+    assert len([e for e in ld.entities if isinstance(e, OpaqueFunction)]) == 1
 
 
 # -- four processes, one synthetic input stream --------------------------------------------------------

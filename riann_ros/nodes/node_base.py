@@ -2,7 +2,8 @@
 
 It owns everything ROS: the ``imu/data_raw`` subscription and its QoS, parameters (node parameters
 plus every :class:`~riann_ros.estimators.base.ParamSpec` of the estimator), the ``~/reset`` service,
-publishing ``QuaternionStamped`` and ``sensor_msgs/Imu``, and ``/diagnostics``. What to do with a
+publishing ``QuaternionStamped``, ``sensor_msgs/Imu``, roll/pitch/yaw and TF in the chosen world frame
+(:mod:`riann_ros.frames`), the stamp-rate check, and ``/diagnostics``. What to do with a
 sample (dt from stamps, input checks, resets) is decided by the ROS-free
 :class:`~riann_ros.stream.EstimatorStream`, the same code the offline evaluator runs.
 
@@ -12,6 +13,8 @@ A concrete node only names its estimator and its default output topics.
 from __future__ import annotations
 
 import math
+import posixpath
+import statistics
 import sys
 import time
 from collections import Counter
@@ -20,7 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import QuaternionStamped
+from geometry_msgs.msg import QuaternionStamped, TransformStamped, Vector3Stamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -29,7 +32,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
-from riann_ros import stamps
+from riann_ros import frames, stamps
 from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
 from riann_ros.params import ParamSpec
@@ -52,8 +55,25 @@ NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("yaw_stddev_deg", 180.0, "deg; standard deviation written to the yaw entry of the orientation "
               "covariance (yaw is unobservable without a magnetometer).", min=0.0, max=1.0e6, runtime=True),
     ParamSpec("diagnostics_period", 1.0, "s; period of /diagnostics messages.", min=0.05, max=3600.0),
+    ParamSpec("world_frame", frames.ENU, "World frame of the published orientation (imu/attitude, imu/data, imu/rpy, "
+              "TF): enu (x east, y north, z up; REP-103), ned (x north, y east, z down) or nwu (x north, y west, "
+              "z up); the physical change of axes from ENU (docs/node.md, Frames).", choices=frames.WORLD_FRAMES),
+    ParamSpec("fixed_frame", "odom", "frame_id of imu/attitude and imu/rpy (a QuaternionStamped is expressed in its "
+              "header frame: the world frame, not the sensor's) and parent frame of the TF; imu/data keeps the "
+              "input's sensor frame."),
+    ParamSpec("publish_tf", False, "Broadcast fixed_frame -> the input's frame_id on /tf (rotation only, zero "
+              "translation; for visualising a stand-alone IMU). Needs tf2_msgs (a system ROS 2)."),
+    ParamSpec("publish_rpy", False, "Publish roll, pitch, yaw in degrees (ZYX, in world_frame) as "
+              "geometry_msgs/Vector3Stamped on imu/rpy (x = roll, y = pitch, z = yaw), for plotting."),
 )
 NODE_PARAMS: tuple[ParamSpec, ...] = (*st.GATE_PARAMS, *NODE_ONLY_PARAMS)
+
+
+RATE_CHECK_SAMPLES = 100  # accepted samples (restarts excluded) whose median dt gives the measured stamp rate
+RATE_TOLERANCE = 0.10  # relative difference between measured and nominal rate that is warned about
+TF_TOPIC = "/tf"
+TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                    durability=DurabilityPolicy.VOLATILE)  # tf2_ros' DynamicBroadcasterQoS
 
 
 def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
@@ -65,6 +85,70 @@ def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
             lo, hi = float(spec.min), float(spec.max)
             d.floating_point_range = [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]
     return d
+
+
+def rpy_topic(attitude_topic: str) -> str:
+    """The roll/pitch/yaw topic beside an attitude topic: ``imu/attitude`` -> ``imu/rpy``,
+    ``imu/madgwick/attitude`` -> ``imu/madgwick/rpy``."""
+    return posixpath.join(posixpath.dirname(attitude_topic), "rpy")
+
+
+def make_transform(stamp: Any, parent: str, child: str, q_wxyz: tuple[float, float, float, float]) -> TransformStamped:
+    """The TF the node broadcasts for one output: ``parent`` (fixed_frame) -> ``child`` (the sensor frame),
+    rotation ``q_wxyz`` (the orientation in the world frame), zero translation, the input's stamp."""
+    t = TransformStamped()
+    t.header.stamp = stamp
+    t.header.frame_id = parent
+    t.child_frame_id = child
+    r = t.transform.rotation
+    r.w, r.x, r.y, r.z = (float(v) for v in q_wxyz)
+    return t
+
+
+def tf_frames_problem(parent: str, child: str) -> str | None:
+    """Why no TF can be sent from ``parent`` to ``child``, or None when it can."""
+    if not child:
+        return "the input messages have an empty header.frame_id (no sensor frame to attach)"
+    if child.lstrip("/") == parent.lstrip("/"):
+        return f"the input's frame_id equals fixed_frame ({parent!r}): a frame cannot be its own parent"
+    return None
+
+
+class StampRateCheck:
+    """The IMU's stamp rate, measured once: the median dt over the first ``samples`` accepted samples that
+    continue a sequence (the first sample after a (re)start gets dt = 1/nominal_rate, so it is left out).
+    The median ignores the odd gap, burst or jittery stamp."""
+
+    def __init__(self, samples: int = RATE_CHECK_SAMPLES, tolerance: float = RATE_TOLERANCE) -> None:
+        self.samples = samples
+        self.tolerance = tolerance
+        self.measured_hz: float | None = None
+        self._dts: list[float] = []
+
+    def add(self, dt: float) -> bool:
+        """Count one dt (s); True when this one completes the measurement."""
+        if self.measured_hz is not None or not dt > 0.0:
+            return False
+        self._dts.append(dt)
+        if len(self._dts) < self.samples:
+            return False
+        self.measured_hz = 1.0 / statistics.median(self._dts)
+        self._dts = []
+        return True
+
+    def mismatch(self, nominal_hz: float) -> float | None:
+        """Relative difference measured/nominal − 1 when it exceeds the tolerance, else None."""
+        if self.measured_hz is None:
+            return None
+        rel = self.measured_hz / nominal_hz - 1.0
+        return rel if abs(rel) > self.tolerance else None
+
+    def text(self, nominal_hz: float) -> str:
+        rel = self.mismatch(nominal_hz) or 0.0
+        return (f"measured IMU stamp rate {self.measured_hz:.1f} Hz (median dt of {self.samples} samples) differs "
+                f"from nominal_rate {nominal_hz:.1f} Hz by {rel * 100:+.0f} %: set the parameter nominal_rate to "
+                f"{self.measured_hz:.1f} (dt of the first sample after a (re)start; VQF's sample time, its time "
+                "constants scale with it)")
 
 
 def input_qos(kind: str, depth: int) -> QoSProfile:
@@ -88,26 +172,37 @@ class EstimatorNode(Node):
         cls = estimator_class(self.ESTIMATOR)
         self._specs: dict[str, ParamSpec] = {p.name: p for p in cls.PARAMS}
         self._node_specs = {p.name: p for p in NODE_PARAMS}
+        self._float_params = {s.name for s in (*NODE_PARAMS, *cls.PARAMS) if isinstance(s.default, float)}
         for spec in (*NODE_PARAMS, *cls.PARAMS):
-            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+            self._declare(spec)
         p = {name: self.get_parameter(name).value for name in [*self._node_specs, *self._specs]}
         for name, spec in self._node_specs.items():
             p[name] = spec.validate(p[name])
-        est_params = {k: self._as_spec_type(k, p[k]) for k in self._specs}
-        self.stream = st.EstimatorStream(create(self.ESTIMATOR, **est_params), self._gate_config(p))
+        if not p["fixed_frame"].strip("/ "):
+            raise ValueError("fixed_frame must not be empty")
+        self.stream = st.EstimatorStream(create(self.ESTIMATOR, **{k: p[k] for k in self._specs}),
+                                         self._gate_config(p))
         self._covariance = self._orientation_covariance(p["roll_pitch_stddev_deg"], p["yaw_stddev_deg"])
+        self._world = frames.check_world_frame(p["world_frame"])
+        self._fixed_frame = str(p["fixed_frame"])
+        self.add_pre_set_parameters_callback(self._int_to_float)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(p["output_depth"]),
                              reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
         self._pub_att = self.create_publisher(QuaternionStamped, self.ATTITUDE_TOPIC, out_qos)
         self._pub_imu = self.create_publisher(Imu, self.IMU_TOPIC, out_qos)
+        self._pub_rpy = self.create_publisher(Vector3Stamped, rpy_topic(self.ATTITUDE_TOPIC), out_qos) \
+            if p["publish_rpy"] else None
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(Imu, INPUT_TOPIC, self._on_imu, input_qos(p["input_qos"], int(p["input_depth"])))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(float(p["diagnostics_period"]), self._publish_diagnostics)
 
         self._att_msg = QuaternionStamped()
+        self._att_msg.header.frame_id = self._fixed_frame
+        self._rpy_msg = Vector3Stamped()
+        self._rpy_msg.header.frame_id = self._fixed_frame
         self._last_warn: dict[str, float] = {}
         self._period_start = time.monotonic()
         self._period_in = 0
@@ -115,18 +210,34 @@ class EstimatorNode(Node):
         self._proc_us: list[float] = []
         self._est_us: list[float] = []
         self._frame_id = ""
+        self._rate = StampRateCheck()
+        outputs = [self.ATTITUDE_TOPIC, self.IMU_TOPIC, *([rpy_topic(self.ATTITUDE_TOPIC)] if p["publish_rpy"] else [])]
         self.get_logger().info(
             f"{self.ESTIMATOR} estimator on '{self.resolve_topic_name(INPUT_TOPIC)}' -> "
-            f"'{self.resolve_topic_name(self.ATTITUDE_TOPIC)}', '{self.resolve_topic_name(self.IMU_TOPIC)}'; "
-            f"parameters: " + ", ".join(f"{k}={v}" for k, v in p.items())
+            + ", ".join(f"'{self.resolve_topic_name(t)}'" for t in outputs)
+            + f"; orientation in {self._world.upper()} (world_frame), imu/attitude in frame '{self._fixed_frame}'"
+            "; parameters: " + ", ".join(f"{k}={v}" for k, v in p.items())
         )
+        self._pub_tf, self._tf_type = self._tf_publisher(bool(p["publish_tf"]))
 
     # -- parameters -----------------------------------------------------------------------------
-    def _as_spec_type(self, name: str, value: Any) -> Any:
-        spec = self._specs[name]
-        if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        return value
+    def _declare(self, spec: ParamSpec) -> None:
+        """Declare one parameter from its spec. A float parameter also takes an integer (``-p nominal_rate:=200``,
+        ``nominal_rate: 200`` in a params file): the start-up value is read through a dynamically typed probe,
+        converted and checked by the spec (clear errors for wrong types and ranges), and the parameter is then
+        declared as a double holding that value."""
+        if not isinstance(spec.default, float):
+            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+            return
+        raw = self.declare_parameter(spec.name, spec.default, ParameterDescriptor(dynamic_typing=True)).value
+        self.undeclare_parameter(spec.name)
+        self.declare_parameter(spec.name, spec.validate(raw), _descriptor(spec), ignore_override=True)
+
+    def _int_to_float(self, params: list[Parameter]) -> list[Parameter]:
+        """Run-time sets: an integer for a float parameter becomes a double (its range is then checked)."""
+        return [Parameter(prm.name, Parameter.Type.DOUBLE, float(prm.value))
+                if prm.name in self._float_params and prm.type_ == Parameter.Type.INTEGER else prm
+                for prm in params]
 
     @staticmethod
     def _gate_config(p: dict[str, Any]) -> st.GateConfig:
@@ -148,12 +259,12 @@ class EstimatorNode(Node):
                     spec = self._specs[prm.name]
                     if not spec.runtime:
                         return SetParametersResult(successful=False, reason=f"{prm.name} is read-only at run time")
-                    est_changes[prm.name] = spec.validate(self._as_spec_type(prm.name, prm.value))
+                    est_changes[prm.name] = spec.validate(prm.value)
                 elif prm.name in gate:
                     gate[prm.name] = prm.value
                 elif prm.name in ("roll_pitch_stddev_deg", "yaw_stddev_deg"):
                     cur = {n: self.get_parameter(n).value for n in ("roll_pitch_stddev_deg", "yaw_stddev_deg")}
-                    cur[prm.name] = float(prm.value)
+                    cur[prm.name] = self._node_specs[prm.name].validate(prm.value)
                     cov = self._orientation_covariance(cur["roll_pitch_stddev_deg"], cur["yaw_stddev_deg"])
             new_gate = st.GateConfig(**gate)
             if est_changes:
@@ -163,9 +274,28 @@ class EstimatorNode(Node):
         self.stream.gate.config = new_gate
         if cov is not None:
             self._covariance = cov
-        if est_changes or cov is not None:
-            self.get_logger().info("parameters changed: " + ", ".join(f"{p.name}={p.value}" for p in params))
+        self.get_logger().info("parameters changed: " + ", ".join(f"{p.name}={p.value}" for p in params))
         return SetParametersResult(successful=True)
+
+    # -- TF -------------------------------------------------------------------------------------
+    def _tf_publisher(self, enabled: bool) -> tuple[Any, Any]:
+        """(/tf publisher, TFMessage type), or (None, None) when TF is off or tf2_msgs cannot be imported."""
+        if not enabled:
+            return None, None
+        try:
+            from tf2_msgs.msg import TFMessage
+        except ImportError as e:
+            self.get_logger().warning(f"publish_tf: tf2_msgs not available ({e}); not broadcasting TF")
+            return None, None
+        self.get_logger().info(f"publish_tf: broadcasting '{self._fixed_frame}' -> <input frame_id> on {TF_TOPIC}")
+        return self.create_publisher(TFMessage, TF_TOPIC, TF_QOS), TFMessage
+
+    def _publish_tf(self, stamp: Any, child: str, q: tuple[float, float, float, float]) -> None:
+        problem = tf_frames_problem(self._fixed_frame, child)
+        if problem is not None:
+            self._warn_throttled("tf", f"publish_tf: not broadcasting TF: {problem}")
+            return
+        self._pub_tf.publish(self._tf_type(transforms=[make_transform(stamp, self._fixed_frame, child, q)]))
 
     # -- data path ------------------------------------------------------------------------------
     def _on_imu(self, msg: Imu) -> None:
@@ -180,30 +310,52 @@ class EstimatorNode(Node):
         t1 = time.perf_counter_ns()
         q, r = self.stream.process(stamp_ns, acc, gyr, receive_ns)
         self._est_us.append((time.perf_counter_ns() - t1) * 1e-3)
+        self._log_gate_result(r)
+        if q is None:
+            self._period_rejected[r.reason or "?"] += 1
+            self._warn_throttled(r.reason or "?", f"sample rejected ({r.reason}) at stamp {r.stamp_ns * 1e-9:.6f} s")
+            return
+        if r.reset is None and self._rate.add(r.dt):
+            self._check_rate()
+        if stamp_ns == 0:  # publish with the receive time we used
+            stamps.set_ns(stamp, r.stamp_ns)
+        self._frame_id = msg.header.frame_id
+        self._publish(msg, frames.to_world_scalar(float(q[0]), float(q[1]), float(q[2]), float(q[3]), self._world))
+        self._proc_us.append((time.perf_counter_ns() - t0) * 1e-3)
+
+    def _log_gate_result(self, r: st.GateResult) -> None:
         for w in r.warnings:
             self.get_logger().warning(st.WARNING_TEXT[w])
         if r.reset in (st.GAP, st.CLOCK_JUMP):
             self.get_logger().info(f"{r.reset.replace('_', ' ')} at stamp {r.stamp_ns * 1e-9:.6f} s: estimator "
                                    "restarted, re-initialised from this sample")
-        if q is None:
-            self._period_rejected[r.reason or "?"] += 1
-            self._warn_throttled(r.reason or "?", f"sample rejected ({r.reason}) at stamp {r.stamp_ns * 1e-9:.6f} s")
-            return
-        if stamp_ns == 0:  # publish with the receive time we used
-            stamps.set_ns(stamp, r.stamp_ns)
-        self._frame_id = msg.header.frame_id
+
+    def _publish(self, msg: Imu, q: tuple[float, float, float, float]) -> None:
+        """Publish the orientation ``q`` (w, x, y, z, in the world frame) of the input ``msg``."""
         att = self._att_msg
-        att.header = msg.header
+        att.header.stamp = msg.header.stamp
         o = att.quaternion
-        o.w, o.x, o.y, o.z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+        o.w, o.x, o.y, o.z = q
         # serialising costs most of the callback: skip topics nobody subscribes to
         if self._pub_att.get_subscription_count():
             self._pub_att.publish(att)
+        if self._pub_rpy is not None and self._pub_rpy.get_subscription_count():
+            rpy = self._rpy_msg
+            rpy.header.stamp = msg.header.stamp
+            v = rpy.vector
+            v.x, v.y, v.z = frames.rpy_deg_scalar(*q)
+            self._pub_rpy.publish(rpy)
+        if self._pub_tf is not None:
+            self._publish_tf(msg.header.stamp, msg.header.frame_id, q)
         if self._pub_imu.get_subscription_count():
             msg.orientation = o
             msg.orientation_covariance = self._covariance
             self._pub_imu.publish(msg)
-        self._proc_us.append((time.perf_counter_ns() - t0) * 1e-3)
+
+    def _check_rate(self) -> None:
+        nominal = self.stream.gate.config.nominal_rate
+        if self._rate.mismatch(nominal) is not None:
+            self.get_logger().warning(self._rate.text(nominal))
 
     def _warn_throttled(self, key: str, text: str) -> None:
         now = time.monotonic()
@@ -219,6 +371,21 @@ class EstimatorNode(Node):
         return response
 
     # -- diagnostics ----------------------------------------------------------------------------
+    def _diagnostic_level(self) -> tuple[bytes, str]:
+        """(level, message) of this period: no input, rejections, a nominal_rate far from the stamp rate."""
+        problems = []
+        if self._period_in == 0:
+            problems.append("no input on " + self.resolve_topic_name(INPUT_TOPIC))
+        if sum(self._period_rejected.values()):
+            problems.append("samples rejected: " + ", ".join(f"{k}={v}" for k, v in self._period_rejected.items()))
+        nominal = self.stream.gate.config.nominal_rate
+        if self._rate.mismatch(nominal) is not None:
+            problems.append(f"nominal_rate {nominal:.1f} Hz differs from the measured stamp rate "
+                            f"{self._rate.measured_hz:.1f} Hz: set nominal_rate")
+        if problems:
+            return DiagnosticStatus.WARN, "; ".join(problems)
+        return DiagnosticStatus.OK, "ok"
+
     def _publish_diagnostics(self) -> None:
         now = time.monotonic()
         period = max(now - self._period_start, 1e-9)
@@ -230,15 +397,12 @@ class EstimatorNode(Node):
         status = DiagnosticStatus()
         status.name = f"{self.get_name()}: {self.ESTIMATOR} attitude estimator"
         status.hardware_id = self._frame_id
-        if self._period_in == 0:
-            status.level, status.message = DiagnosticStatus.WARN, "no input on " + self.resolve_topic_name(INPUT_TOPIC)
-        elif sum(self._period_rejected.values()):
-            status.level = DiagnosticStatus.WARN
-            status.message = "samples rejected: " + ", ".join(f"{k}={v}" for k, v in self._period_rejected.items())
-        else:
-            status.level, status.message = DiagnosticStatus.OK, "ok"
+        status.level, status.message = self._diagnostic_level()
+        measured = self._rate.measured_hz
         values = {
             "input rate (Hz)": f"{rate:.2f}",
+            "stamp rate measured (Hz)": f"{measured:.2f}" if measured is not None else "nan",
+            "nominal_rate (Hz)": f"{gate.config.nominal_rate:.2f}",
             "dt min (ms)": f"{dts.get('min', math.nan) * 1e3:.3f}",
             "dt mean (ms)": f"{dts.get('mean', math.nan) * 1e3:.3f}",
             "dt max (ms)": f"{dts.get('max', math.nan) * 1e3:.3f}",
@@ -249,6 +413,7 @@ class EstimatorNode(Node):
             "processing time mean (us)": f"{proc.mean():.1f}" if len(proc) else "nan",
             "processing time p99 (us)": f"{np.percentile(proc, 99):.1f}" if len(proc) else "nan",
             "processing time max (us)": f"{proc.max():.1f}" if len(proc) else "nan",
+            "world frame": self._world,
         }
         values.update(self.stream.estimator.diagnostics())
         for reason in st.REJECT_REASONS:
