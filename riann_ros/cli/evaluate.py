@@ -48,6 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="evaluate under this condition too: 'none', or perturbations joined with '+': "
                    "jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, bias:random:2 (deg/s), "
                    "dropout:0.1-0.6s@10s; repeatable, each one a condition (default: none)")
+    p.add_argument("--rest", default=None, metavar="START:END",
+                   help="the initial rest, in seconds from the first sample, whose mean gyro is removed as the turn-on "
+                   "bias (default: detected from the signals before the first scored sample; see docs/evaluation.md)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random gyro bias (per sequence: seed + name)")
     p.add_argument("--rates", default=None,
                    help="comma-separated sampling rates (Hz) to resample to (FFT), e.g. 50,100,200,500; 'native' "
@@ -128,6 +131,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         with_heading=args.heading,
         series_for=None if args.no_plots or not args.out else (args.plot_sequence or "*"),
         keep_estimates=args.write_estimates is not None,
+        rest=ev.parse_rest(args.rest) if args.rest else None,
     )
 
 
@@ -228,6 +232,9 @@ def _main(argv: list[str] | None) -> int:
                         time.perf_counter() - t_start, args.jobs, tuning)
     if settings.series_for not in (None, "*") and not any(r.series for r in results):
         _err(f"--plot-sequence {settings.series_for!r} matches no evaluated sequence")
+    for res in results:
+        for w in res.warnings if not res.error else []:
+            _err(f"warning: {w}")
     for f in rep.failures:
         _err(f"FAILED {f['error']}")
     _print_summary(rep, args.live)

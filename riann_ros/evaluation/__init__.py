@@ -12,6 +12,7 @@ figures: :mod:`~riann_ros.evaluation.plots`.
 from riann_ros.evaluation.aggregate import ALL_DATASETS, Group, aggregate, best_of, rate_order, tune
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import Condition, parse_condition, parse_perturbation
+from riann_ros.evaluation.rest import NO_REST_WARNING, Rest, parse_rest
 from riann_ros.evaluation.run import (
     NATIVE,
     EvalSettings,
@@ -55,6 +56,7 @@ __all__ = [
     "BIAS_STD_DPS",
     "BROAD_SUFFIXES",
     "NATIVE",
+    "NO_REST_WARNING",
     "PAPER_SCENARIOS",
     "PARTIAL",
     "REALISTIC",
@@ -67,6 +69,7 @@ __all__ = [
     "EvalSettings",
     "Group",
     "OfflineRunner",
+    "Rest",
     "ResultRow",
     "RunStats",
     "ScenarioInfo",
@@ -88,6 +91,7 @@ __all__ = [
     "parse_estimators",
     "parse_grid",
     "parse_perturbation",
+    "parse_rest",
     "parse_scenarios",
     "random_bias",
     "rate_order",

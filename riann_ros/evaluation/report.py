@@ -21,6 +21,7 @@ import numpy as np
 from riann_ros.evaluation.aggregate import Group, aggregate, rate_order, scenario_order
 from riann_ros.evaluation.perturb import DEFINITIONS as PERTURB_DEFINITIONS
 from riann_ros.evaluation.perturb import NONE
+from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
 from riann_ros.evaluation.run import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
 
@@ -175,6 +176,8 @@ class Report:
             "jobs": self.jobs,
             "bias_std_dps": BIAS_STD_DPS,
             "scenario_definition": {k: v for k, v in DEFINITIONS.items() if k in s.scenarios},
+            "rest": None if s.rest is None else list(s.rest),
+            "rest_definition": REST_DEFINITION,
             "perturbation_definition": PERTURB_DEFINITIONS,
             "metric": METRIC,
         }
@@ -188,7 +191,8 @@ class Report:
             "summary": [g.to_dict() for g in self.summary],
             "sequences": [
                 {"source": r.source, "name": r.name, "dataset": r.dataset, "seconds": r.seconds,
-                 "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios, "perturbations": r.perturbations}
+                 "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios, "perturbations": r.perturbations,
+                 "warnings": r.warnings}
                 for r in self.results
                 if not r.error
             ],
@@ -292,6 +296,9 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
                 f"- {t['estimator']} ({t['scenario']}): best {b['label']} — mean {b['mean']:.2f}°, max {b['max']:.2f}°"
             )
         lines.append("")
+    warnings = [w for r in report.results if not r.error for w in r.warnings]
+    if warnings:
+        lines += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
     lines += ["## Per sequence", "", *_per_sequence(report.rows)]
     if report.failures:
         lines += ["## Failed inputs", ""] + [f"- {f['error']}" for f in report.failures] + [""]

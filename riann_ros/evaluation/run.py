@@ -33,7 +33,8 @@ from numpy.typing import NDArray
 from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import NONE, Condition, Transform
-from riann_ros.evaluation.scenarios import PAPER_SCENARIOS, ScenarioPlan, sequence_seed
+from riann_ros.evaluation.rest import NO_REST_WARNING
+from riann_ros.evaluation.scenarios import AS_RECORDED, PAPER_SCENARIOS, ScenarioPlan, sequence_seed
 from riann_ros.evaluation.scoring import Accumulator, Score, error_deg
 from riann_ros.evaluation.sources import (
     BROAD_SUFFIXES,
@@ -64,6 +65,7 @@ class EvalSettings:
     series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
     keep_estimates: bool = False  # return the estimates of the first scenario (for --write-estimates)
     chunk: int = STREAM_CHUNK  # samples per bag chunk
+    rest: tuple[float, float] | None = None  # the initial rest by hand (s from the first sample); None: detect it
 
 
 @dataclass
@@ -130,6 +132,7 @@ class SequenceResult:
     seconds: float = 0.0
     cpu_seconds: float = 0.0  # reading + scenarios + runs + scoring, in the worker
     citation: str = ""
+    warnings: list[str] = field(default_factory=list)  # "<sequence>: <what>", for stderr and results.json
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -295,11 +298,20 @@ def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool
     return runs
 
 
-def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runner: Runner,
-                   res: SequenceResult) -> None:
-    summary = summarise(src)
+def _summarise(src: Source, rate: float | None, settings: EvalSettings, res: SequenceResult) -> Summary:
+    """The first pass; names the result and warns when a scenario would remove a bias but there is no rest."""
+    summary = summarise(src, settings.rest)
     if not res.name:
         res.name, res.dataset, res.citation = summary.name, summary.dataset, summary.citation
+    if not summary.rest.found and any(s != AS_RECORDED for s in settings.scenarios):
+        rate_note = "" if rate is None else f" (resampled to {rate:g} Hz)"
+        _warn(res, f"{res.name}{rate_note}: {NO_REST_WARNING}")
+    return summary
+
+
+def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runner: Runner,
+                   res: SequenceResult) -> None:
+    summary = _summarise(src, rate, settings, res)
     runs = _plan_runs(summary, settings, res.name, rate is None)
     for run in runs:
         res.scenarios.setdefault(run.plan.scenario, run.plan.info.to_dict())
@@ -318,6 +330,11 @@ def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runn
                 run.keep_series(res)
             if run.estimates is not None:
                 run.keep_estimates(res)
+
+
+def _warn(res: SequenceResult, text: str) -> None:
+    if text not in res.warnings:
+        res.warnings.append(text)
 
 
 def evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runner: Runner | None = None,

@@ -6,8 +6,10 @@ one whole chunk. Everything after the source — scenario, estimators, scoring �
 both: scoring a whole recording is the one-chunk case.
 
 :func:`summarise` is the first pass over a source: the input checks (samples, reference, scored
-samples), the motion onset (first scored sample), the mean gyro over the initial rest, and the rates
-(1 / median stamp step) of the whole sequence and of the sequence from the motion onset.
+samples), the motion onset (first scored sample) and the rates (1 / median stamp step) of the whole
+sequence and of the sequence from the motion onset; then, over the samples before the motion onset
+only, the rest whose mean gyro is the turn-on bias (:mod:`~riann_ros.evaluation.rest`: detected from the
+signals, or given by hand).
 """
 
 from __future__ import annotations
@@ -15,13 +17,14 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.rest import GIVEN, Rest, RestDetector
 from riann_ros.recording import Recording
 
 BAG_SUFFIXES = (".mcap", ".db3")
@@ -133,11 +136,16 @@ class Summary:
     frame_id: str
     n: int
     first_stamp: int
-    i0: int  # first scored sample (the motion onset); the initial rest is [0, i0)
+    i0: int  # first scored sample (the motion onset); the rest is looked for in [0, i0)
     stamp_i0: int
-    rest_gyr_mean: NDArray[np.float64]  # mean gyro over [0, i0) (zeros when i0 == 0)
     rate_all: float  # 1 / median stamp step of the whole sequence
     rate_from_i0: float  # … of the sequence from i0 on
+    rest: Rest = field(default_factory=Rest)  # the rest whose mean gyro is the turn-on bias (maybe none)
+
+    @property
+    def rest_gyr_mean(self) -> NDArray[np.float64]:
+        """The turn-on bias (rad/s): the mean gyro over the rest; zeros without one."""
+        return self.rest.bias
 
 
 class _Pass:
@@ -148,7 +156,6 @@ class _Pass:
         self.last: int | None = None
         self.i0 = -1
         self.has_ref = self.ref_any = self.scored_any = self.scored_ref = False
-        self.rest: list[NDArray[np.float64]] = []
         self.hist_all: dict[int, int] = {}
         self.hist_i0: dict[int, int] = {}
         self.meta: tuple[str, str, str, str] = ("", "", "", "")
@@ -168,9 +175,6 @@ class _Pass:
         if self.i0 < 0 and c.score_mask.any():
             k = int(np.argmax(c.score_mask))
             self.i0, self.stamp_i0 = self.n + k, int(c.stamps_ns[k])
-            self.rest.append(c.gyr[:k].copy())
-        elif self.i0 < 0:
-            self.rest.append(c.gyr.copy())
         if self.i0 >= 0:
             _add_steps(self.hist_i0, steps[later > self.i0])
         self.scored_any |= bool(c.score_mask.any())
@@ -193,7 +197,6 @@ class _Pass:
         name, dataset, citation, frame_id = self.meta
         if not name or name == "sequence":
             name = p.stem if p.is_file() else p.name
-        rest = np.concatenate(self.rest) if self.rest else np.zeros((0, 3))
         return Summary(
             name=name,
             dataset=dataset or "unknown",
@@ -203,19 +206,44 @@ class _Pass:
             first_stamp=self.first_stamp,
             i0=self.i0,
             stamp_i0=self.stamp_i0,
-            rest_gyr_mean=np.mean(rest, axis=0) if self.i0 > 0 else np.zeros(3),
             rate_all=median_rate(self.hist_all),
             rate_from_i0=median_rate(self.hist_i0),
         )
 
 
-def summarise(src: Source) -> Summary:
-    """The first pass over ``src``: checks (raising :class:`EvalError` naming the input), motion onset,
-    initial-rest gyro mean and rates."""
+def summarise(src: Source, rest: tuple[float, float] | None = None) -> Summary:
+    """The first pass over ``src``: checks (raising :class:`EvalError` naming the input), motion onset and rates;
+    then the rest before the motion onset (a second pass over those samples only). ``rest``: the rest given by
+    hand, (start, end) in seconds from the first sample."""
     state = _Pass()
     for c in src.chunks():
         state.add(c)
-    return state.summary(src.path)
+    summary = state.summary(src.path)
+    summary.rest = find_rest(src, summary, rest)
+    return summary
+
+
+def find_rest(src: Source, summary: Summary, given: tuple[float, float] | None = None) -> Rest:
+    """The rest of ``src`` (see :mod:`~riann_ros.evaluation.rest`), reading only as far as needed."""
+    if summary.i0 <= 0 and given is None:
+        return Rest()
+    det = RestDetector(summary.rate_all, summary.i0, summary.first_stamp, given)
+    chunks = src.chunks()
+    try:
+        for c in chunks:
+            det.add(c)
+            if det.done:
+                break
+    finally:
+        close = getattr(chunks, "close", None)
+        if close is not None:
+            close()
+    found = det.result()
+    if given is not None and found.source != GIVEN:
+        length = (det.last_stamp - summary.first_stamp) * 1e-9
+        raise EvalError(f"{src.path}: --rest {given[0]:g}:{given[1]:g} holds no samples (the recording lasts "
+                        f"{length:.3f} s from its first sample)")
+    return found
 
 
 def load_recording(path: str | os.PathLike[str]) -> Recording:
