@@ -58,7 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "of the bag length); resampled runs load each input whole")
     p.add_argument("--jobs", "-j", type=int, default=1, help="parallel worker processes (one per sequence)")
     p.add_argument("--out", "-o", type=Path, default=None,
-                   help="write results.csv, results.json, report.md and plots (PNG+SVG) here")
+                   help="write results.csv, results.json, report.md and plots (PNG+SVG) here (a folder already holding "
+                   "results needs --force)")
     p.add_argument("--heading", action="store_true", help="also score heading and total error (extra columns)")
     p.add_argument("--plot-sequence", default=None,
                    help="sequence name for the error-over-time plot (default: the first input)")
@@ -70,7 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--write-estimates", type=Path, default=None, metavar="DIR",
                    help="write a copy of every input bag into DIR with each estimator's output as "
                    "geometry_msgs/QuaternionStamped topics /eval/<scenario>/<estimator> (first scenario)")
-    p.add_argument("--force", action="store_true", help="overwrite existing --write-estimates outputs")
+    p.add_argument("--force", action="store_true",
+                   help="replace an earlier run's result files in --out (results.csv/json, report.md, compare.csv and "
+                   "the plots; nothing else in the folder) and existing --write-estimates bags; without it an --out "
+                   "folder holding results is refused before any work")
     p.add_argument("--live", action="store_true",
                    help="replay the inputs over DDS to the estimator nodes (started by the tool, or already running "
                    "with --live-topics) instead of running them in-process; reports messages lost")
@@ -212,11 +216,42 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def _check_out(args: argparse.Namespace) -> None:
+    """Refuse (ValueError, exit status 2) an --out folder holding an earlier run's results, before any work."""
+    old = report.previous_results(args.out) if args.out and not args.force else []
+    if old:
+        raise ValueError(str(report.OutputExists(args.out, old)))
+
+
+def _print_messages(rep: report.Report) -> None:
+    """Warnings and failures on stderr, then the summary table on stdout."""
+    if rep.settings.series_for not in (None, "*", "all") and not any(r.series for r in rep.results):
+        _err(f"--plot-sequence {rep.settings.series_for!r} matches no evaluated sequence")
+    for res in rep.results:
+        for w in res.warnings if not res.error else []:
+            _err(f"warning: {w}")
+    for f in rep.failures:
+        _err(f"FAILED {f['error']}")
+
+
+def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
+    """The result files in --out; False when they could not be written."""
+    try:
+        figures = report.write_results(args.out, rep, plots=not args.no_plots, replace=args.force)
+    except report.OutputExists as exc:  # written meanwhile by someone else
+        _err(str(exc))
+        return False
+    print(f"wrote {args.out}/results.csv, results.json, report.md"
+          + (f" and {len(figures)} plot files" if figures else ""))
+    return True
+
+
 def _main(argv: list[str] | None) -> int:
     args = build_parser().parse_args(argv)
     argv_list = sys.argv[1:] if argv is None else list(argv)
     try:
         settings = _settings(args)
+        _check_out(args)
     except (ValueError, ImportError) as exc:
         _err(str(exc))
         return 2
@@ -230,21 +265,13 @@ def _main(argv: list[str] | None) -> int:
         return 1
     rep = report.Report("riann-bag-eval " + shlex.join(argv_list), sources, settings, results,
                         time.perf_counter() - t_start, args.jobs, tuning)
-    if settings.series_for not in (None, "*") and not any(r.series for r in results):
-        _err(f"--plot-sequence {settings.series_for!r} matches no evaluated sequence")
-    for res in results:
-        for w in res.warnings if not res.error else []:
-            _err(f"warning: {w}")
-    for f in rep.failures:
-        _err(f"FAILED {f['error']}")
+    _print_messages(rep)
     _print_summary(rep, args.live)
     problems = _write_estimates(results, args.write_estimates, args.force) if args.write_estimates else []
     for p in problems:
         _err(p)
-    if args.out:
-        figures = report.write_results(args.out, rep, plots=not args.no_plots)
-        print(f"wrote {args.out}/results.csv, results.json, report.md"
-              + (f" and {len(figures)} plot files" if figures else ""))
+    if args.out and not _write_out(args, rep):
+        return 1
     return 1 if rep.failures or problems else 0
 
 

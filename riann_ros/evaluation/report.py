@@ -52,8 +52,10 @@ METRIC = (
     "RMSE of e_alpha = 2 acos(sqrt(w^2+z^2)) of q_ref * conj(q_est), deg, over score mask & reference present & "
     "estimate present"
 )
-PLOT_STEMS = ("rmse_boxplots", "error_over_time", "rmse_vs_rate")
-RESULT_FILES = ("results.csv", "results.json", "report.md")
+PLOT_STEMS = ("rmse_boxplots", "error_over_time", "rmse_vs_rate", "compare_rmse")
+PLOT_PATTERNS = ("roll_pitch_*",)  # one figure per sequence
+RESULT_FILES = ("results.csv", "results.json", "report.md", "compare.csv")
+PLOT_EXTS = ("png", "svg")
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -307,14 +309,48 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
     return "\n".join(lines)
 
 
-def write_results(out: Path, report: Report, plots: bool = True) -> list[Path]:
+def previous_results(out: Path) -> list[Path]:
+    """The result files of an earlier run in ``out``: results.csv/json, report.md, compare.csv and every plot
+    riann-bag-eval writes (``rmse_boxplots``, ``error_over_time``, ``rmse_vs_rate``, ``compare_rmse``,
+    ``roll_pitch_*``; .png and .svg). Nothing else in ``out`` is a result file."""
+    if not out.is_dir():
+        return []
+    found = [out / f for f in RESULT_FILES] + [out / f"{s}.{e}" for s in PLOT_STEMS for e in PLOT_EXTS]
+    found += [p for pat in PLOT_PATTERNS for e in PLOT_EXTS for p in sorted(out.glob(f"{pat}.{e}"))]
+    return [p for p in found if p.is_file()]
+
+
+class OutputExists(FileExistsError):
+    """``--out`` holds the results of an earlier run and replacing them was not asked for."""
+
+    def __init__(self, out: Path, files: Sequence[Path]) -> None:
+        names = ", ".join(p.name for p in files[:4]) + (", …" if len(files) > 4 else "")
+        super().__init__(f"{out} already holds the results of an earlier run ({names}); not overwriting them: use "
+                         "--force to replace them (only riann-bag-eval's result files are removed, nothing else in "
+                         "the folder) or choose another --out")
+
+
+def prepare_out(out: Path, replace: bool) -> list[Path]:
+    """Make ``out`` ready for a run's files: :class:`OutputExists` when it holds an earlier run's result files and
+    not ``replace``; with ``replace`` those files (only those) are removed. Returns the files removed."""
+    old = previous_results(out)
+    if old and not replace:
+        raise OutputExists(out, old)
+    for p in old:
+        p.unlink(missing_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
+    return old
+
+
+def write_results(out: Path, report: Report, plots: bool = True, replace: bool = False) -> list[Path]:
     """results.csv, results.json, report.md and (``plots``) the figures in ``out``; returns the plot files.
 
-    If anything stops it half-way (Ctrl-C included), the files of this call are removed again."""
+    An earlier run's result files in ``out`` are removed first with ``replace``, else :class:`OutputExists`
+    (:func:`prepare_out`): a folder never mixes two runs. If anything stops it half-way (Ctrl-C included), the
+    files of this call are removed again."""
     from riann_ros.evaluation import plots as pl
 
-    out.mkdir(parents=True, exist_ok=True)
-    written = [out / f for f in RESULT_FILES] + [out / f"{s}.{e}" for s in PLOT_STEMS for e in ("png", "svg")]
+    prepare_out(out, replace)
     try:
         rows = report.rows
         write_csv(out / "results.csv", rows)
@@ -329,6 +365,6 @@ def write_results(out: Path, report: Report, plots: bool = True) -> list[Path]:
         (out / "report.md").write_text(markdown(report, figures))
         return figures
     except BaseException:
-        for f in written:
+        for f in previous_results(out):  # all of this call's: the earlier run's are gone
             f.unlink(missing_ok=True)
         raise
