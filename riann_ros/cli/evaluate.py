@@ -15,6 +15,7 @@ This module only parses the command line and prints; the work is in :mod:`riann_
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import shlex
 import sys
@@ -25,6 +26,13 @@ from riann_ros import evaluation as ev
 from riann_ros.evaluation import report
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
+DEFAULT_MAX_GAP_S = 0.1  # riann_ros.bagio.topics.DEFAULT_MAX_GAP_S (as riann-bag-convert --max-gap)
+
+
+def bagio_imu_topic() -> str:
+    from riann_ros.bagio.layout import IMU_TOPIC
+
+    return IMU_TOPIC
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -40,10 +48,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("inputs", nargs="+", metavar="BAG", help="bags (.mcap, bag directories) or BROAD .hdf5/.mat files")
     p.add_argument("--estimators", "-e", default=None,
-                   help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed)")
-    p.add_argument("--scenarios", "-s", default="all",
+                   help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed); 'none': only "
+                   "the --estimate-topic estimates")
+    p.add_argument("--scenarios", "-s", default=None,
                    help="restrictive, partially-restrictive, realistic, as-recorded; paper (the first three) or all "
-                   "(comma-separated; default all)")
+                   "(comma-separated; default all, or as-recorded with --estimators none)")
+    b = p.add_argument_group("bags from elsewhere and estimates recorded in them (evo style)")
+    b.add_argument("--estimate-topic", action="append", default=[], metavar="TOPIC",
+                   help="score the orientation a filter recorded on TOPIC in the bag (sensor_msgs/Imu, geometry_msgs/"
+                   "QuaternionStamped, PoseStamped, PoseWithCovarianceStamped, nav_msgs/Odometry) against the ground "
+                   "truth, beside the built-in estimators; matched to the IMU samples by stamp (slerp between "
+                   "messages). It is the recording as it is, so it is scored in the as-recorded scenario only, at the "
+                   "native rate, unperturbed. Repeatable")
+    b.add_argument("--t-offset", type=float, default=0.0, metavar="SECONDS",
+                   help="added to the stamps of the --estimate-topic messages before matching (default 0)")
+    b.add_argument("--max-gap", type=float, default=DEFAULT_MAX_GAP_S, metavar="SECONDS",
+                   help="slerp a topic between two messages at most this far apart, hold the nearer one within half "
+                   "of it, else the sample has none (not scored, counted as unestimated); --estimate-topic and "
+                   f"--ground-truth-topic (default {DEFAULT_MAX_GAP_S})")
+    b.add_argument("--ground-truth-topic", default=None, metavar="TOPIC",
+                   help="the reference orientation for bags not written by riann-bag-convert (geometry_msgs/"
+                   "PoseStamped, nav_msgs/Odometry, geometry_msgs/QuaternionStamped, sensor_msgs/Imu, …; the IMU "
+                   "frame's orientation in a z-up world), interpolated onto the IMU stamps")
+    b.add_argument("--imu-topic", default=None, metavar="TOPIC",
+                   help="the sensor_msgs/Imu topic of the samples (default /imu/data_raw); without a "
+                   "/ground_truth/scored topic every sample is scored")
     p.add_argument("--perturb", "-p", action="append", default=[], metavar="CONDITION",
                    help="evaluate under this condition too: 'none', or perturbations joined with '+': "
                    "jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, bias:random:2 (deg/s), "
@@ -126,9 +155,13 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         raise ValueError("--jobs must be at least 1")
     have = ev.available_estimators()
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
-    return ev.EvalSettings(
-        estimators=ev.parse_estimators(spec_text),
-        scenarios=ev.parse_scenarios(args.scenarios),
+    only_recorded = spec_text.strip().lower() == "none"
+    topics = _topics(args)
+    if only_recorded and not topics.estimates:
+        raise ValueError("--estimators none needs at least one --estimate-topic")
+    settings = ev.EvalSettings(
+        estimators=[] if only_recorded else ev.parse_estimators(spec_text),
+        scenarios=ev.parse_scenarios(args.scenarios or (ev.AS_RECORDED if only_recorded else "all")),
         seed=args.seed,
         rates=parse_rates(args.rates),
         conditions=[ev.parse_condition(c) for c in args.perturb] or [ev.Condition()],
@@ -136,7 +169,50 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         series_for=None if args.no_plots or not args.out else (args.plot_sequence or "*"),
         keep_estimates=args.write_estimates is not None,
         rest=ev.parse_rest(args.rest) if args.rest else None,
+        topics=topics,
     )
+    _check_recorded(settings)
+    return settings
+
+
+def _topic(name: str) -> str:
+    name = name.strip()
+    if not name or name == "/":
+        raise ValueError("empty topic name")
+    return name if name.startswith("/") else "/" + name
+
+
+def _topics(args: argparse.Namespace) -> ev.BagTopics:
+    """Which bag topics to read (ValueError on bad values)."""
+    estimates = tuple(dict.fromkeys(_topic(t) for t in args.estimate_topic))
+    if not (args.max_gap > 0 and math.isfinite(args.max_gap)):
+        raise ValueError(f"--max-gap must be a positive number of seconds, got {args.max_gap:g}")
+    if not math.isfinite(args.t_offset):
+        raise ValueError("--t-offset must be a finite number of seconds")
+    return ev.BagTopics(
+        imu=_topic(args.imu_topic) if args.imu_topic else bagio_imu_topic(),
+        reference=_topic(args.ground_truth_topic) if args.ground_truth_topic else None,
+        estimates=estimates,
+        t_offset_s=args.t_offset,
+        max_gap_s=args.max_gap,
+    )
+
+
+def _check_recorded(settings: ev.EvalSettings) -> None:
+    """Recorded estimates are the recording as it is: they need the as-recorded scenario, the native rate and the
+    unperturbed condition among those asked for (ValueError otherwise)."""
+    if not settings.topics.estimates:
+        return
+    missing = []
+    if ev.AS_RECORDED not in settings.scenarios:
+        missing.append("the as-recorded scenario in --scenarios")
+    if None not in settings.rates:
+        missing.append("native in --rates")
+    if not any(not c.parts for c in settings.conditions):
+        missing.append("none in --perturb")
+    if missing:
+        raise ValueError("--estimate-topic estimates exist only for the recording as it is (as-recorded scenario, "
+                         f"native rate, no perturbation): add {' and '.join(missing)}")
 
 
 def _tune(args: argparse.Namespace, sources: list[str], settings: ev.EvalSettings) -> list[dict]:
@@ -145,7 +221,7 @@ def _tune(args: argparse.Namespace, sources: list[str], settings: ev.EvalSetting
         if not args.quiet:
             _err(f"tuning {text} on {len(sources)} input(s), {args.tune_scenario}")
         best, spec = ev.tune(text, sources, args.tune_scenario, settings.seed, args.jobs,
-                             report.Progress(len(sources), enabled=not args.quiet))
+                             report.Progress(len(sources), enabled=not args.quiet), like=settings)
         tuning.append(best)
         b = best["best"]
         _err(f"tuned {best['estimator']} on {args.tune_scenario}: {b['label']} mean {b['mean']:.2f}° "

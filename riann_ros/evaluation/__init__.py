@@ -15,13 +15,16 @@ from riann_ros.evaluation.perturb import Condition, parse_condition, parse_pertu
 from riann_ros.evaluation.rest import NO_REST_WARNING, Rest, parse_rest
 from riann_ros.evaluation.run import (
     NATIVE,
+    RECORDED,
     EvalSettings,
     OfflineRunner,
+    RecordedRunner,
     ResultRow,
     RunStats,
     SequenceResult,
     evaluate_source,
     evaluate_sources,
+    recorded_spec,
 )
 from riann_ros.evaluation.scenarios import (
     AS_RECORDED,
@@ -39,7 +42,16 @@ from riann_ros.evaluation.scenarios import (
     sequence_seed,
 )
 from riann_ros.evaluation.scoring import Accumulator, Score, score
-from riann_ros.evaluation.sources import BROAD_SUFFIXES, Source, load_recording, open_source, summarise
+from riann_ros.evaluation.sources import (
+    BROAD_SUFFIXES,
+    BagTopics,
+    Chunk,
+    Source,
+    input_hint,
+    load_recording,
+    open_source,
+    summarise,
+)
 from riann_ros.evaluation.specs import (
     EstimatorSpec,
     available_estimators,
@@ -60,15 +72,19 @@ __all__ = [
     "PAPER_SCENARIOS",
     "PARTIAL",
     "REALISTIC",
+    "RECORDED",
     "RESTRICTIVE",
     "SCENARIOS",
     "Accumulator",
+    "BagTopics",
+    "Chunk",
     "Condition",
     "EstimatorSpec",
     "EvalError",
     "EvalSettings",
     "Group",
     "OfflineRunner",
+    "RecordedRunner",
     "Rest",
     "ResultRow",
     "RunStats",
@@ -83,6 +99,7 @@ __all__ = [
     "evaluate_source",
     "evaluate_sources",
     "grid_specs",
+    "input_hint",
     "load_recording",
     "make_label",
     "open_source",
@@ -95,6 +112,7 @@ __all__ = [
     "parse_scenarios",
     "random_bias",
     "rate_order",
+    "recorded_spec",
     "scenario_recording",
     "score",
     "sequence_seed",

@@ -39,6 +39,8 @@ from riann_ros.evaluation.scoring import Accumulator, Score, error_deg
 from riann_ros.evaluation.sources import (
     BROAD_SUFFIXES,
     STREAM_CHUNK,
+    BagTopics,
+    Chunk,
     Source,
     Summary,
     open_source,
@@ -50,6 +52,7 @@ from riann_ros.recording import Recording
 from riann_ros.stream import EstimatorStream, GateConfig
 
 NATIVE = "native"  # rate key of rows at the recording's own rate
+RECORDED = "recorded"  # estimator name and mode of estimates recorded in a bag
 SERIES_POINTS = 6000  # points per curve kept for the error-over-time plot
 
 
@@ -66,6 +69,12 @@ class EvalSettings:
     keep_estimates: bool = False  # return the estimates of the first scenario (for --write-estimates)
     chunk: int = STREAM_CHUNK  # samples per bag chunk
     rest: tuple[float, float] | None = None  # the initial rest by hand (s from the first sample); None: detect it
+    topics: BagTopics = field(default_factory=BagTopics)  # which topics of the bags; recorded estimates
+
+    @property
+    def recorded(self) -> list[EstimatorSpec]:
+        """The estimates recorded in the bags (``topics.estimates``) as specs labelled by their topic."""
+        return [recorded_spec(t) for t in self.topics.estimates]
 
 
 @dataclass
@@ -196,6 +205,50 @@ class OfflineRunner:
         return _OfflineRun(specs, gate, slot)
 
 
+def recorded_spec(topic: str) -> EstimatorSpec:
+    """The spec of an estimate recorded on ``topic``: labelled by the topic, served by :class:`RecordedRunner`."""
+    return EstimatorSpec(RECORDED, (("topic", topic),), topic)
+
+
+class _RecordedRun:
+    def __init__(self, specs: list[EstimatorSpec]) -> None:
+        self.topics = [dict(s.params)["topic"] for s in specs]
+        self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        recorded = rec.recorded if isinstance(rec, Chunk) else {}
+        none = np.full((len(rec), 4), np.nan)
+        return [recorded.get(t, none) for t in self.topics]
+
+    def finish(self) -> list[RunStats]:
+        return self.stats
+
+
+class RecordedRunner:
+    """The estimates a user recorded in the bag from their own filter: served per chunk from the source's
+    :class:`~riann_ros.evaluation.sources.Chunk` (aligned onto the samples there); none in a piece that has
+    none (they exist only for the recording as it is)."""
+
+    mode = RECORDED
+    interleaved = True
+
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
+        return _RecordedRun(specs)
+
+
+class _Joined:
+    """Several runs fed together as one: their estimates and stats in turn."""
+
+    def __init__(self, runs: list[Run]) -> None:
+        self.runs = runs
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        return [q for run in self.runs for q in run.feed(rec)]
+
+    def finish(self) -> list[RunStats]:
+        return [st for run in self.runs for st in run.finish()]
+
+
 # ---------------------------------------------------------------------------------------------------
 # the pipeline
 # ---------------------------------------------------------------------------------------------------
@@ -204,11 +257,13 @@ class _ScenarioRun:
     runner's run and one accumulator per estimator."""
 
     def __init__(self, plan: ScenarioPlan, condition: Condition, slot: int, settings: EvalSettings, name: str,
-                 series: bool, estimates: bool) -> None:
+                 series: bool, estimates: bool, recorded: list[EstimatorSpec] | None = None) -> None:
         self.plan = plan
         self.condition = condition
         self.slot = slot
-        self.specs = settings.estimators
+        self.own = settings.estimators  # run by the runner
+        self.recorded = recorded or []  # served from the bag
+        self.specs = [*self.own, *self.recorded]
         rngs = [np.random.default_rng(sequence_seed(settings.seed, f"{name}:{condition.label}:{k}"))
                 for k in range(len(condition.parts))]
         self.transforms: list[Transform] = condition.start(rngs)
@@ -226,7 +281,9 @@ class _ScenarioRun:
         self.estimates: list[tuple[NDArray[np.int64], list[NDArray[np.float64]]]] | None = [] if estimates else None
 
     def begin(self, runner: Runner) -> None:
-        self.run = runner.start(self.specs, self.gate, self.slot)
+        runs = [runner.start(self.own, self.gate, self.slot)] if self.own else []
+        runs += [RecordedRunner().start(self.recorded, self.gate, self.slot)] if self.recorded else []
+        self.run = runs[0] if len(runs) == 1 else _Joined(runs)
 
     def feed(self, chunk: Recording, offset: int) -> None:
         rec = self.plan.apply(chunk, offset)
@@ -260,10 +317,20 @@ class _ScenarioRun:
         return [
             ResultRow(sequence=res.name, dataset=res.dataset, source=res.source, scenario=self.plan.scenario,
                       rate=NATIVE if rate is None else float(rate), rate_hz=rate_hz, resampled=rate is not None,
-                      estimator=spec.label, estimator_name=spec.name, mode=mode, score=acc.result(), stats=st,
-                      perturbation=label)
+                      estimator=spec.label, estimator_name=spec.name, mode=RECORDED if spec.name == RECORDED else mode,
+                      score=self._score(spec, acc), stats=st, perturbation=label)
             for spec, acc, st in zip(self.specs, self.acc, stats, strict=True)
         ]
+
+    def _score(self, spec: EstimatorSpec, acc: Accumulator) -> Score:
+        try:
+            return acc.result()
+        except EvalError as exc:
+            if spec.name != RECORDED or acc.n_scored:
+                raise
+            raise EvalError(f"recorded estimate {spec.label}: no message near any scored sample (within half the "
+                            "--max-gap, or between two messages at most --max-gap apart); compare its stamps with the "
+                            "IMU's (--t-offset adds seconds to the estimate stamps)") from exc
 
     def keep_series(self, res: SequenceResult) -> None:
         if res.series is None:
@@ -279,23 +346,26 @@ class _ScenarioRun:
     def keep_estimates(self, res: SequenceResult) -> None:
         parts = self.estimates or []
         stamps = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
-        quats = {
+        quats = {  # the runner's (recorded ones are in the bag already)
             spec.label: np.concatenate([p[1][j] for p in parts]) if parts else np.zeros((0, 4))
-            for j, spec in enumerate(self.specs)
+            for j, spec in enumerate(self.own)
         }
         res.estimates = {"scenario": self.plan.scenario, "stamps": stamps, "quats": quats}
 
 
 def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool) -> list[_ScenarioRun]:
     """One run per condition × scenario (series for the first condition, estimates for the very first run)."""
-    want_series = native and settings.series_for is not None and settings.series_for in ("*", name)
+    want_series = native and settings.series_for is not None and settings.series_for in ("*", "all", name)
     runs = []
     for c, condition in enumerate(settings.conditions):
         for s, scn in enumerate(settings.scenarios):
             slot = c * len(settings.scenarios) + s
+            # recorded estimates exist for the recording as it is only: as-recorded, unperturbed, own rate
+            recorded = settings.recorded if native and scn == AS_RECORDED and not condition.parts else []
             runs.append(_ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, name,
-                                     want_series and c == 0, native and settings.keep_estimates and slot == 0))
-    return runs
+                                     want_series and c == 0, native and settings.keep_estimates and slot == 0,
+                                     recorded))
+    return [r for r in runs if r.specs]
 
 
 def _summarise(src: Source, rate: float | None, settings: EvalSettings, res: SequenceResult) -> Summary:
@@ -352,9 +422,9 @@ def evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runn
         base = recording
         whole = Path(source).suffix.lower() in BROAD_SUFFIXES or any(r is not None for r in settings.rates)
         if base is None and whole:
-            base = read_whole(source)
+            base = read_whole(source, settings.topics)
         for rate in settings.rates:
-            src = open_source(source, rate, base, settings.chunk)
+            src = open_source(source, rate, base, settings.chunk, settings.topics)
             _evaluate_rate(src, rate, settings, runner, res)
     except EvalError as exc:
         res = SequenceResult(source=str(source), error=str(exc))

@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from riann_ros.evaluation.sources import Summary
+from riann_ros.evaluation.sources import Chunk, Summary
 from riann_ros.recording import Recording
 from riann_ros.stream import GateConfig
 
@@ -131,13 +131,15 @@ class ScenarioPlan:
 
     def apply(self, chunk: Recording, offset: int) -> Recording | None:
         """The part of ``chunk`` (whose first sample has the global index ``offset``) in this scenario: gyro
-        de-biased and biased, stamps shifted off zero (``shift``)."""
+        de-biased and biased, stamps shifted off zero (``shift``). Estimates recorded in the bag (a
+        :class:`~riann_ros.evaluation.sources.Chunk`) stay only in ``as-recorded``: they belong to the
+        recording as it is."""
         k = max(0, self.start - offset)
         if k >= len(chunk):
             return None
         c = chunk.slice(k) if k else chunk
         gyr = c.gyr - self.removed + self.added
-        return Recording(
+        out = Recording(
             stamps_ns=c.stamps_ns + self.shift if self.shift else c.stamps_ns,
             acc=c.acc,
             gyr=gyr,
@@ -149,6 +151,9 @@ class ScenarioPlan:
             frame_id=c.frame_id,
             meta=c.meta,
         )
+        if self.scenario == AS_RECORDED and isinstance(chunk, Chunk) and chunk.recorded:
+            return Chunk.of(out, chunk.recorded)
+        return out
 
 
 def scenario_recording(rec: Recording, scenario: str, seed: int = 0,

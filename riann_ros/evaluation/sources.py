@@ -16,13 +16,15 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from riann_ros.bagio.layout import IMU_TOPIC
+from riann_ros.bagio.topics import DEFAULT_MAX_GAP_S
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.rest import GIVEN, Rest, RestDetector
 from riann_ros.recording import Recording
@@ -32,13 +34,53 @@ BROAD_SUFFIXES = (".hdf5", ".h5", ".mat")
 STREAM_CHUNK = 100_000  # samples per chunk when a bag is read chunk by chunk
 
 
+@dataclass(frozen=True)
+class BagTopics:
+    """Which topics of a bag to read: the layout's (:mod:`riann_ros.bagio`) by default, or any bag's
+    (:mod:`riann_ros.bagio.topics`): its IMU topic, a ground-truth topic interpolated onto the IMU stamps, and
+    estimates recorded from the user's own filters (``estimates``; matched by stamp + ``t_offset_s``)."""
+
+    imu: str = IMU_TOPIC
+    reference: str | None = None  # None: the layout's /ground_truth/attitude
+    estimates: tuple[str, ...] = ()
+    t_offset_s: float = 0.0  # added to the stamps of the estimate topics
+    max_gap_s: float = DEFAULT_MAX_GAP_S  # slerp between messages at most this far apart; hold within half of it
+
+    @property
+    def plain(self) -> bool:
+        """Only the layout's topics."""
+        return self.imu == IMU_TOPIC and self.reference is None and not self.estimates
+
+    def options(self) -> list[str]:
+        """The command-line options that ask for these topics (for messages)."""
+        out = [] if self.imu == IMU_TOPIC else ["--imu-topic"]
+        out += ["--ground-truth-topic"] if self.reference else []
+        return out + (["--estimate-topic"] if self.estimates else [])
+
+
+@dataclass
+class Chunk(Recording):
+    """A piece of a recording with the estimates recorded in the bag at its samples: topic → (N, 4) w, x, y, z
+    (NaN rows: no estimate near that sample). Only the recording as it is has them (the as-recorded scenario)."""
+
+    recorded: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, rec: Recording, recorded: dict[str, NDArray[np.float64]]) -> Chunk:
+        return cls(stamps_ns=rec.stamps_ns, acc=rec.acc, gyr=rec.gyr, quat_ref=rec.quat_ref,
+                   score_mask=rec.score_mask, name=rec.name, dataset=rec.dataset, source=rec.source,
+                   frame_id=rec.frame_id, meta=rec.meta, recorded=recorded)
+
+
 class Source:
     """A recording as a re-iterable sequence of chunks (each iteration reads it again)."""
 
-    def __init__(self, path: str | os.PathLike[str], rec: Recording | None = None, chunk: int = STREAM_CHUNK) -> None:
+    def __init__(self, path: str | os.PathLike[str], rec: Recording | None = None, chunk: int = STREAM_CHUNK,
+                 topics: BagTopics | None = None) -> None:
         self.path = Path(path)
         self.rec = rec  # the whole recording, or None: read the bag chunk by chunk
         self.chunk = chunk
+        self.topics = topics or BagTopics()
 
     @property
     def resampled(self) -> bool:
@@ -48,17 +90,44 @@ class Source:
         if self.rec is not None:
             yield self.rec
             return
+        it = self._bag_chunks()
+        try:
+            while True:
+                try:
+                    c = next(it)
+                except StopIteration:
+                    return
+                except Exception as exc:  # reading only: an estimator crash is reported as such elsewhere
+                    raise read_error(self.path, exc) from exc
+                yield c
+        finally:
+            it.close()
+
+    def _bag_chunks(self) -> Generator[Recording, None, None]:
         from riann_ros import bagio
 
-        it = bagio.iter_imu_chunks(self.path, chunk=self.chunk)
-        while True:
-            try:
-                c = next(it)
-            except StopIteration:
-                return
-            except Exception as exc:  # reading only: an estimator crash is reported as such elsewhere
-                raise read_error(self.path, exc) from exc
-            yield c
+        t = self.topics
+        if t.plain:
+            yield from bagio.iter_imu_chunks(self.path, chunk=self.chunk)
+            return
+        from riann_ros.bagio.topics import iter_topic_chunks
+
+        for rec, recorded in iter_topic_chunks(self.path, self.chunk, imu_topic=t.imu, reference_topic=t.reference,
+                                               estimate_topics=t.estimates, t_offset_ns=round(t.t_offset_s * 1e9),
+                                               max_gap_ns=round(t.max_gap_s * 1e9)):
+            yield Chunk.of(rec, recorded) if t.estimates else rec
+
+
+def _concat(chunks: list[Recording]) -> Recording:
+    """The chunks of a source as one recording (a :class:`Chunk` when they carry recorded estimates)."""
+    from riann_ros import bagio
+
+    rec = bagio.concat(chunks)
+    if chunks and isinstance(chunks[0], Chunk) and chunks[0].recorded:
+        topics = list(chunks[0].recorded)
+        return Chunk.of(rec, {k: np.concatenate([c.recorded[k] for c in chunks if isinstance(c, Chunk)])
+                              for k in topics})
+    return rec
 
 
 def read_error(path: Path, exc: Exception) -> EvalError:
@@ -118,31 +187,37 @@ def check_input(p: Path) -> None:
         raise EvalError(hint)
 
 
-def read_whole(path: str | os.PathLike[str]) -> Recording:
-    """A bag (``.mcap``, ``.db3`` or a bag directory) or a BROAD trial file (``.hdf5`` / ``.mat``), whole."""
+def read_whole(path: str | os.PathLike[str], topics: BagTopics | None = None) -> Recording:
+    """A bag (``.mcap``, ``.db3`` or a bag directory; ``topics``: which of its topics) or a BROAD trial file
+    (``.hdf5`` / ``.mat``), whole."""
     p = Path(path)
+    topics = topics or BagTopics()
     check_input(p)
+    if p.suffix.lower() in BROAD_SUFFIXES and not topics.plain:
+        raise EvalError(f"{p}: a BROAD trial file, not a bag: {', '.join(topics.options())} apply to bags only")
     try:
         if p.suffix.lower() in BROAD_SUFFIXES:
             from riann_ros.datasets.broad import read_broad
 
             return read_broad(p)
-        from riann_ros import bagio
+        if topics.plain:
+            from riann_ros import bagio
 
-        return bagio.read_recording(p)
+            return bagio.read_recording(p)
     except Exception as exc:  # bagio.BagError, OSError, ValueError, …
         raise read_error(p, exc) from exc
+    return _concat(list(Source(p, topics=topics).chunks()))
 
 
 def open_source(path: str | os.PathLike[str], rate: float | None = None, base: Recording | None = None,
-                chunk: int = STREAM_CHUNK) -> Source:
+                chunk: int = STREAM_CHUNK, topics: BagTopics | None = None) -> Source:
     """The source of ``path`` at ``rate`` Hz (None: its own rate). Bags at their own rate stream chunk by
     chunk; BROAD files and resampled recordings are whole (``base``: the whole recording, if already read)."""
     p = Path(path)
     if rate is None and base is None and p.suffix.lower() not in BROAD_SUFFIXES:
         check_input(p)
-        return Source(p, chunk=chunk)
-    rec = base if base is not None else read_whole(p)
+        return Source(p, chunk=chunk, topics=topics)
+    rec = base if base is not None else read_whole(p, topics)
     if rate is not None:
         from riann_ros.resample import resample_recording
 
