@@ -46,7 +46,11 @@ def build_parser() -> argparse.ArgumentParser:
         "tuning specs: NAME (default grid) or NAME:PARAM=V1/V2/...[:PARAM=...], e.g. mahony:kp=0.5/1/2:ki=0/0.3\n"
         "exit status: 0 ok, 1 some input failed, 2 usage error, 130 interrupted",
     )
-    p.add_argument("inputs", nargs="+", metavar="BAG", help="bags (.mcap, bag directories) or BROAD .hdf5/.mat files")
+    p.add_argument("inputs", nargs="*", metavar="BAG", help="bags (.mcap, bag directories) or BROAD .hdf5/.mat files")
+    p.add_argument("--compare", nargs=2, metavar=("A", "B"), type=Path, default=None,
+                   help="no evaluation: the difference B − A of two saved runs (results.json files or their --out "
+                   "folders) per estimator × scenario × perturbation (mean/median/max) and per sequence; with --out, "
+                   "compare.csv and the plot compare_rmse")
     p.add_argument("--estimators", "-e", default=None,
                    help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed); 'none': only "
                    "the --estimate-topic estimates")
@@ -91,7 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "results needs --force)")
     p.add_argument("--heading", action="store_true", help="also score heading and total error (extra columns)")
     p.add_argument("--plot-sequence", default=None,
-                   help="sequence name for the error-over-time plot (default: the first input)")
+                   help="sequence for the error-over-time and roll/pitch plots (default: the first input); 'all': "
+                   "a roll/pitch figure (roll_pitch_<sequence>) for every sequence")
     p.add_argument("--no-plots", action="store_true", help="skip the plots")
     p.add_argument("--tune", action="append", default=[], metavar="SPEC",
                    help="grid-search this estimator's parameters for the lowest mean RMSE on the inputs and add "
@@ -322,9 +327,41 @@ def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
     return True
 
 
+def _compare(args: argparse.Namespace) -> int:
+    """``--compare A B``: print (and with --out write) the difference of two saved runs; no estimator runs."""
+    from riann_ros.evaluation import compare as cp
+
+    try:
+        cmp = cp.compare(cp.load(args.compare[0]), cp.load(args.compare[1]))
+    except ev.EvalError as exc:
+        _err(str(exc))
+        return 1
+    print(cp.format_comparison(cmp))
+    if args.out:
+        try:
+            files = cp.write_comparison(args.out, cmp, plots=not args.no_plots, replace=args.force)
+        except report.OutputExists as exc:
+            _err(str(exc))
+            return 1
+        print(f"wrote {', '.join(str(f) for f in files)}")
+    return 0
+
+
 def _main(argv: list[str] | None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     argv_list = sys.argv[1:] if argv is None else list(argv)
+    if args.compare is not None:
+        if args.inputs:
+            parser.error("--compare A B takes no inputs: it compares two saved runs")
+        try:
+            _check_out(args)
+        except ValueError as exc:
+            _err(str(exc))
+            return 2
+        return _compare(args)
+    if not args.inputs:
+        parser.error("no input given (bags or BROAD files; or --compare A B)")
     try:
         settings = _settings(args)
         _check_out(args)

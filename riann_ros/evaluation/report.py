@@ -342,14 +342,26 @@ def prepare_out(out: Path, replace: bool) -> list[Path]:
     return old
 
 
+def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
+    """The figures: boxplots, error over time (the first sequence with series), roll/pitch per sequence (that one,
+    or every sequence with ``--plot-sequence all``), RMSE vs rate."""
+    from riann_ros.evaluation import plots as pl
+
+    figures = pl.plot_boxes(rows, out)
+    with_series = [r.series for r in report.results if r.series and not r.error]
+    if with_series:
+        figures += pl.plot_error_over_time(with_series[0], out)
+    for series in with_series if report.settings.series_for == "all" else with_series[:1]:
+        figures += pl.plot_attitude(series, out)
+    return figures + pl.plot_rmse_vs_rate(rows, out)
+
+
 def write_results(out: Path, report: Report, plots: bool = True, replace: bool = False) -> list[Path]:
     """results.csv, results.json, report.md and (``plots``) the figures in ``out``; returns the plot files.
 
     An earlier run's result files in ``out`` are removed first with ``replace``, else :class:`OutputExists`
     (:func:`prepare_out`): a folder never mixes two runs. If anything stops it half-way (Ctrl-C included), the
     files of this call are removed again."""
-    from riann_ros.evaluation import plots as pl
-
     prepare_out(out, replace)
     try:
         rows = report.rows
@@ -357,11 +369,7 @@ def write_results(out: Path, report: Report, plots: bool = True, replace: bool =
         write_json(out / "results.json", report.payload())
         figures: list[Path] = []
         if plots and rows:
-            figures += pl.plot_boxes(rows, out)
-            series = next((r.series for r in report.results if r.series), None)
-            if series:
-                figures += pl.plot_error_over_time(series, out)
-            figures += pl.plot_rmse_vs_rate(rows, out)
+            figures += _plots(report, rows, out)
         (out / "report.md").write_text(markdown(report, figures))
         return figures
     except BaseException:

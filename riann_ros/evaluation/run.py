@@ -35,7 +35,7 @@ from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import NONE, Condition, Transform
 from riann_ros.evaluation.rest import NO_REST_WARNING
 from riann_ros.evaluation.scenarios import AS_RECORDED, PAPER_SCENARIOS, ScenarioPlan, sequence_seed
-from riann_ros.evaluation.scoring import Accumulator, Score, error_deg
+from riann_ros.evaluation.scoring import Accumulator, Score, error_deg, roll_pitch_deg
 from riann_ros.evaluation.sources import (
     BROAD_SUFFIXES,
     STREAM_CHUNK,
@@ -52,8 +52,10 @@ from riann_ros.recording import Recording
 from riann_ros.stream import EstimatorStream, GateConfig
 
 NATIVE = "native"  # rate key of rows at the recording's own rate
+LIVE_KEYS = ("published", "received", "lost", "unexpected")  # RunStats.live columns
 RECORDED = "recorded"  # estimator name and mode of estimates recorded in a bag
-SERIES_POINTS = 6000  # points per curve kept for the error-over-time plot
+SERIES_POINTS = 6000  # points per curve kept for the error-over-time and roll/pitch plots
+REFERENCE = "reference"  # key of the reference's roll/pitch in a series
 
 
 @dataclass
@@ -64,7 +66,7 @@ class EvalSettings:
     rates: list[float | None] = field(default_factory=lambda: [None])  # None = the recording's own rate
     conditions: list[Condition] = field(default_factory=lambda: [Condition()])  # perturbations; () = none
     with_heading: bool = False
-    series_for: str | None = None  # sequence name whose error-over-time series is kept ("*" = first)
+    series_for: str | None = None  # sequence whose series are plotted: a name, "*" (the first) or "all"
     series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
     keep_estimates: bool = False  # return the estimates of the first scenario (for --write-estimates)
     chunk: int = STREAM_CHUNK  # samples per bag chunk
@@ -125,6 +127,29 @@ class ResultRow:
         d.update(self.stats.live or {})
         d["cpu_seconds"] = self.stats.cpu_seconds
         return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ResultRow:
+        """A row back from :meth:`to_dict` (a row of results.json, where NaN is null); KeyError names a missing
+        column."""
+        def num(v: Any) -> float:
+            return float("nan") if v is None else float(v)
+
+        score = Score(n_samples=int(d["n_samples"]), n_scored=int(d["n_scored"]),
+                      n_unestimated=int(d["n_unestimated"]), rmse_deg=num(d["rmse_deg"]),
+                      max_err_deg=num(d["max_err_deg"]), heading_rmse_deg=d.get("heading_rmse_deg"),
+                      total_rmse_deg=d.get("total_rmse_deg"))
+        live = {k: int(d[k]) for k in LIVE_KEYS if k in d}
+        stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
+                         rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},
+                         resets={k[len("reset_"):]: int(v) for k, v in d.items() if k.startswith("reset_")},
+                         live=live or None)
+        rate = d["rate"]
+        return cls(sequence=str(d["sequence"]), dataset=str(d["dataset"]), source=str(d.get("source", "")),
+                   scenario=str(d["scenario"]), rate=rate if rate == NATIVE else float(rate),
+                   rate_hz=num(d["rate_hz"]), resampled=bool(d["resampled"]), estimator=str(d["estimator"]),
+                   estimator_name=str(d.get("estimator_name", d["estimator"])), mode=str(d.get("mode", "")),
+                   score=score, perturbation=str(d.get("perturbation", NONE)), stats=stats)
 
 
 @dataclass
@@ -276,6 +301,8 @@ class _ScenarioRun:
         self.step = settings.series_step if settings.series_step > 0 else max(1, -(-int(length) // SERIES_POINTS))
         self.series = series
         self.curves: list[list[NDArray[np.float32]]] = [[] for _ in self.specs]
+        self.att: list[list[NDArray[np.float32]]] = [[] for _ in self.specs]
+        self.att_ref: list[NDArray[np.float32]] = []
         self.t: list[NDArray[np.float32]] = []
         self.scored: list[NDArray[np.bool_]] = []
         self.estimates: list[tuple[NDArray[np.int64], list[NDArray[np.float64]]]] | None = [] if estimates else None
@@ -297,14 +324,22 @@ class _ScenarioRun:
         for acc, q in zip(self.acc, qs, strict=True):
             acc.add(rec.quat_ref, rec.score_mask, q)
         if self.series and rec.quat_ref is not None:
-            pick = slice((-self.fed) % self.step, None, self.step)
-            for curve, q in zip(self.curves, qs, strict=True):
-                curve.append(error_deg(rec.quat_ref[pick], q[pick]).astype(np.float32))
-            self.t.append(((rec.stamps_ns[pick] - self.plan.first_stamp) * 1e-9).astype(np.float32))
-            self.scored.append(rec.score_mask[pick])
+            self._add_series(rec, qs)
         if self.estimates is not None:
             self.estimates.append((rec.stamps_ns - self.plan.shift, qs))
         self.fed += len(rec)
+
+    def _add_series(self, rec: Recording, qs: list[NDArray[np.float64]]) -> None:
+        """Every ``step``-th sample (counted over the whole sequence): e_α, roll and pitch of each estimator, the
+        reference's roll and pitch, time and score mask."""
+        assert rec.quat_ref is not None
+        pick = slice((-self.fed) % self.step, None, self.step)
+        for curve, att, q in zip(self.curves, self.att, qs, strict=True):
+            curve.append(error_deg(rec.quat_ref[pick], q[pick]).astype(np.float32))
+            att.append(roll_pitch_deg(q[pick]).astype(np.float32))
+        self.att_ref.append(roll_pitch_deg(rec.quat_ref[pick]).astype(np.float32))
+        self.t.append(((rec.stamps_ns[pick] - self.plan.first_stamp) * 1e-9).astype(np.float32))
+        self.scored.append(rec.score_mask[pick])
 
     def rows(self, res: SequenceResult, rate: float | None, rate_hz: float, mode: str) -> list[ResultRow]:
         stats = self.run.finish() if self.run is not None else [RunStats() for _ in self.specs]
@@ -342,6 +377,14 @@ class _ScenarioRun:
         }
         res.series.setdefault("t", {})[scn] = np.concatenate(self.t) if self.t else np.zeros(0, np.float32)
         res.series.setdefault("scored", {})[scn] = np.concatenate(self.scored) if self.scored else np.zeros(0, bool)
+
+        def cat(parts: list[NDArray[np.float32]]) -> NDArray[np.float32]:
+            return np.concatenate(parts) if parts else np.zeros((0, 2), np.float32)
+
+        # roll and pitch (°, (n, 2)) of the reference and of every estimator: the evo_traj-style plot
+        res.series.setdefault("attitude", {})[scn] = {
+            REFERENCE: cat(self.att_ref), **{spec.label: cat(a) for spec, a in zip(self.specs, self.att, strict=True)}
+        }
 
     def keep_estimates(self, res: SequenceResult) -> None:
         parts = self.estimates or []
