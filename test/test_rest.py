@@ -201,3 +201,20 @@ def test_cli_rest_option(moving_bag, tmp_path, capsys):
     assert data["settings"]["rest"] == [0.0, 2.0]
     assert main([str(moving_bag), "--rest", "2-3"]) == 2
     assert "START:END" in capsys.readouterr().err
+
+
+def test_resampled_rates_use_the_rest_found_at_the_own_rate():
+    # FFT resampling rings near the motion onset and the wrap-around; a 2.5 s rest then looks too short at 50 Hz
+    rec = recording([(2.5, "rest"), (15.0, "move")])
+    settings = ev.EvalSettings(estimators=ev.parse_estimators("madgwick"), scenarios=[ev.RESTRICTIVE],
+                               rates=[50.0])
+    res = ev.evaluate_source("x.mcap", settings, recording=rec)
+    assert res.error is None and res.warnings == []
+    info = res.scenarios[ev.RESTRICTIVE]
+    assert info["rest_source"] == "detected" and info["rest_start_s"] == 0.0 and info["rest_end_s"] > 2.0
+    # the resampled gyro over that span: the bias, up to the FFT's ringing from the wrap-around at the start
+    np.testing.assert_allclose(np.radians(info["bias_removed_dps"]), BIAS, atol=np.radians(0.1))
+    # no rest at the own rate: none at any rate
+    moving = recording([(4.0, "roll"), (10.0, "move")], bias=(0.0, 0.0, 0.0))
+    res = ev.evaluate_source("y.mcap", settings, recording=moving)
+    assert res.warnings == ["rec (resampled to 50 Hz): no rest found before the first scored sample: no bias removed"]

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import NONE, Condition, Transform
-from riann_ros.evaluation.rest import NO_REST_WARNING
+from riann_ros.evaluation.rest import NO_REST_WARNING, Rest
 from riann_ros.evaluation.scenarios import AS_RECORDED, PAPER_SCENARIOS, ScenarioPlan, sequence_seed
 from riann_ros.evaluation.scoring import Accumulator, Score, error_deg, roll_pitch_deg
 from riann_ros.evaluation.sources import (
@@ -411,9 +411,11 @@ def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool
     return [r for r in runs if r.specs]
 
 
-def _summarise(src: Source, rate: float | None, settings: EvalSettings, res: SequenceResult) -> Summary:
-    """The first pass; names the result and warns when a scenario would remove a bias but there is no rest."""
-    summary = summarise(src, settings.rest)
+def _summarise(src: Source, rate: float | None, settings: EvalSettings, res: SequenceResult,
+               native_rest: Rest | None = None) -> Summary:
+    """The first pass; names the result and warns when a scenario would remove a bias but there is no rest.
+    ``native_rest``: the rest detected at the recording's own rate, used for the resampled ones."""
+    summary = summarise(src, settings.rest if settings.rest is not None or rate is None else native_rest)
     if not res.name:
         res.name, res.dataset, res.citation = summary.name, summary.dataset, summary.citation
     if not summary.rest.found and any(s != AS_RECORDED for s in settings.scenarios):
@@ -423,8 +425,8 @@ def _summarise(src: Source, rate: float | None, settings: EvalSettings, res: Seq
 
 
 def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runner: Runner,
-                   res: SequenceResult) -> None:
-    summary = _summarise(src, rate, settings, res)
+                   res: SequenceResult, native_rest: Rest | None = None) -> None:
+    summary = _summarise(src, rate, settings, res, native_rest)
     runs = _plan_runs(summary, settings, res.name, rate is None)
     for run in runs:
         res.scenarios.setdefault(run.plan.scenario, run.plan.info.to_dict())
@@ -466,9 +468,13 @@ def evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runn
         whole = Path(source).suffix.lower() in BROAD_SUFFIXES or any(r is not None for r in settings.rates)
         if base is None and whole:
             base = read_whole(source, settings.topics)
+        # resampled recordings use the rest found at the recording's own rate (resampling rings near steps)
+        native_rest = None
+        if base is not None and settings.rest is None and any(r is not None for r in settings.rates):
+            native_rest = summarise(Source(source, base)).rest
         for rate in settings.rates:
             src = open_source(source, rate, base, settings.chunk, settings.topics)
-            _evaluate_rate(src, rate, settings, runner, res)
+            _evaluate_rate(src, rate, settings, runner, res, native_rest)
     except EvalError as exc:
         res = SequenceResult(source=str(source), error=str(exc))
     except Exception as exc:  # an estimator crash must not take the other inputs down

@@ -337,10 +337,11 @@ class _Pass:
         )
 
 
-def summarise(src: Source, rest: tuple[float, float] | None = None) -> Summary:
+def summarise(src: Source, rest: tuple[float, float] | Rest | None = None) -> Summary:
     """The first pass over ``src``: checks (raising :class:`EvalError` naming the input), motion onset and rates;
-    then the rest before the motion onset (a second pass over those samples only). ``rest``: the rest given by
-    hand, (start, end) in seconds from the first sample."""
+    then the rest before the motion onset (a second pass over those samples only). ``rest``: None: detect it; the
+    rest given by hand, (start, end) in seconds from the first sample; or the :class:`Rest` of this recording at
+    another rate (the resampled recording's rest is the same stretch of time: no rest there, none here)."""
     state = _Pass()
     for c in src.chunks():
         state.add(c)
@@ -349,8 +350,15 @@ def summarise(src: Source, rest: tuple[float, float] | None = None) -> Summary:
     return summary
 
 
-def find_rest(src: Source, summary: Summary, given: tuple[float, float] | None = None) -> Rest:
-    """The rest of ``src`` (see :mod:`~riann_ros.evaluation.rest`), reading only as far as needed."""
+def find_rest(src: Source, summary: Summary, given: tuple[float, float] | Rest | None = None) -> Rest:
+    """The rest of ``src`` (see :mod:`~riann_ros.evaluation.rest` and :func:`summarise`), reading only as far as
+    needed."""
+    if isinstance(given, Rest):
+        if not given.found or given.start_s is None or given.end_s is None:
+            return Rest()
+        found = find_rest(src, summary, (given.start_s, given.end_s + 1e-6))  # the span, its last sample included
+        found.source = given.source
+        return found
     if summary.i0 <= 0 and given is None:
         return Rest()
     det = RestDetector(summary.rate_all, summary.i0, summary.first_stamp, given)
