@@ -170,7 +170,7 @@ def test_rmse_vs_rate_is_linear(three, monkeypatch):
     plots.plot_rmse_vs_rate(rows, Path("."))
     (_, fig), = figs
     assert fig.axes[0].get_yscale() == "linear" and fig.axes[0].get_ylim()[0] == 0.0
-    assert fig.axes[0].get_legend().get_texts()[0].get_text() == "madgwick (n=1)"
+    assert fig.legends[0].get_texts()[0].get_text() == "madgwick (n=1)"
 
 
 def test_roll_pitch_plot_per_sequence(three, tmp_path):

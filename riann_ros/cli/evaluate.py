@@ -5,8 +5,12 @@ Example::
     riann-bag-eval bags/*.mcap --estimators riann,madgwick:beta=0.033,mahony:kp=1:ki=0.3,vqf \\
         --scenarios all --seed 0 --jobs 2 --out eval_out
 
-Inputs are rosbag2 bags in the layout of :mod:`riann_ros.bagio` (``.mcap`` files or bag directories) or
-BROAD trial files (``.hdf5`` / ``.mat``). Exit status: 0 all inputs evaluated, 1 some input failed
+    riann-bag-eval my.mcap --imu-topic /imu --ground-truth-topic /mocap/pose --estimate-topic /my_filter/imu
+    riann-bag-eval --compare eval_a/results.json eval_b/results.json --out a_vs_b
+
+Inputs are rosbag2 bags in the layout of :mod:`riann_ros.bagio` (``.mcap`` files or bag directories), any
+rosbag2 bag with ``--imu-topic`` / ``--ground-truth-topic``, or BROAD trial files (``.hdf5`` / ``.mat``).
+Full reference: docs/evaluation.md. Exit status: 0 all inputs evaluated, 1 some input failed
 (named on stderr, the others are still evaluated and reported), 130 interrupted, 2 bad command line.
 This module only parses the command line and prints; the work is in :mod:`riann_ros.evaluation`
 (and :mod:`riann_ros.nodes.live` for ``--live``).
@@ -39,14 +43,18 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="riann-bag-eval",
         description="Attitude RMSE (e_α, heading ignored) of RIANN, Madgwick, Mahony and VQF on dataset bags, "
-        "in the paper's restrictive / partially-restrictive / realistic scenarios.",
+        "in the paper's restrictive / partially-restrictive / realistic scenarios and as recorded; also of "
+        "estimates your own filter recorded in a bag (--estimate-topic), on any rosbag2 bag (--imu-topic, "
+        "--ground-truth-topic); --compare of two saved runs. Full reference: docs/evaluation.md.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="estimator specs: NAME[:PARAM=VALUE[:PARAM=VALUE...]], comma-separated, e.g.\n"
         "  riann,madgwick:beta=0.033,madgwick:beta=0.1,mahony:kp=1:ki=0.3,vqf:tau_acc=3\n"
         "tuning specs: NAME (default grid) or NAME:PARAM=V1/V2/...[:PARAM=...], e.g. mahony:kp=0.5/1/2:ki=0/0.3\n"
         "exit status: 0 ok, 1 some input failed, 2 usage error, 130 interrupted",
     )
-    p.add_argument("inputs", nargs="*", metavar="BAG", help="bags (.mcap, bag directories) or BROAD .hdf5/.mat files")
+    p.add_argument("inputs", nargs="*", metavar="BAG",
+                   help="bags (.mcap, .db3, bag directories) or BROAD .hdf5/.mat files (CSV files and EuRoC folders: "
+                   "convert them with riann-bag-convert first; the error message says how)")
     p.add_argument("--compare", nargs=2, metavar=("A", "B"), type=Path, default=None,
                    help="no evaluation: the difference B − A of two saved runs (results.json files or their --out "
                    "folders) per estimator × scenario × perturbation (mean/median/max) and per sequence; with --out, "

@@ -1,12 +1,15 @@
 """Offline attitude evaluation, the paper's way (ROS-free core of ``riann-bag-eval``).
 
-One pipeline (:mod:`~riann_ros.evaluation.run`): a source yields recording chunks
-(:mod:`~riann_ros.evaluation.sources`) → each scenario transforms them chunk by chunk
-(:mod:`~riann_ros.evaluation.scenarios`) → the estimators run through the node's ``EstimatorStream``
-→ one accumulator per scenario × estimator scores them (:mod:`~riann_ros.evaluation.scoring`).
-Estimator specs and tuning grids: :mod:`~riann_ros.evaluation.specs`; statistics across sequences and
-tuning: :mod:`~riann_ros.evaluation.aggregate`; tables and files: :mod:`~riann_ros.evaluation.report`;
-figures: :mod:`~riann_ros.evaluation.plots`.
+One pipeline (:mod:`~riann_ros.evaluation.run`): a source yields recording chunks, with estimates
+recorded in the bag aligned onto them (:mod:`~riann_ros.evaluation.sources`) → its first pass finds the
+motion onset and the initial rest (:mod:`~riann_ros.evaluation.rest`) → each scenario transforms the chunks
+(:mod:`~riann_ros.evaluation.scenarios`) → a runner gives the estimates (in-process through the node's
+``EstimatorStream``, live over DDS, or recorded in the bag) → one accumulator per scenario × estimator
+scores them (:mod:`~riann_ros.evaluation.scoring`). Estimator specs and tuning grids:
+:mod:`~riann_ros.evaluation.specs`; statistics across sequences and tuning:
+:mod:`~riann_ros.evaluation.aggregate`; tables and files: :mod:`~riann_ros.evaluation.report`; figures:
+:mod:`~riann_ros.evaluation.plots`; two saved runs side by side: :mod:`~riann_ros.evaluation.compare`.
+Reference: docs/evaluation.md.
 """
 
 from riann_ros.evaluation.aggregate import ALL_DATASETS, Group, aggregate, best_of, rate_order, tune

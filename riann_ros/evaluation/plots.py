@@ -172,8 +172,8 @@ def plot_rmse_vs_rate(rows: Sequence[ResultRow], out_dir: Path, stem: str = "rms
         ax.set_title(scn)
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize="small")
     fig.tight_layout()
+    _fig_legend(fig, axes[0, 0], min(len(ests), 4))
     return _save(fig, out_dir, stem)
 
 

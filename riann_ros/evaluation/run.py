@@ -16,6 +16,10 @@ The runner is where the estimates come from:
   over a bag serves all scenarios.
 * :class:`riann_ros.nodes.live.LiveRunner` replays the sequences over DDS to the estimator nodes; one
   replay at a time (a pass per scenario).
+* :class:`RecordedRunner` serves the estimates a user's own filter recorded in the bag
+  (``--estimate-topic``), which the source aligned onto each chunk's samples; they exist for the recording
+  as it is only, so they join the as-recorded scenario, unperturbed, at the native rate, beside the other
+  runner's estimators.
 """
 
 from __future__ import annotations
