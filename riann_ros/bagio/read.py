@@ -124,12 +124,14 @@ def _info_from(path: Path, reader) -> dict:
     return {}
 
 
-def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000) -> Iterator[Recording]:
+def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_topic: str = IMU_TOPIC,
+                    reference: bool = True) -> Iterator[Recording]:
     """Yield the bag as consecutive :class:`Recording` chunks of at most ``chunk`` samples, in stamp order.
 
     Memory stays bounded by the chunk size. Each chunk carries its reference (NaN rows where no
     ``/ground_truth/attitude`` message has the sample's stamp; ``quat_ref=None`` when the bag has no
-    reference topic), its score mask and the bag's name/dataset/source/frame_id/meta. Raises
+    reference topic, or with ``reference=False``), its score mask and the bag's name/dataset/source/frame_id/meta.
+    ``imu_topic``: the ``sensor_msgs/msg/Imu`` topic of the samples (a bag not written by the converter). Raises
     :class:`BagError` for anything that is not a readable IMU bag.
     """
     path = Path(path)
@@ -137,7 +139,7 @@ def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000) -> Itera
         raise ValueError("chunk must be >= 1")
     with _opened(path) as reader:
         try:
-            yield from _iter_chunks(path, reader, chunk)
+            yield from _iter_chunks(path, reader, chunk, imu_topic, reference)
         except BagError:
             raise
         except (KeyboardInterrupt, GeneratorExit):
@@ -154,8 +156,10 @@ class _ChunkBuffer:
     messages into a :class:`Recording` with their reference rows and score mask.
     """
 
-    def __init__(self, path: Path, info: dict, has_ref: bool, imu_ids: set, ref_ids: set) -> None:
+    def __init__(self, path: Path, info: dict, has_ref: bool, imu_ids: set, ref_ids: set,
+                 imu_topic: str = IMU_TOPIC) -> None:
         self.path = path
+        self.imu_topic = imu_topic
         self.info = info
         self.has_ref = has_ref
         self.imu_ids = imu_ids
@@ -191,7 +195,7 @@ class _ChunkBuffer:
         if self.imu_raw:
             yield self.flush(len(self.imu_raw))
         elif self.index == 0:
-            raise BagError(self.path, f"topic {IMU_TOPIC} has no messages")
+            raise BagError(self.path, f"topic {self.imu_topic} has no messages")
 
     def flush(self, n: int) -> Recording:
         """The first ``n`` buffered IMU messages as a :class:`Recording`, removed from the buffer."""
@@ -216,7 +220,7 @@ class _ChunkBuffer:
         bad = np.flatnonzero(np.diff(prev) <= 0)
         if len(bad):
             i = first + int(bad[0]) + (0 if self.last is not None else 1)
-            raise BagError(self.path, f"{IMU_TOPIC} header stamps not strictly increasing at sample {i}")
+            raise BagError(self.path, f"{self.imu_topic} header stamps not strictly increasing at sample {i}")
 
     def _reference(self, stamps: np.ndarray, last: int) -> np.ndarray:
         """Reference rows at the chunk's stamps (NaN where none); keeps the messages stamped after ``last``."""
@@ -260,12 +264,13 @@ class _ChunkBuffer:
         )
 
 
-def _iter_chunks(path: Path, reader, chunk: int) -> Iterator[Recording]:
-    c_imu = _topic_connections(path, reader, IMU_TOPIC, IMU_TYPE, required=True)
-    c_ref = _topic_connections(path, reader, REF_TOPIC, QUAT_TYPE, required=False)
+def _iter_chunks(path: Path, reader, chunk: int, imu_topic: str = IMU_TOPIC,
+                 reference: bool = True) -> Iterator[Recording]:
+    c_imu = _topic_connections(path, reader, imu_topic, IMU_TYPE, required=True)
+    c_ref = _topic_connections(path, reader, REF_TOPIC, QUAT_TYPE, required=False) if reference else []
     c_scored = _topic_connections(path, reader, SCORED_TOPIC, BOOL_TYPE, required=False)
     info = _info_from(path, reader)
-    buf = _ChunkBuffer(path, info, bool(c_ref), {c.id for c in c_imu}, {c.id for c in c_ref})
+    buf = _ChunkBuffer(path, info, bool(c_ref), {c.id for c in c_imu}, {c.id for c in c_ref}, imu_topic)
     for conn, t, raw in reader.messages(connections=[*c_imu, *c_ref, *c_scored]):
         if buf.complete(chunk, t):
             yield buf.flush(chunk)

@@ -5,8 +5,12 @@ Example::
     riann-bag-eval bags/*.mcap --estimators riann,madgwick:beta=0.033,mahony:kp=1:ki=0.3,vqf \\
         --scenarios all --seed 0 --jobs 2 --out eval_out
 
-Inputs are rosbag2 bags in the layout of :mod:`riann_ros.bagio` (``.mcap`` files or bag directories) or
-BROAD trial files (``.hdf5`` / ``.mat``). Exit status: 0 all inputs evaluated, 1 some input failed
+    riann-bag-eval my.mcap --imu-topic /imu --ground-truth-topic /mocap/pose --estimate-topic /my_filter/imu
+    riann-bag-eval --compare eval_a/results.json eval_b/results.json --out a_vs_b
+
+Inputs are rosbag2 bags in the layout of :mod:`riann_ros.bagio` (``.mcap`` files or bag directories), any
+rosbag2 bag with ``--imu-topic`` / ``--ground-truth-topic``, or BROAD trial files (``.hdf5`` / ``.mat``).
+Full reference: docs/evaluation.md. Exit status: 0 all inputs evaluated, 1 some input failed
 (named on stderr, the others are still evaluated and reported), 130 interrupted, 2 bad command line.
 This module only parses the command line and prints; the work is in :mod:`riann_ros.evaluation`
 (and :mod:`riann_ros.nodes.live` for ``--live``).
@@ -15,6 +19,7 @@ This module only parses the command line and prints; the work is in :mod:`riann_
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import shlex
 import sys
@@ -25,29 +30,68 @@ from riann_ros import evaluation as ev
 from riann_ros.evaluation import report
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
+DEFAULT_MAX_GAP_S = 0.1  # riann_ros.bagio.topics.DEFAULT_MAX_GAP_S (as riann-bag-convert --max-gap)
+
+
+def bagio_imu_topic() -> str:
+    from riann_ros.bagio.layout import IMU_TOPIC
+
+    return IMU_TOPIC
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="riann-bag-eval",
         description="Attitude RMSE (e_α, heading ignored) of RIANN, Madgwick, Mahony and VQF on dataset bags, "
-        "in the paper's restrictive / partially-restrictive / realistic scenarios.",
+        "in the paper's restrictive / partially-restrictive / realistic scenarios and as recorded; also of "
+        "estimates your own filter recorded in a bag (--estimate-topic), on any rosbag2 bag (--imu-topic, "
+        "--ground-truth-topic); --compare of two saved runs. Full reference: docs/evaluation.md.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="estimator specs: NAME[:PARAM=VALUE[:PARAM=VALUE...]], comma-separated, e.g.\n"
         "  riann,madgwick:beta=0.033,madgwick:beta=0.1,mahony:kp=1:ki=0.3,vqf:tau_acc=3\n"
         "tuning specs: NAME (default grid) or NAME:PARAM=V1/V2/...[:PARAM=...], e.g. mahony:kp=0.5/1/2:ki=0/0.3\n"
         "exit status: 0 ok, 1 some input failed, 2 usage error, 130 interrupted",
     )
-    p.add_argument("inputs", nargs="+", metavar="BAG", help="bags (.mcap, bag directories) or BROAD .hdf5/.mat files")
+    p.add_argument("inputs", nargs="*", metavar="BAG",
+                   help="bags (.mcap, .db3, bag directories) or BROAD .hdf5/.mat files (CSV files and EuRoC folders: "
+                   "convert them with riann-bag-convert first; the error message says how)")
+    p.add_argument("--compare", nargs=2, metavar=("A", "B"), type=Path, default=None,
+                   help="no evaluation: the difference B − A of two saved runs (results.json files or their --out "
+                   "folders) per estimator × scenario × perturbation (mean/median/max) and per sequence; with --out, "
+                   "compare.csv and the plot compare_rmse")
     p.add_argument("--estimators", "-e", default=None,
-                   help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed)")
-    p.add_argument("--scenarios", "-s", default="all",
+                   help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed); 'none': only "
+                   "the --estimate-topic estimates")
+    p.add_argument("--scenarios", "-s", default=None,
                    help="restrictive, partially-restrictive, realistic, as-recorded; paper (the first three) or all "
-                   "(comma-separated; default all)")
+                   "(comma-separated; default all, or as-recorded with --estimators none)")
+    b = p.add_argument_group("bags from elsewhere and estimates recorded in them (evo style)")
+    b.add_argument("--estimate-topic", action="append", default=[], metavar="TOPIC",
+                   help="score the orientation a filter recorded on TOPIC in the bag (sensor_msgs/Imu, geometry_msgs/"
+                   "QuaternionStamped, PoseStamped, PoseWithCovarianceStamped, nav_msgs/Odometry) against the ground "
+                   "truth, beside the built-in estimators; matched to the IMU samples by stamp (slerp between "
+                   "messages). It is the recording as it is, so it is scored in the as-recorded scenario only, at the "
+                   "native rate, unperturbed. Repeatable")
+    b.add_argument("--t-offset", type=float, default=0.0, metavar="SECONDS",
+                   help="added to the stamps of the --estimate-topic messages before matching (default 0)")
+    b.add_argument("--max-gap", type=float, default=DEFAULT_MAX_GAP_S, metavar="SECONDS",
+                   help="slerp a topic between two messages at most this far apart, hold the nearer one within half "
+                   "of it, else the sample has none (not scored, counted as unestimated); --estimate-topic and "
+                   f"--ground-truth-topic (default {DEFAULT_MAX_GAP_S})")
+    b.add_argument("--ground-truth-topic", default=None, metavar="TOPIC",
+                   help="the reference orientation for bags not written by riann-bag-convert (geometry_msgs/"
+                   "PoseStamped, nav_msgs/Odometry, geometry_msgs/QuaternionStamped, sensor_msgs/Imu, …; the IMU "
+                   "frame's orientation in a z-up world), interpolated onto the IMU stamps")
+    b.add_argument("--imu-topic", default=None, metavar="TOPIC",
+                   help="the sensor_msgs/Imu topic of the samples (default /imu/data_raw); without a "
+                   "/ground_truth/scored topic every sample is scored")
     p.add_argument("--perturb", "-p", action="append", default=[], metavar="CONDITION",
                    help="evaluate under this condition too: 'none', or perturbations joined with '+': "
                    "jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, bias:random:2 (deg/s), "
                    "dropout:0.1-0.6s@10s; repeatable, each one a condition (default: none)")
+    p.add_argument("--rest", default=None, metavar="START:END",
+                   help="the initial rest, in seconds from the first sample, whose mean gyro is removed as the turn-on "
+                   "bias (default: detected from the signals before the first scored sample; see docs/evaluation.md)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random gyro bias (per sequence: seed + name)")
     p.add_argument("--rates", default=None,
                    help="comma-separated sampling rates (Hz) to resample to (FFT), e.g. 50,100,200,500; 'native' "
@@ -55,10 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
                    "of the bag length); resampled runs load each input whole")
     p.add_argument("--jobs", "-j", type=int, default=1, help="parallel worker processes (one per sequence)")
     p.add_argument("--out", "-o", type=Path, default=None,
-                   help="write results.csv, results.json, report.md and plots (PNG+SVG) here")
+                   help="write results.csv, results.json, report.md and plots (PNG+SVG) here (a folder already holding "
+                   "results needs --force)")
     p.add_argument("--heading", action="store_true", help="also score heading and total error (extra columns)")
     p.add_argument("--plot-sequence", default=None,
-                   help="sequence name for the error-over-time plot (default: the first input)")
+                   help="sequence for the error-over-time and roll/pitch plots (default: the first input); 'all': "
+                   "a roll/pitch figure (roll_pitch_<sequence>) for every sequence")
     p.add_argument("--no-plots", action="store_true", help="skip the plots")
     p.add_argument("--tune", action="append", default=[], metavar="SPEC",
                    help="grid-search this estimator's parameters for the lowest mean RMSE on the inputs and add "
@@ -67,7 +113,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--write-estimates", type=Path, default=None, metavar="DIR",
                    help="write a copy of every input bag into DIR with each estimator's output as "
                    "geometry_msgs/QuaternionStamped topics /eval/<scenario>/<estimator> (first scenario)")
-    p.add_argument("--force", action="store_true", help="overwrite existing --write-estimates outputs")
+    p.add_argument("--force", action="store_true",
+                   help="replace an earlier run's result files in --out (results.csv/json, report.md, compare.csv and "
+                   "the plots; nothing else in the folder) and existing --write-estimates bags; without it an --out "
+                   "folder holding results is refused before any work")
     p.add_argument("--live", action="store_true",
                    help="replay the inputs over DDS to the estimator nodes (started by the tool, or already running "
                    "with --live-topics) instead of running them in-process; reports messages lost")
@@ -119,16 +168,64 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         raise ValueError("--jobs must be at least 1")
     have = ev.available_estimators()
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
-    return ev.EvalSettings(
-        estimators=ev.parse_estimators(spec_text),
-        scenarios=ev.parse_scenarios(args.scenarios),
+    only_recorded = spec_text.strip().lower() == "none"
+    topics = _topics(args)
+    if only_recorded and not topics.estimates:
+        raise ValueError("--estimators none needs at least one --estimate-topic")
+    settings = ev.EvalSettings(
+        estimators=[] if only_recorded else ev.parse_estimators(spec_text),
+        scenarios=ev.parse_scenarios(args.scenarios or (ev.AS_RECORDED if only_recorded else "all")),
         seed=args.seed,
         rates=parse_rates(args.rates),
         conditions=[ev.parse_condition(c) for c in args.perturb] or [ev.Condition()],
         with_heading=args.heading,
         series_for=None if args.no_plots or not args.out else (args.plot_sequence or "*"),
         keep_estimates=args.write_estimates is not None,
+        rest=ev.parse_rest(args.rest) if args.rest else None,
+        topics=topics,
     )
+    _check_recorded(settings)
+    return settings
+
+
+def _topic(name: str) -> str:
+    name = name.strip()
+    if not name or name == "/":
+        raise ValueError("empty topic name")
+    return name if name.startswith("/") else "/" + name
+
+
+def _topics(args: argparse.Namespace) -> ev.BagTopics:
+    """Which bag topics to read (ValueError on bad values)."""
+    estimates = tuple(dict.fromkeys(_topic(t) for t in args.estimate_topic))
+    if not (args.max_gap > 0 and math.isfinite(args.max_gap)):
+        raise ValueError(f"--max-gap must be a positive number of seconds, got {args.max_gap:g}")
+    if not math.isfinite(args.t_offset):
+        raise ValueError("--t-offset must be a finite number of seconds")
+    return ev.BagTopics(
+        imu=_topic(args.imu_topic) if args.imu_topic else bagio_imu_topic(),
+        reference=_topic(args.ground_truth_topic) if args.ground_truth_topic else None,
+        estimates=estimates,
+        t_offset_s=args.t_offset,
+        max_gap_s=args.max_gap,
+    )
+
+
+def _check_recorded(settings: ev.EvalSettings) -> None:
+    """Recorded estimates are the recording as it is: they need the as-recorded scenario, the native rate and the
+    unperturbed condition among those asked for (ValueError otherwise)."""
+    if not settings.topics.estimates:
+        return
+    missing = []
+    if ev.AS_RECORDED not in settings.scenarios:
+        missing.append("the as-recorded scenario in --scenarios")
+    if None not in settings.rates:
+        missing.append("native in --rates")
+    if not any(not c.parts for c in settings.conditions):
+        missing.append("none in --perturb")
+    if missing:
+        raise ValueError("--estimate-topic estimates exist only for the recording as it is (as-recorded scenario, "
+                         f"native rate, no perturbation): add {' and '.join(missing)}")
 
 
 def _tune(args: argparse.Namespace, sources: list[str], settings: ev.EvalSettings) -> list[dict]:
@@ -137,7 +234,7 @@ def _tune(args: argparse.Namespace, sources: list[str], settings: ev.EvalSetting
         if not args.quiet:
             _err(f"tuning {text} on {len(sources)} input(s), {args.tune_scenario}")
         best, spec = ev.tune(text, sources, args.tune_scenario, settings.seed, args.jobs,
-                             report.Progress(len(sources), enabled=not args.quiet))
+                             report.Progress(len(sources), enabled=not args.quiet), like=settings)
         tuning.append(best)
         b = best["best"]
         _err(f"tuned {best['estimator']} on {args.tune_scenario}: {b['label']} mean {b['mean']:.2f}° "
@@ -208,11 +305,74 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def _check_out(args: argparse.Namespace) -> None:
+    """Refuse (ValueError, exit status 2) an --out folder holding an earlier run's results, before any work."""
+    old = report.previous_results(args.out) if args.out and not args.force else []
+    if old:
+        raise ValueError(str(report.OutputExists(args.out, old)))
+
+
+def _print_messages(rep: report.Report) -> None:
+    """Warnings and failures on stderr, then the summary table on stdout."""
+    if rep.settings.series_for not in (None, "*", "all") and not any(r.series for r in rep.results):
+        _err(f"--plot-sequence {rep.settings.series_for!r} matches no evaluated sequence")
+    for res in rep.results:
+        for w in res.warnings if not res.error else []:
+            _err(f"warning: {w}")
+    for f in rep.failures:
+        _err(f"FAILED {f['error']}")
+
+
+def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
+    """The result files in --out; False when they could not be written."""
+    try:
+        figures = report.write_results(args.out, rep, plots=not args.no_plots, replace=args.force)
+    except report.OutputExists as exc:  # written meanwhile by someone else
+        _err(str(exc))
+        return False
+    print(f"wrote {args.out}/results.csv, results.json, report.md"
+          + (f" and {len(figures)} plot files" if figures else ""))
+    return True
+
+
+def _compare(args: argparse.Namespace) -> int:
+    """``--compare A B``: print (and with --out write) the difference of two saved runs; no estimator runs."""
+    from riann_ros.evaluation import compare as cp
+
+    try:
+        cmp = cp.compare(cp.load(args.compare[0]), cp.load(args.compare[1]))
+    except ev.EvalError as exc:
+        _err(str(exc))
+        return 1
+    print(cp.format_comparison(cmp))
+    if args.out:
+        try:
+            files = cp.write_comparison(args.out, cmp, plots=not args.no_plots, replace=args.force)
+        except report.OutputExists as exc:
+            _err(str(exc))
+            return 1
+        print(f"wrote {', '.join(str(f) for f in files)}")
+    return 0
+
+
 def _main(argv: list[str] | None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     argv_list = sys.argv[1:] if argv is None else list(argv)
+    if args.compare is not None:
+        if args.inputs:
+            parser.error("--compare A B takes no inputs: it compares two saved runs")
+        try:
+            _check_out(args)
+        except ValueError as exc:
+            _err(str(exc))
+            return 2
+        return _compare(args)
+    if not args.inputs:
+        parser.error("no input given (bags or BROAD files; or --compare A B)")
     try:
         settings = _settings(args)
+        _check_out(args)
     except (ValueError, ImportError) as exc:
         _err(str(exc))
         return 2
@@ -226,18 +386,13 @@ def _main(argv: list[str] | None) -> int:
         return 1
     rep = report.Report("riann-bag-eval " + shlex.join(argv_list), sources, settings, results,
                         time.perf_counter() - t_start, args.jobs, tuning)
-    if settings.series_for not in (None, "*") and not any(r.series for r in results):
-        _err(f"--plot-sequence {settings.series_for!r} matches no evaluated sequence")
-    for f in rep.failures:
-        _err(f"FAILED {f['error']}")
+    _print_messages(rep)
     _print_summary(rep, args.live)
     problems = _write_estimates(results, args.write_estimates, args.force) if args.write_estimates else []
     for p in problems:
         _err(p)
-    if args.out:
-        figures = report.write_results(args.out, rep, plots=not args.no_plots)
-        print(f"wrote {args.out}/results.csv, results.json, report.md"
-              + (f" and {len(figures)} plot files" if figures else ""))
+    if args.out and not _write_out(args, rep):
+        return 1
     return 1 if rep.failures or problems else 0
 
 

@@ -1,26 +1,33 @@
 """Offline attitude evaluation, the paper's way (ROS-free core of ``riann-bag-eval``).
 
-One pipeline (:mod:`~riann_ros.evaluation.run`): a source yields recording chunks
-(:mod:`~riann_ros.evaluation.sources`) → each scenario transforms them chunk by chunk
-(:mod:`~riann_ros.evaluation.scenarios`) → the estimators run through the node's ``EstimatorStream``
-→ one accumulator per scenario × estimator scores them (:mod:`~riann_ros.evaluation.scoring`).
-Estimator specs and tuning grids: :mod:`~riann_ros.evaluation.specs`; statistics across sequences and
-tuning: :mod:`~riann_ros.evaluation.aggregate`; tables and files: :mod:`~riann_ros.evaluation.report`;
-figures: :mod:`~riann_ros.evaluation.plots`.
+One pipeline (:mod:`~riann_ros.evaluation.run`): a source yields recording chunks, with estimates
+recorded in the bag aligned onto them (:mod:`~riann_ros.evaluation.sources`) → its first pass finds the
+motion onset and the initial rest (:mod:`~riann_ros.evaluation.rest`) → each scenario transforms the chunks
+(:mod:`~riann_ros.evaluation.scenarios`) → a runner gives the estimates (in-process through the node's
+``EstimatorStream``, live over DDS, or recorded in the bag) → one accumulator per scenario × estimator
+scores them (:mod:`~riann_ros.evaluation.scoring`). Estimator specs and tuning grids:
+:mod:`~riann_ros.evaluation.specs`; statistics across sequences and tuning:
+:mod:`~riann_ros.evaluation.aggregate`; tables and files: :mod:`~riann_ros.evaluation.report`; figures:
+:mod:`~riann_ros.evaluation.plots`; two saved runs side by side: :mod:`~riann_ros.evaluation.compare`.
+Reference: docs/evaluation.md.
 """
 
 from riann_ros.evaluation.aggregate import ALL_DATASETS, Group, aggregate, best_of, rate_order, tune
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import Condition, parse_condition, parse_perturbation
+from riann_ros.evaluation.rest import NO_REST_WARNING, Rest, parse_rest
 from riann_ros.evaluation.run import (
     NATIVE,
+    RECORDED,
     EvalSettings,
     OfflineRunner,
+    RecordedRunner,
     ResultRow,
     RunStats,
     SequenceResult,
     evaluate_source,
     evaluate_sources,
+    recorded_spec,
 )
 from riann_ros.evaluation.scenarios import (
     AS_RECORDED,
@@ -38,7 +45,16 @@ from riann_ros.evaluation.scenarios import (
     sequence_seed,
 )
 from riann_ros.evaluation.scoring import Accumulator, Score, score
-from riann_ros.evaluation.sources import BROAD_SUFFIXES, Source, load_recording, open_source, summarise
+from riann_ros.evaluation.sources import (
+    BROAD_SUFFIXES,
+    BagTopics,
+    Chunk,
+    Source,
+    input_hint,
+    load_recording,
+    open_source,
+    summarise,
+)
 from riann_ros.evaluation.specs import (
     EstimatorSpec,
     available_estimators,
@@ -55,18 +71,24 @@ __all__ = [
     "BIAS_STD_DPS",
     "BROAD_SUFFIXES",
     "NATIVE",
+    "NO_REST_WARNING",
     "PAPER_SCENARIOS",
     "PARTIAL",
     "REALISTIC",
+    "RECORDED",
     "RESTRICTIVE",
     "SCENARIOS",
     "Accumulator",
+    "BagTopics",
+    "Chunk",
     "Condition",
     "EstimatorSpec",
     "EvalError",
     "EvalSettings",
     "Group",
     "OfflineRunner",
+    "RecordedRunner",
+    "Rest",
     "ResultRow",
     "RunStats",
     "ScenarioInfo",
@@ -80,6 +102,7 @@ __all__ = [
     "evaluate_source",
     "evaluate_sources",
     "grid_specs",
+    "input_hint",
     "load_recording",
     "make_label",
     "open_source",
@@ -88,9 +111,11 @@ __all__ = [
     "parse_estimators",
     "parse_grid",
     "parse_perturbation",
+    "parse_rest",
     "parse_scenarios",
     "random_bias",
     "rate_order",
+    "recorded_spec",
     "scenario_recording",
     "score",
     "sequence_seed",

@@ -21,6 +21,7 @@ import numpy as np
 from riann_ros.evaluation.aggregate import Group, aggregate, rate_order, scenario_order
 from riann_ros.evaluation.perturb import DEFINITIONS as PERTURB_DEFINITIONS
 from riann_ros.evaluation.perturb import NONE
+from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
 from riann_ros.evaluation.run import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
 
@@ -51,8 +52,10 @@ METRIC = (
     "RMSE of e_alpha = 2 acos(sqrt(w^2+z^2)) of q_ref * conj(q_est), deg, over score mask & reference present & "
     "estimate present"
 )
-PLOT_STEMS = ("rmse_boxplots", "error_over_time", "rmse_vs_rate")
-RESULT_FILES = ("results.csv", "results.json", "report.md")
+PLOT_STEMS = ("rmse_boxplots", "error_over_time", "rmse_vs_rate", "compare_rmse")
+PLOT_PATTERNS = ("roll_pitch_*",)  # one figure per sequence
+RESULT_FILES = ("results.csv", "results.json", "report.md", "compare.csv")
+PLOT_EXTS = ("png", "svg")
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -175,6 +178,8 @@ class Report:
             "jobs": self.jobs,
             "bias_std_dps": BIAS_STD_DPS,
             "scenario_definition": {k: v for k, v in DEFINITIONS.items() if k in s.scenarios},
+            "rest": None if s.rest is None else list(s.rest),
+            "rest_definition": REST_DEFINITION,
             "perturbation_definition": PERTURB_DEFINITIONS,
             "metric": METRIC,
         }
@@ -188,7 +193,8 @@ class Report:
             "summary": [g.to_dict() for g in self.summary],
             "sequences": [
                 {"source": r.source, "name": r.name, "dataset": r.dataset, "seconds": r.seconds,
-                 "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios, "perturbations": r.perturbations}
+                 "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios, "perturbations": r.perturbations,
+                 "warnings": r.warnings}
                 for r in self.results
                 if not r.error
             ],
@@ -292,6 +298,9 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
                 f"- {t['estimator']} ({t['scenario']}): best {b['label']} — mean {b['mean']:.2f}°, max {b['max']:.2f}°"
             )
         lines.append("")
+    warnings = [w for r in report.results if not r.error for w in r.warnings]
+    if warnings:
+        lines += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
     lines += ["## Per sequence", "", *_per_sequence(report.rows)]
     if report.failures:
         lines += ["## Failed inputs", ""] + [f"- {f['error']}" for f in report.failures] + [""]
@@ -300,28 +309,70 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
     return "\n".join(lines)
 
 
-def write_results(out: Path, report: Report, plots: bool = True) -> list[Path]:
-    """results.csv, results.json, report.md and (``plots``) the figures in ``out``; returns the plot files.
+def previous_results(out: Path) -> list[Path]:
+    """The result files of an earlier run in ``out``: results.csv/json, report.md, compare.csv and every plot
+    riann-bag-eval writes (``rmse_boxplots``, ``error_over_time``, ``rmse_vs_rate``, ``compare_rmse``,
+    ``roll_pitch_*``; .png and .svg). Nothing else in ``out`` is a result file."""
+    if not out.is_dir():
+        return []
+    found = [out / f for f in RESULT_FILES] + [out / f"{s}.{e}" for s in PLOT_STEMS for e in PLOT_EXTS]
+    found += [p for pat in PLOT_PATTERNS for e in PLOT_EXTS for p in sorted(out.glob(f"{pat}.{e}"))]
+    return [p for p in found if p.is_file()]
 
-    If anything stops it half-way (Ctrl-C included), the files of this call are removed again."""
+
+class OutputExists(FileExistsError):
+    """``--out`` holds the results of an earlier run and replacing them was not asked for."""
+
+    def __init__(self, out: Path, files: Sequence[Path]) -> None:
+        names = ", ".join(p.name for p in files[:4]) + (", …" if len(files) > 4 else "")
+        super().__init__(f"{out} already holds the results of an earlier run ({names}); not overwriting them: use "
+                         "--force to replace them (only riann-bag-eval's result files are removed, nothing else in "
+                         "the folder) or choose another --out")
+
+
+def prepare_out(out: Path, replace: bool) -> list[Path]:
+    """Make ``out`` ready for a run's files: :class:`OutputExists` when it holds an earlier run's result files and
+    not ``replace``; with ``replace`` those files (only those) are removed. Returns the files removed."""
+    old = previous_results(out)
+    if old and not replace:
+        raise OutputExists(out, old)
+    for p in old:
+        p.unlink(missing_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
+    return old
+
+
+def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
+    """The figures: boxplots, error over time (the first sequence with series), roll/pitch per sequence (that one,
+    or every sequence with ``--plot-sequence all``), RMSE vs rate."""
     from riann_ros.evaluation import plots as pl
 
-    out.mkdir(parents=True, exist_ok=True)
-    written = [out / f for f in RESULT_FILES] + [out / f"{s}.{e}" for s in PLOT_STEMS for e in ("png", "svg")]
+    figures = pl.plot_boxes(rows, out)
+    with_series = [r.series for r in report.results if r.series and not r.error]
+    if with_series:
+        figures += pl.plot_error_over_time(with_series[0], out)
+    for series in with_series if report.settings.series_for == "all" else with_series[:1]:
+        figures += pl.plot_attitude(series, out)
+    return figures + pl.plot_rmse_vs_rate(rows, out)
+
+
+def write_results(out: Path, report: Report, plots: bool = True, replace: bool = False) -> list[Path]:
+    """results.csv, results.json, report.md and (``plots``) the figures in ``out``; returns the plot files.
+
+    An earlier run's result files in ``out`` are removed first with ``replace``, else :class:`OutputExists`
+    (:func:`prepare_out`): a folder never mixes two runs. If anything stops it half-way (Ctrl-C included), the
+    files of this call are removed again."""
+    prepare_out(out, replace)
     try:
         rows = report.rows
         write_csv(out / "results.csv", rows)
         write_json(out / "results.json", report.payload())
         figures: list[Path] = []
         if plots and rows:
-            figures += pl.plot_boxes(rows, out)
-            series = next((r.series for r in report.results if r.series), None)
-            if series:
-                figures += pl.plot_error_over_time(series, out)
-            figures += pl.plot_rmse_vs_rate(rows, out)
+            figures += _plots(report, rows, out)
         (out / "report.md").write_text(markdown(report, figures))
         return figures
     except BaseException:
-        for f in written:
+        for f in previous_results(out):  # all of this call's: the earlier run's are gone
             f.unlink(missing_ok=True)
         raise

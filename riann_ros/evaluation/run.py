@@ -16,6 +16,10 @@ The runner is where the estimates come from:
   over a bag serves all scenarios.
 * :class:`riann_ros.nodes.live.LiveRunner` replays the sequences over DDS to the estimator nodes; one
   replay at a time (a pass per scenario).
+* :class:`RecordedRunner` serves the estimates a user's own filter recorded in the bag
+  (``--estimate-topic``), which the source aligned onto each chunk's samples; they exist for the recording
+  as it is only, so they join the as-recorded scenario, unperturbed, at the native rate, beside the other
+  runner's estimators.
 """
 
 from __future__ import annotations
@@ -33,11 +37,14 @@ from numpy.typing import NDArray
 from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import NONE, Condition, Transform
-from riann_ros.evaluation.scenarios import PAPER_SCENARIOS, ScenarioPlan, sequence_seed
-from riann_ros.evaluation.scoring import Accumulator, Score, error_deg
+from riann_ros.evaluation.rest import NO_REST_WARNING, Rest
+from riann_ros.evaluation.scenarios import AS_RECORDED, PAPER_SCENARIOS, ScenarioPlan, sequence_seed
+from riann_ros.evaluation.scoring import Accumulator, Score, error_deg, roll_pitch_deg
 from riann_ros.evaluation.sources import (
     BROAD_SUFFIXES,
     STREAM_CHUNK,
+    BagTopics,
+    Chunk,
     Source,
     Summary,
     open_source,
@@ -49,7 +56,10 @@ from riann_ros.recording import Recording
 from riann_ros.stream import EstimatorStream, GateConfig
 
 NATIVE = "native"  # rate key of rows at the recording's own rate
-SERIES_POINTS = 6000  # points per curve kept for the error-over-time plot
+LIVE_KEYS = ("published", "received", "lost", "unexpected")  # RunStats.live columns
+RECORDED = "recorded"  # estimator name and mode of estimates recorded in a bag
+SERIES_POINTS = 6000  # points per curve kept for the error-over-time and roll/pitch plots
+REFERENCE = "reference"  # key of the reference's roll/pitch in a series
 
 
 @dataclass
@@ -60,10 +70,17 @@ class EvalSettings:
     rates: list[float | None] = field(default_factory=lambda: [None])  # None = the recording's own rate
     conditions: list[Condition] = field(default_factory=lambda: [Condition()])  # perturbations; () = none
     with_heading: bool = False
-    series_for: str | None = None  # sequence name whose error-over-time series is kept ("*" = first)
+    series_for: str | None = None  # sequence whose series are plotted: a name, "*" (the first) or "all"
     series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
     keep_estimates: bool = False  # return the estimates of the first scenario (for --write-estimates)
     chunk: int = STREAM_CHUNK  # samples per bag chunk
+    rest: tuple[float, float] | None = None  # the initial rest by hand (s from the first sample); None: detect it
+    topics: BagTopics = field(default_factory=BagTopics)  # which topics of the bags; recorded estimates
+
+    @property
+    def recorded(self) -> list[EstimatorSpec]:
+        """The estimates recorded in the bags (``topics.estimates``) as specs labelled by their topic."""
+        return [recorded_spec(t) for t in self.topics.estimates]
 
 
 @dataclass
@@ -115,6 +132,29 @@ class ResultRow:
         d["cpu_seconds"] = self.stats.cpu_seconds
         return d
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ResultRow:
+        """A row back from :meth:`to_dict` (a row of results.json, where NaN is null); KeyError names a missing
+        column."""
+        def num(v: Any) -> float:
+            return float("nan") if v is None else float(v)
+
+        score = Score(n_samples=int(d["n_samples"]), n_scored=int(d["n_scored"]),
+                      n_unestimated=int(d["n_unestimated"]), rmse_deg=num(d["rmse_deg"]),
+                      max_err_deg=num(d["max_err_deg"]), heading_rmse_deg=d.get("heading_rmse_deg"),
+                      total_rmse_deg=d.get("total_rmse_deg"))
+        live = {k: int(d[k]) for k in LIVE_KEYS if k in d}
+        stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
+                         rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},
+                         resets={k[len("reset_"):]: int(v) for k, v in d.items() if k.startswith("reset_")},
+                         live=live or None)
+        rate = d["rate"]
+        return cls(sequence=str(d["sequence"]), dataset=str(d["dataset"]), source=str(d.get("source", "")),
+                   scenario=str(d["scenario"]), rate=rate if rate == NATIVE else float(rate),
+                   rate_hz=num(d["rate_hz"]), resampled=bool(d["resampled"]), estimator=str(d["estimator"]),
+                   estimator_name=str(d.get("estimator_name", d["estimator"])), mode=str(d.get("mode", "")),
+                   score=score, perturbation=str(d.get("perturbation", NONE)), stats=stats)
+
 
 @dataclass
 class SequenceResult:
@@ -130,6 +170,7 @@ class SequenceResult:
     seconds: float = 0.0
     cpu_seconds: float = 0.0  # reading + scenarios + runs + scoring, in the worker
     citation: str = ""
+    warnings: list[str] = field(default_factory=list)  # "<sequence>: <what>", for stderr and results.json
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -193,6 +234,50 @@ class OfflineRunner:
         return _OfflineRun(specs, gate, slot)
 
 
+def recorded_spec(topic: str) -> EstimatorSpec:
+    """The spec of an estimate recorded on ``topic``: labelled by the topic, served by :class:`RecordedRunner`."""
+    return EstimatorSpec(RECORDED, (("topic", topic),), topic)
+
+
+class _RecordedRun:
+    def __init__(self, specs: list[EstimatorSpec]) -> None:
+        self.topics = [dict(s.params)["topic"] for s in specs]
+        self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        recorded = rec.recorded if isinstance(rec, Chunk) else {}
+        none = np.full((len(rec), 4), np.nan)
+        return [recorded.get(t, none) for t in self.topics]
+
+    def finish(self) -> list[RunStats]:
+        return self.stats
+
+
+class RecordedRunner:
+    """The estimates a user recorded in the bag from their own filter: served per chunk from the source's
+    :class:`~riann_ros.evaluation.sources.Chunk` (aligned onto the samples there); none in a piece that has
+    none (they exist only for the recording as it is)."""
+
+    mode = RECORDED
+    interleaved = True
+
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
+        return _RecordedRun(specs)
+
+
+class _Joined:
+    """Several runs fed together as one: their estimates and stats in turn."""
+
+    def __init__(self, runs: list[Run]) -> None:
+        self.runs = runs
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        return [q for run in self.runs for q in run.feed(rec)]
+
+    def finish(self) -> list[RunStats]:
+        return [st for run in self.runs for st in run.finish()]
+
+
 # ---------------------------------------------------------------------------------------------------
 # the pipeline
 # ---------------------------------------------------------------------------------------------------
@@ -201,11 +286,13 @@ class _ScenarioRun:
     runner's run and one accumulator per estimator."""
 
     def __init__(self, plan: ScenarioPlan, condition: Condition, slot: int, settings: EvalSettings, name: str,
-                 series: bool, estimates: bool) -> None:
+                 series: bool, estimates: bool, recorded: list[EstimatorSpec] | None = None) -> None:
         self.plan = plan
         self.condition = condition
         self.slot = slot
-        self.specs = settings.estimators
+        self.own = settings.estimators  # run by the runner
+        self.recorded = recorded or []  # served from the bag
+        self.specs = [*self.own, *self.recorded]
         rngs = [np.random.default_rng(sequence_seed(settings.seed, f"{name}:{condition.label}:{k}"))
                 for k in range(len(condition.parts))]
         self.transforms: list[Transform] = condition.start(rngs)
@@ -218,12 +305,16 @@ class _ScenarioRun:
         self.step = settings.series_step if settings.series_step > 0 else max(1, -(-int(length) // SERIES_POINTS))
         self.series = series
         self.curves: list[list[NDArray[np.float32]]] = [[] for _ in self.specs]
+        self.att: list[list[NDArray[np.float32]]] = [[] for _ in self.specs]
+        self.att_ref: list[NDArray[np.float32]] = []
         self.t: list[NDArray[np.float32]] = []
         self.scored: list[NDArray[np.bool_]] = []
         self.estimates: list[tuple[NDArray[np.int64], list[NDArray[np.float64]]]] | None = [] if estimates else None
 
     def begin(self, runner: Runner) -> None:
-        self.run = runner.start(self.specs, self.gate, self.slot)
+        runs = [runner.start(self.own, self.gate, self.slot)] if self.own else []
+        runs += [RecordedRunner().start(self.recorded, self.gate, self.slot)] if self.recorded else []
+        self.run = runs[0] if len(runs) == 1 else _Joined(runs)
 
     def feed(self, chunk: Recording, offset: int) -> None:
         rec = self.plan.apply(chunk, offset)
@@ -237,14 +328,22 @@ class _ScenarioRun:
         for acc, q in zip(self.acc, qs, strict=True):
             acc.add(rec.quat_ref, rec.score_mask, q)
         if self.series and rec.quat_ref is not None:
-            pick = slice((-self.fed) % self.step, None, self.step)
-            for curve, q in zip(self.curves, qs, strict=True):
-                curve.append(error_deg(rec.quat_ref[pick], q[pick]).astype(np.float32))
-            self.t.append(((rec.stamps_ns[pick] - self.plan.first_stamp) * 1e-9).astype(np.float32))
-            self.scored.append(rec.score_mask[pick])
+            self._add_series(rec, qs)
         if self.estimates is not None:
             self.estimates.append((rec.stamps_ns - self.plan.shift, qs))
         self.fed += len(rec)
+
+    def _add_series(self, rec: Recording, qs: list[NDArray[np.float64]]) -> None:
+        """Every ``step``-th sample (counted over the whole sequence): e_α, roll and pitch of each estimator, the
+        reference's roll and pitch, time and score mask."""
+        assert rec.quat_ref is not None
+        pick = slice((-self.fed) % self.step, None, self.step)
+        for curve, att, q in zip(self.curves, self.att, qs, strict=True):
+            curve.append(error_deg(rec.quat_ref[pick], q[pick]).astype(np.float32))
+            att.append(roll_pitch_deg(q[pick]).astype(np.float32))
+        self.att_ref.append(roll_pitch_deg(rec.quat_ref[pick]).astype(np.float32))
+        self.t.append(((rec.stamps_ns[pick] - self.plan.first_stamp) * 1e-9).astype(np.float32))
+        self.scored.append(rec.score_mask[pick])
 
     def rows(self, res: SequenceResult, rate: float | None, rate_hz: float, mode: str) -> list[ResultRow]:
         stats = self.run.finish() if self.run is not None else [RunStats() for _ in self.specs]
@@ -257,10 +356,20 @@ class _ScenarioRun:
         return [
             ResultRow(sequence=res.name, dataset=res.dataset, source=res.source, scenario=self.plan.scenario,
                       rate=NATIVE if rate is None else float(rate), rate_hz=rate_hz, resampled=rate is not None,
-                      estimator=spec.label, estimator_name=spec.name, mode=mode, score=acc.result(), stats=st,
-                      perturbation=label)
+                      estimator=spec.label, estimator_name=spec.name, mode=RECORDED if spec.name == RECORDED else mode,
+                      score=self._score(spec, acc), stats=st, perturbation=label)
             for spec, acc, st in zip(self.specs, self.acc, stats, strict=True)
         ]
+
+    def _score(self, spec: EstimatorSpec, acc: Accumulator) -> Score:
+        try:
+            return acc.result()
+        except EvalError as exc:
+            if spec.name != RECORDED or acc.n_scored:
+                raise
+            raise EvalError(f"recorded estimate {spec.label}: no message near any scored sample (within half the "
+                            "--max-gap, or between two messages at most --max-gap apart); compare its stamps with the "
+                            "IMU's (--t-offset adds seconds to the estimate stamps)") from exc
 
     def keep_series(self, res: SequenceResult) -> None:
         if res.series is None:
@@ -273,33 +382,55 @@ class _ScenarioRun:
         res.series.setdefault("t", {})[scn] = np.concatenate(self.t) if self.t else np.zeros(0, np.float32)
         res.series.setdefault("scored", {})[scn] = np.concatenate(self.scored) if self.scored else np.zeros(0, bool)
 
+        def cat(parts: list[NDArray[np.float32]]) -> NDArray[np.float32]:
+            return np.concatenate(parts) if parts else np.zeros((0, 2), np.float32)
+
+        # roll and pitch (°, (n, 2)) of the reference and of every estimator: the evo_traj-style plot
+        res.series.setdefault("attitude", {})[scn] = {
+            REFERENCE: cat(self.att_ref), **{spec.label: cat(a) for spec, a in zip(self.specs, self.att, strict=True)}
+        }
+
     def keep_estimates(self, res: SequenceResult) -> None:
         parts = self.estimates or []
         stamps = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
-        quats = {
+        quats = {  # the runner's (recorded ones are in the bag already)
             spec.label: np.concatenate([p[1][j] for p in parts]) if parts else np.zeros((0, 4))
-            for j, spec in enumerate(self.specs)
+            for j, spec in enumerate(self.own)
         }
         res.estimates = {"scenario": self.plan.scenario, "stamps": stamps, "quats": quats}
 
 
 def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool) -> list[_ScenarioRun]:
     """One run per condition × scenario (series for the first condition, estimates for the very first run)."""
-    want_series = native and settings.series_for is not None and settings.series_for in ("*", name)
+    want_series = native and settings.series_for is not None and settings.series_for in ("*", "all", name)
     runs = []
     for c, condition in enumerate(settings.conditions):
         for s, scn in enumerate(settings.scenarios):
             slot = c * len(settings.scenarios) + s
+            # recorded estimates exist for the recording as it is only: as-recorded, unperturbed, own rate
+            recorded = settings.recorded if native and scn == AS_RECORDED and not condition.parts else []
             runs.append(_ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, name,
-                                     want_series and c == 0, native and settings.keep_estimates and slot == 0))
-    return runs
+                                     want_series and c == 0, native and settings.keep_estimates and slot == 0,
+                                     recorded))
+    return [r for r in runs if r.specs]
+
+
+def _summarise(src: Source, rate: float | None, settings: EvalSettings, res: SequenceResult,
+               native_rest: Rest | None = None) -> Summary:
+    """The first pass; names the result and warns when a scenario would remove a bias but there is no rest.
+    ``native_rest``: the rest detected at the recording's own rate, used for the resampled ones."""
+    summary = summarise(src, settings.rest if settings.rest is not None or rate is None else native_rest)
+    if not res.name:
+        res.name, res.dataset, res.citation = summary.name, summary.dataset, summary.citation
+    if not summary.rest.found and any(s != AS_RECORDED for s in settings.scenarios):
+        rate_note = "" if rate is None else f" (resampled to {rate:g} Hz)"
+        _warn(res, f"{res.name}{rate_note}: {NO_REST_WARNING}")
+    return summary
 
 
 def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runner: Runner,
-                   res: SequenceResult) -> None:
-    summary = summarise(src)
-    if not res.name:
-        res.name, res.dataset, res.citation = summary.name, summary.dataset, summary.citation
+                   res: SequenceResult, native_rest: Rest | None = None) -> None:
+    summary = _summarise(src, rate, settings, res, native_rest)
     runs = _plan_runs(summary, settings, res.name, rate is None)
     for run in runs:
         res.scenarios.setdefault(run.plan.scenario, run.plan.info.to_dict())
@@ -320,6 +451,11 @@ def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runn
                 run.keep_estimates(res)
 
 
+def _warn(res: SequenceResult, text: str) -> None:
+    if text not in res.warnings:
+        res.warnings.append(text)
+
+
 def evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runner: Runner | None = None,
                     recording: Recording | None = None) -> SequenceResult:
     """Every rate × scenario × estimator on one input; any problem ends up in ``result.error`` naming it.
@@ -335,10 +471,14 @@ def evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runn
         base = recording
         whole = Path(source).suffix.lower() in BROAD_SUFFIXES or any(r is not None for r in settings.rates)
         if base is None and whole:
-            base = read_whole(source)
+            base = read_whole(source, settings.topics)
+        # resampled recordings use the rest found at the recording's own rate (resampling rings near steps)
+        native_rest = None
+        if base is not None and settings.rest is None and any(r is not None for r in settings.rates):
+            native_rest = summarise(Source(source, base)).rest
         for rate in settings.rates:
-            src = open_source(source, rate, base, settings.chunk)
-            _evaluate_rate(src, rate, settings, runner, res)
+            src = open_source(source, rate, base, settings.chunk, settings.topics)
+            _evaluate_rate(src, rate, settings, runner, res, native_rest)
     except EvalError as exc:
         res = SequenceResult(source=str(source), error=str(exc))
     except Exception as exc:  # an estimator crash must not take the other inputs down

@@ -3,9 +3,12 @@
 Paper, section "Performance Evaluation":
 
 - ``restrictive`` — the recording from its first sample (with its initial rest), with the gyroscope
-  turn-on bias removed: the mean gyro over the *initial rest* (the samples before the first scored
-  sample, i.e. before BROAD's first ``movement`` sample) is subtracted from the whole sequence. A
-  recording whose first sample is already scored has no known rest: nothing is removed.
+  turn-on bias removed: the mean gyro over the *initial rest* is subtracted from the whole sequence.
+  The rest is looked for among the samples before the first scored sample (before BROAD's first
+  ``movement`` sample) and detected from the signals (:mod:`~riann_ros.evaluation.rest`: the longest
+  stretch of ≥ 1.5 s where gyro and accelerometer are still), not assumed: a sensor that moves there
+  gives no rest. No rest found (or a recording whose first sample is already scored): nothing is removed,
+  and the evaluator warns. ``--rest START:END`` gives the rest by hand.
 - ``partially-restrictive`` — ``restrictive`` plus a constant gyro bias per axis drawn from
   N(0, (0.5 °/s)²); the generator is seeded per sequence from ``seed`` and the sequence name
   (:func:`sequence_seed`), so every estimator, scenario and rate sees the same bias.
@@ -27,7 +30,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from riann_ros.evaluation.sources import Summary
+from riann_ros.evaluation.sources import Chunk, Summary
 from riann_ros.recording import Recording
 from riann_ros.stream import GateConfig
 
@@ -41,8 +44,8 @@ BIAS_STD_DPS = 0.5  # °/s, paper: N(0, 0.5 °/s) per axis
 STAMP_OFFSET_NS = 1_000_000_000  # added when a sequence starts at stamp ≤ 0 (the gate rejects stamp 0)
 
 DEFINITIONS = {
-    RESTRICTIVE: "from the first sample; mean gyro over the initial rest (samples before the first scored sample) "
-    "subtracted",
+    RESTRICTIVE: "from the first sample; mean gyro over the initial rest (detected before the first scored sample, "
+    "see rest_definition; or given with --rest) subtracted; no rest found: nothing subtracted",
     PARTIAL: "restrictive + constant gyro bias per axis ~ N(0, 0.5 deg/s), seeded per sequence "
     "(sha256 of '<seed>:<sequence name>')",
     REALISTIC: "partially-restrictive signals (same bias) starting at the first scored sample",
@@ -85,9 +88,13 @@ def random_bias(seed: int, name: str) -> NDArray[np.float64]:
 class ScenarioInfo:
     scenario: str
     start_index: int  # first sample of the scenario sequence in the (resampled) recording
-    rest_samples: int  # initial rest length in the recording
-    bias_removed_dps: list[float]  # mean gyro over the initial rest (°/s), subtracted
+    rest_samples: int  # samples of the rest whose mean gyro is the turn-on bias (0: no rest)
+    bias_removed_dps: list[float]  # mean gyro over the rest (°/s), subtracted
     bias_added_dps: list[float]  # random bias (°/s), added
+    unscored_samples: int = 0  # samples before the first scored sample (where the rest is looked for)
+    rest_source: str = "none"  # "detected", "given" (--rest) or "none" (no rest found: no bias removed)
+    rest_start_s: float | None = None  # the rest, seconds from the first sample of the recording
+    rest_end_s: float | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -101,7 +108,7 @@ class ScenarioPlan:
             raise ValueError(f"unknown scenario {scenario!r}")
         self.scenario = scenario
         self.start = summary.i0 if scenario == REALISTIC else 0
-        self.removed = np.zeros(3) if scenario == AS_RECORDED else summary.rest_gyr_mean
+        self.removed = np.zeros(3) if scenario == AS_RECORDED else summary.rest.bias
         self.added = random_bias(seed, summary.name) if scenario in (PARTIAL, REALISTIC) else np.zeros(3)
         first = summary.stamp_i0 if self.start else summary.first_stamp
         self.shift = STAMP_OFFSET_NS - first if first <= 0 else 0
@@ -113,20 +120,26 @@ class ScenarioPlan:
         self.info = ScenarioInfo(
             scenario=scenario,
             start_index=self.start,
-            rest_samples=summary.i0,
+            rest_samples=summary.rest.samples,
             bias_removed_dps=np.degrees(self.removed).round(6).tolist(),
             bias_added_dps=np.degrees(self.added).round(6).tolist(),
+            unscored_samples=summary.i0,
+            rest_source=summary.rest.source,
+            rest_start_s=summary.rest.start_s,
+            rest_end_s=summary.rest.end_s,
         )
 
     def apply(self, chunk: Recording, offset: int) -> Recording | None:
         """The part of ``chunk`` (whose first sample has the global index ``offset``) in this scenario: gyro
-        de-biased and biased, stamps shifted off zero (``shift``)."""
+        de-biased and biased, stamps shifted off zero (``shift``). Estimates recorded in the bag (a
+        :class:`~riann_ros.evaluation.sources.Chunk`) stay only in ``as-recorded``: they belong to the
+        recording as it is."""
         k = max(0, self.start - offset)
         if k >= len(chunk):
             return None
         c = chunk.slice(k) if k else chunk
         gyr = c.gyr - self.removed + self.added
-        return Recording(
+        out = Recording(
             stamps_ns=c.stamps_ns + self.shift if self.shift else c.stamps_ns,
             acc=c.acc,
             gyr=gyr,
@@ -138,13 +151,18 @@ class ScenarioPlan:
             frame_id=c.frame_id,
             meta=c.meta,
         )
+        if self.scenario == AS_RECORDED and isinstance(chunk, Chunk) and chunk.recorded:
+            return Chunk.of(out, chunk.recorded)
+        return out
 
 
-def scenario_recording(rec: Recording, scenario: str, seed: int = 0) -> tuple[Recording, ScenarioInfo]:
-    """A whole recording prepared for ``scenario``: the one-chunk case of :class:`ScenarioPlan`."""
+def scenario_recording(rec: Recording, scenario: str, seed: int = 0,
+                       rest: tuple[float, float] | None = None) -> tuple[Recording, ScenarioInfo]:
+    """A whole recording prepared for ``scenario``: the one-chunk case of :class:`ScenarioPlan` (``rest``: given
+    by hand, seconds from the first sample)."""
     from riann_ros.evaluation.sources import Source, summarise
 
-    plan = ScenarioPlan(scenario, summarise(Source(rec.name, rec)), seed)
+    plan = ScenarioPlan(scenario, summarise(Source(rec.name, rec), rest), seed)
     out = plan.apply(rec, 0)
     if out is None:  # pragma: no cover - summarise guarantees scored samples, so the start is inside
         raise ValueError(f"{rec.name}: empty {scenario} sequence")

@@ -95,3 +95,13 @@ def score(rec: Recording, q_est: NDArray[np.float64], with_heading: bool = False
 def error_deg(quat_ref: NDArray[np.float64], q_est: NDArray[np.float64]) -> NDArray[np.float64]:
     """e_α in degrees per sample (NaN where the reference or the estimate is missing)."""
     return np.degrees(quat.inclination_error(quat_ref, q_est))
+
+
+def roll_pitch_deg(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Roll and pitch (°, (N, 2)) of sensor-to-world quaternions w, x, y, z: the Z-Y-X (yaw-pitch-roll) Euler
+    angles, which do not depend on the heading, so estimators with different headings compare (NaN rows stay)."""
+    q = np.asarray(q, dtype=float)
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    return np.degrees(np.column_stack([roll, pitch]))

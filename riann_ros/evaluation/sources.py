@@ -6,22 +6,27 @@ one whole chunk. Everything after the source — scenario, estimators, scoring �
 both: scoring a whole recording is the one-chunk case.
 
 :func:`summarise` is the first pass over a source: the input checks (samples, reference, scored
-samples), the motion onset (first scored sample), the mean gyro over the initial rest, and the rates
-(1 / median stamp step) of the whole sequence and of the sequence from the motion onset.
+samples), the motion onset (first scored sample) and the rates (1 / median stamp step) of the whole
+sequence and of the sequence from the motion onset; then, over the samples before the motion onset
+only, the rest whose mean gyro is the turn-on bias (:mod:`~riann_ros.evaluation.rest`: detected from the
+signals, or given by hand).
 """
 
 from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Generator, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from riann_ros.bagio.layout import IMU_TOPIC
+from riann_ros.bagio.topics import DEFAULT_MAX_GAP_S
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.rest import GIVEN, Rest, RestDetector
 from riann_ros.recording import Recording
 
 BAG_SUFFIXES = (".mcap", ".db3")
@@ -29,13 +34,53 @@ BROAD_SUFFIXES = (".hdf5", ".h5", ".mat")
 STREAM_CHUNK = 100_000  # samples per chunk when a bag is read chunk by chunk
 
 
+@dataclass(frozen=True)
+class BagTopics:
+    """Which topics of a bag to read: the layout's (:mod:`riann_ros.bagio`) by default, or any bag's
+    (:mod:`riann_ros.bagio.topics`): its IMU topic, a ground-truth topic interpolated onto the IMU stamps, and
+    estimates recorded from the user's own filters (``estimates``; matched by stamp + ``t_offset_s``)."""
+
+    imu: str = IMU_TOPIC
+    reference: str | None = None  # None: the layout's /ground_truth/attitude
+    estimates: tuple[str, ...] = ()
+    t_offset_s: float = 0.0  # added to the stamps of the estimate topics
+    max_gap_s: float = DEFAULT_MAX_GAP_S  # slerp between messages at most this far apart; hold within half of it
+
+    @property
+    def plain(self) -> bool:
+        """Only the layout's topics."""
+        return self.imu == IMU_TOPIC and self.reference is None and not self.estimates
+
+    def options(self) -> list[str]:
+        """The command-line options that ask for these topics (for messages)."""
+        out = [] if self.imu == IMU_TOPIC else ["--imu-topic"]
+        out += ["--ground-truth-topic"] if self.reference else []
+        return out + (["--estimate-topic"] if self.estimates else [])
+
+
+@dataclass
+class Chunk(Recording):
+    """A piece of a recording with the estimates recorded in the bag at its samples: topic → (N, 4) w, x, y, z
+    (NaN rows: no estimate near that sample). Only the recording as it is has them (the as-recorded scenario)."""
+
+    recorded: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, rec: Recording, recorded: dict[str, NDArray[np.float64]]) -> Chunk:
+        return cls(stamps_ns=rec.stamps_ns, acc=rec.acc, gyr=rec.gyr, quat_ref=rec.quat_ref,
+                   score_mask=rec.score_mask, name=rec.name, dataset=rec.dataset, source=rec.source,
+                   frame_id=rec.frame_id, meta=rec.meta, recorded=recorded)
+
+
 class Source:
     """A recording as a re-iterable sequence of chunks (each iteration reads it again)."""
 
-    def __init__(self, path: str | os.PathLike[str], rec: Recording | None = None, chunk: int = STREAM_CHUNK) -> None:
+    def __init__(self, path: str | os.PathLike[str], rec: Recording | None = None, chunk: int = STREAM_CHUNK,
+                 topics: BagTopics | None = None) -> None:
         self.path = Path(path)
         self.rec = rec  # the whole recording, or None: read the bag chunk by chunk
         self.chunk = chunk
+        self.topics = topics or BagTopics()
 
     @property
     def resampled(self) -> bool:
@@ -45,50 +90,134 @@ class Source:
         if self.rec is not None:
             yield self.rec
             return
+        it = self._bag_chunks()
+        try:
+            while True:
+                try:
+                    c = next(it)
+                except StopIteration:
+                    return
+                except Exception as exc:  # reading only: an estimator crash is reported as such elsewhere
+                    raise read_error(self.path, exc) from exc
+                yield c
+        finally:
+            it.close()
+
+    def _bag_chunks(self) -> Generator[Recording, None, None]:
         from riann_ros import bagio
 
-        it = bagio.iter_imu_chunks(self.path, chunk=self.chunk)
-        while True:
-            try:
-                c = next(it)
-            except StopIteration:
-                return
-            except Exception as exc:  # reading only: an estimator crash is reported as such elsewhere
-                raise read_error(self.path, exc) from exc
-            yield c
+        t = self.topics
+        if t.plain:
+            yield from bagio.iter_imu_chunks(self.path, chunk=self.chunk)
+            return
+        from riann_ros.bagio.topics import iter_topic_chunks
+
+        for rec, recorded in iter_topic_chunks(self.path, self.chunk, imu_topic=t.imu, reference_topic=t.reference,
+                                               estimate_topics=t.estimates, t_offset_ns=round(t.t_offset_s * 1e9),
+                                               max_gap_ns=round(t.max_gap_s * 1e9)):
+            yield Chunk.of(rec, recorded) if t.estimates else rec
+
+
+def _concat(chunks: list[Recording]) -> Recording:
+    """The chunks of a source as one recording (a :class:`Chunk` when they carry recorded estimates)."""
+    from riann_ros import bagio
+
+    rec = bagio.concat(chunks)
+    if chunks and isinstance(chunks[0], Chunk) and chunks[0].recorded:
+        topics = list(chunks[0].recorded)
+        return Chunk.of(rec, {k: np.concatenate([c.recorded[k] for c in chunks if isinstance(c, Chunk)])
+                              for k in topics})
+    return rec
 
 
 def read_error(path: Path, exc: Exception) -> EvalError:
     return exc if isinstance(exc, EvalError) else EvalError(f"{path}: cannot read: {exc}")
 
 
-def read_whole(path: str | os.PathLike[str]) -> Recording:
-    """A bag (``.mcap``, ``.db3`` or a bag directory) or a BROAD trial file (``.hdf5`` / ``.mat``), whole."""
+def _q(p: Path) -> str:
+    import shlex
+
+    return shlex.quote(str(p))
+
+
+def _folder_hint(p: Path) -> str | None:
+    from riann_ros.datasets.euroc import is_euroc
+
+    if (p / "metadata.yaml").exists():
+        return None
+    if is_euroc(p):
+        bag = p.parent / f"{p.resolve().name}.mcap"
+        return (f"{p}: an EuRoC/ASL folder, not a bag; convert it first with riann-bag-convert:\n"
+                f"    riann-bag-convert {_q(p)} -o {_q(bag)}\n    riann-bag-eval {_q(bag)}")
+    files = sorted(f for f in p.iterdir() if f.suffix.lower() in (*BROAD_SUFFIXES, ".csv"))
+    if files:
+        out = p.parent / f"{p.resolve().name}_bags"
+        return (f"{p}: a folder of dataset files, not a bag; give the BROAD files themselves "
+                f"(riann-bag-eval {_q(p)}/*.hdf5 …) or convert them first with riann-bag-convert:\n"
+                f"    riann-bag-convert {_q(p)} -o {_q(out)}\n    riann-bag-eval {_q(out)}/*.mcap")
+    return None
+
+
+def input_hint(path: str | os.PathLike[str]) -> str | None:
+    """For an input the evaluator does not read but riann-bag-convert does (a CSV file, an EuRoC/ASL folder, a
+    folder of dataset files; a ROS 1 bag): what to type instead. None for anything else."""
     p = Path(path)
+    if p.is_dir():
+        return _folder_hint(p)
+    suffix = p.suffix.lower()
+    if suffix in (".csv", ".txt") and p.is_file():
+        bag = p.with_suffix(".mcap")
+        return (f"{p}: a CSV file, not a bag; convert it first with riann-bag-convert (see riann-bag-convert --help "
+                f"for the column and unit options, e.g. --time-unit ms --gyr-unit deg/s --quat-cols qw,qx,qy,qz):\n"
+                f"    riann-bag-convert {_q(p)} -o {_q(bag)}\n    riann-bag-eval {_q(bag)}")
+    if suffix == ".bag" and p.is_file():
+        dst = p.with_suffix("")
+        return (f"{p}: a ROS 1 bag; convert it to rosbag2 first, then name its topics:\n"
+                f"    rosbags-convert --src {_q(p)} --dst {_q(dst)}\n"
+                f"    riann-bag-eval {_q(dst)} --imu-topic IMU_TOPIC --ground-truth-topic REFERENCE_TOPIC")
+    return None
+
+
+def check_input(p: Path) -> None:
+    """EvalError for a missing input, or one to convert first (:func:`input_hint`)."""
     if not p.exists():
         raise EvalError(f"{p}: no such file or directory")
+    hint = input_hint(p)
+    if hint:
+        raise EvalError(hint)
+
+
+def read_whole(path: str | os.PathLike[str], topics: BagTopics | None = None) -> Recording:
+    """A bag (``.mcap``, ``.db3`` or a bag directory; ``topics``: which of its topics) or a BROAD trial file
+    (``.hdf5`` / ``.mat``), whole."""
+    p = Path(path)
+    topics = topics or BagTopics()
+    check_input(p)
+    if p.suffix.lower() in BROAD_SUFFIXES and not topics.plain:
+        raise EvalError(f"{p}: a BROAD trial file, not a bag: {', '.join(topics.options())} apply to bags only")
     try:
         if p.suffix.lower() in BROAD_SUFFIXES:
             from riann_ros.datasets.broad import read_broad
 
             return read_broad(p)
-        from riann_ros import bagio
+        if topics.plain:
+            from riann_ros import bagio
 
-        return bagio.read_recording(p)
+            return bagio.read_recording(p)
     except Exception as exc:  # bagio.BagError, OSError, ValueError, …
         raise read_error(p, exc) from exc
+    return _concat(list(Source(p, topics=topics).chunks()))
 
 
 def open_source(path: str | os.PathLike[str], rate: float | None = None, base: Recording | None = None,
-                chunk: int = STREAM_CHUNK) -> Source:
+                chunk: int = STREAM_CHUNK, topics: BagTopics | None = None) -> Source:
     """The source of ``path`` at ``rate`` Hz (None: its own rate). Bags at their own rate stream chunk by
     chunk; BROAD files and resampled recordings are whole (``base``: the whole recording, if already read)."""
     p = Path(path)
     if rate is None and base is None and p.suffix.lower() not in BROAD_SUFFIXES:
-        if not p.exists():
-            raise EvalError(f"{p}: no such file or directory")
-        return Source(p, chunk=chunk)
-    rec = base if base is not None else read_whole(p)
+        check_input(p)
+        return Source(p, chunk=chunk, topics=topics)
+    rec = base if base is not None else read_whole(p, topics)
     if rate is not None:
         from riann_ros.resample import resample_recording
 
@@ -133,11 +262,16 @@ class Summary:
     frame_id: str
     n: int
     first_stamp: int
-    i0: int  # first scored sample (the motion onset); the initial rest is [0, i0)
+    i0: int  # first scored sample (the motion onset); the rest is looked for in [0, i0)
     stamp_i0: int
-    rest_gyr_mean: NDArray[np.float64]  # mean gyro over [0, i0) (zeros when i0 == 0)
     rate_all: float  # 1 / median stamp step of the whole sequence
     rate_from_i0: float  # … of the sequence from i0 on
+    rest: Rest = field(default_factory=Rest)  # the rest whose mean gyro is the turn-on bias (maybe none)
+
+    @property
+    def rest_gyr_mean(self) -> NDArray[np.float64]:
+        """The turn-on bias (rad/s): the mean gyro over the rest; zeros without one."""
+        return self.rest.bias
 
 
 class _Pass:
@@ -148,7 +282,6 @@ class _Pass:
         self.last: int | None = None
         self.i0 = -1
         self.has_ref = self.ref_any = self.scored_any = self.scored_ref = False
-        self.rest: list[NDArray[np.float64]] = []
         self.hist_all: dict[int, int] = {}
         self.hist_i0: dict[int, int] = {}
         self.meta: tuple[str, str, str, str] = ("", "", "", "")
@@ -168,9 +301,6 @@ class _Pass:
         if self.i0 < 0 and c.score_mask.any():
             k = int(np.argmax(c.score_mask))
             self.i0, self.stamp_i0 = self.n + k, int(c.stamps_ns[k])
-            self.rest.append(c.gyr[:k].copy())
-        elif self.i0 < 0:
-            self.rest.append(c.gyr.copy())
         if self.i0 >= 0:
             _add_steps(self.hist_i0, steps[later > self.i0])
         self.scored_any |= bool(c.score_mask.any())
@@ -193,7 +323,6 @@ class _Pass:
         name, dataset, citation, frame_id = self.meta
         if not name or name == "sequence":
             name = p.stem if p.is_file() else p.name
-        rest = np.concatenate(self.rest) if self.rest else np.zeros((0, 3))
         return Summary(
             name=name,
             dataset=dataset or "unknown",
@@ -203,19 +332,52 @@ class _Pass:
             first_stamp=self.first_stamp,
             i0=self.i0,
             stamp_i0=self.stamp_i0,
-            rest_gyr_mean=np.mean(rest, axis=0) if self.i0 > 0 else np.zeros(3),
             rate_all=median_rate(self.hist_all),
             rate_from_i0=median_rate(self.hist_i0),
         )
 
 
-def summarise(src: Source) -> Summary:
-    """The first pass over ``src``: checks (raising :class:`EvalError` naming the input), motion onset,
-    initial-rest gyro mean and rates."""
+def summarise(src: Source, rest: tuple[float, float] | Rest | None = None) -> Summary:
+    """The first pass over ``src``: checks (raising :class:`EvalError` naming the input), motion onset and rates;
+    then the rest before the motion onset (a second pass over those samples only). ``rest``: None: detect it; the
+    rest given by hand, (start, end) in seconds from the first sample; or the :class:`Rest` of this recording at
+    another rate (the resampled recording's rest is the same stretch of time: no rest there, none here)."""
     state = _Pass()
     for c in src.chunks():
         state.add(c)
-    return state.summary(src.path)
+    summary = state.summary(src.path)
+    summary.rest = find_rest(src, summary, rest)
+    return summary
+
+
+def find_rest(src: Source, summary: Summary, given: tuple[float, float] | Rest | None = None) -> Rest:
+    """The rest of ``src`` (see :mod:`~riann_ros.evaluation.rest` and :func:`summarise`), reading only as far as
+    needed."""
+    if isinstance(given, Rest):
+        if not given.found or given.start_s is None or given.end_s is None:
+            return Rest()
+        found = find_rest(src, summary, (given.start_s, given.end_s + 1e-6))  # the span, its last sample included
+        found.source = given.source
+        return found
+    if summary.i0 <= 0 and given is None:
+        return Rest()
+    det = RestDetector(summary.rate_all, summary.i0, summary.first_stamp, given)
+    chunks = src.chunks()
+    try:
+        for c in chunks:
+            det.add(c)
+            if det.done:
+                break
+    finally:
+        close = getattr(chunks, "close", None)
+        if close is not None:
+            close()
+    found = det.result()
+    if given is not None and found.source != GIVEN:
+        length = (det.last_stamp - summary.first_stamp) * 1e-9
+        raise EvalError(f"{src.path}: --rest {given[0]:g}:{given[1]:g} holds no samples (the recording lasts "
+                        f"{length:.3f} s from its first sample)")
+    return found
 
 
 def load_recording(path: str | os.PathLike[str]) -> Recording:

@@ -1,0 +1,254 @@
+"""Orientation topics of any bag — a ground truth, estimates a user recorded from their own filter — aligned onto
+the IMU samples chunk by chunk (ROS-free: ``rosbags`` only).
+
+Types with an orientation (:data:`ORIENTATION_TYPES`): ``sensor_msgs/msg/Imu`` (``orientation``; a message whose
+``orientation_covariance[0]`` is -1 has none), ``geometry_msgs/msg/QuaternionStamped``, ``geometry_msgs/msg/
+PoseStamped``, ``geometry_msgs/msg/PoseWithCovarianceStamped`` and ``nav_msgs/msg/Odometry``. The header stamp
+is the message's time (plus ``offset``), not the log time.
+
+Alignment onto a sample at stamp ``t`` (:func:`interpolate`): a message stamped exactly ``t`` gives its
+orientation; otherwise the two messages around ``t`` are slerped when they are at most ``max_gap`` apart;
+otherwise the nearer one is held if it is at most ``max_gap / 2`` away (the ends of a topic, the edges of a
+gap); otherwise the sample has none (NaN).
+
+:func:`iter_topic_chunks` reads the IMU samples in chunks (:func:`~riann_ros.bagio.read.iter_imu_chunks`) and,
+with a reader of its own per topic, only as much of each orientation topic as the chunk needs, so memory is
+bounded by the chunk size and the topics' latency, not by the bag's length.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from riann_ros import quaternion as quat
+from riann_ros.bagio.cdr import _f64_cols, _stamps_of, _uniform_rows
+from riann_ros.bagio.layout import IMU_TOPIC, IMU_TYPE, BagError, typestore
+from riann_ros.bagio.read import _opened, iter_imu_chunks
+from riann_ros.recording import Recording
+from riann_ros.stamps import to_ns
+
+#: message type → the attribute path of its orientation
+ORIENTATION_TYPES: dict[str, tuple[str, ...]] = {
+    IMU_TYPE: ("orientation",),
+    "geometry_msgs/msg/QuaternionStamped": ("quaternion",),
+    "geometry_msgs/msg/PoseStamped": ("pose", "orientation"),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": ("pose", "pose", "orientation"),
+    "nav_msgs/msg/Odometry": ("pose", "pose", "orientation"),
+}
+DEFAULT_MAX_GAP_S = 0.1  # as riann-bag-convert's --max-gap for EuRoC ground truth
+READ_BATCH = 4096  # messages parsed at a time
+_MARK = (1.0 + 1 / 1024 + 3e-13, 1.0 + 2 / 1024 + 5e-13, 1.0 + 3 / 1024 + 7e-13, 1.0 + 4 / 1024 + 11e-13,
+         1.0 + 5 / 1024 + 13e-13)
+
+
+def orientation_topic(path: Path, reader, topic: str) -> tuple[str, list]:
+    """The type and connections of ``topic``; BagError when it is missing or has no orientation."""
+    conns = [c for c in reader.connections if c.topic == topic]
+    if not conns:
+        have = ", ".join(sorted({c.topic for c in reader.connections})) or "none"
+        raise BagError(path, f"no {topic} topic (topics: {have})")
+    types = sorted({c.msgtype for c in conns})
+    if len(types) > 1 or types[0] not in ORIENTATION_TYPES:
+        raise BagError(path, f"topic {topic} has type {', '.join(types)}; an orientation topic must be one of "
+                       f"{', '.join(ORIENTATION_TYPES)}")
+    return types[0], conns
+
+
+def _orientation(msg, msgtype: str):
+    obj = msg
+    for name in ORIENTATION_TYPES[msgtype]:
+        obj = getattr(obj, name)
+    return obj
+
+
+def _template(raw: bytes, msgtype: str) -> tuple[int, list[int], int | None]:
+    """The length of ``raw`` and the byte offsets of its orientation x, y, z, w (and of Imu's
+    ``orientation_covariance[0]``), found by serialising it again with marker values."""
+    ts = typestore()
+    msg = ts.deserialize_cdr(raw, msgtype)
+    o = _orientation(msg, msgtype)
+    o.x, o.y, o.z, o.w = _MARK[:4]
+    if msgtype == IMU_TYPE:
+        msg.orientation_covariance = np.array(msg.orientation_covariance, dtype=np.float64)
+        msg.orientation_covariance[0] = _MARK[4]
+    buf = bytes(ts.serialize_cdr(msg, msgtype))
+    offs = [buf.find(struct.pack("<d", m)) for m in _MARK[: 5 if msgtype == IMU_TYPE else 4]]
+    if min(offs) < 0 or any(buf.find(struct.pack("<d", m), o + 1) >= 0 for m, o in zip(_MARK, offs, strict=False)):
+        raise RuntimeError("orientation template markers not found once")  # pragma: no cover - defensive
+    return len(buf), offs[:4], (offs[4] if msgtype == IMU_TYPE else None)
+
+
+def _clean(q: NDArray[np.float64], no_orientation: NDArray[np.bool_] | None) -> NDArray[np.float64]:
+    """Unit quaternions; NaN rows for messages without an orientation (zero quaternion, Imu covariance -1)."""
+    norm = np.linalg.norm(q, axis=1, keepdims=True)
+    bad = ~(np.isfinite(norm[:, 0]) & (norm[:, 0] > 1e-6))
+    if no_orientation is not None:
+        bad |= no_orientation
+    out = q / np.where(bad[:, None], 1.0, norm)
+    out[bad] = np.nan
+    return out
+
+
+def parse_orientations(raws: Sequence[bytes], msgtype: str) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Header stamps (ns) and orientations (N, 4) w, x, y, z of serialised messages of an orientation type (NaN
+    rows: no orientation). Vectorised when the messages share one length and frame_id, generic otherwise."""
+    if not raws:
+        return np.zeros(0, np.int64), np.zeros((0, 4))
+    fast = raws[0][1] == 1  # little-endian CDR
+    if fast:
+        length, offs, cov = _template(raws[0], msgtype)
+        rows = _uniform_rows(list(raws), length)
+        if rows is not None:
+            xyzw = _f64_cols(rows, offs)
+            missing = _f64_cols(rows, [cov])[:, 0] == -1.0 if cov is not None else None
+            return _stamps_of(rows), _clean(xyzw[:, [3, 0, 1, 2]], missing)
+    ts = typestore()
+    stamps = np.empty(len(raws), np.int64)
+    q = np.empty((len(raws), 4))
+    missing = np.zeros(len(raws), bool)
+    for i, r in enumerate(raws):
+        m = ts.deserialize_cdr(r, msgtype)
+        stamps[i] = to_ns(m.header.stamp)
+        o = _orientation(m, msgtype)
+        q[i] = (o.w, o.x, o.y, o.z)
+        if msgtype == IMU_TYPE:
+            missing[i] = m.orientation_covariance[0] == -1.0
+    return stamps, _clean(q, missing)
+
+
+def iter_orientations(path: str | os.PathLike[str], topic: str,
+                      batch: int = READ_BATCH) -> Iterator[tuple[NDArray[np.int64], NDArray[np.float64]]]:
+    """``(stamps_ns, quats)`` of ``topic`` in batches of at most ``batch`` messages, in log-time order, with a
+    reader of its own."""
+    path = Path(path)
+    with _opened(path) as reader:
+        msgtype, conns = orientation_topic(path, reader, topic)
+        raws: list[bytes] = []
+        try:
+            for _, _, raw in reader.messages(connections=conns):
+                raws.append(raw)
+                if len(raws) >= batch:
+                    yield parse_orientations(raws, msgtype)
+                    raws = []
+            if raws:
+                yield parse_orientations(raws, msgtype)
+        except (BagError, KeyboardInterrupt, GeneratorExit):
+            raise
+        except Exception as e:
+            raise BagError(path, f"topic {topic}: unreadable ({type(e).__name__}: {e})") from e
+
+
+def interpolate(st: NDArray[np.int64], q: NDArray[np.float64], t: NDArray[np.int64],
+                max_gap_ns: int) -> NDArray[np.float64]:
+    """Orientations at stamps ``t`` from messages at sorted, unique stamps ``st`` (rules in the module docstring)."""
+    out = np.full((len(t), 4), np.nan)
+    n = len(st)
+    if n == 0 or len(t) == 0:
+        return out
+    j = np.searchsorted(st, t, side="left")
+    has_a, has_b = j > 0, j < n
+    ja, jb = np.maximum(j - 1, 0), np.minimum(j, n - 1)
+    exact = has_b & (st[jb] == t)
+    da = (t - st[ja]).astype(np.float64)
+    db = (st[jb] - t).astype(np.float64)
+    span = (st[jb] - st[ja]).astype(np.float64)
+    both = ~exact & has_a & has_b & (span <= max_gap_ns)
+    out[exact] = q[jb[exact]]
+    if both.any():
+        out[both] = quat.slerp(q[ja[both]], q[jb[both]], da[both] / span[both])
+    rest = ~exact & ~both
+    half = max_gap_ns / 2
+    use_a = rest & has_a & (da <= half) & (~has_b | (da <= db))
+    use_b = rest & ~use_a & has_b & (db <= half)
+    out[use_a] = q[ja[use_a]]
+    out[use_b] = q[jb[use_b]]
+    return out
+
+
+class Aligner:
+    """One orientation topic served at consecutive chunks of sample stamps (:meth:`at`), reading its messages only
+    as far as needed and forgetting those no later sample can use."""
+
+    def __init__(self, batches: Iterator[tuple[NDArray[np.int64], NDArray[np.float64]]], offset_ns: int = 0,
+                 max_gap_ns: int = round(DEFAULT_MAX_GAP_S * 1e9)) -> None:
+        self.batches = batches
+        self.offset = int(offset_ns)
+        self.gap = int(max_gap_ns)
+        self.st = np.zeros(0, np.int64)
+        self.q = np.zeros((0, 4))
+        self.latest: int | None = None  # the largest stamp read so far
+        self.exhausted = False
+        self.messages = 0  # read so far, with an orientation
+        self.span: tuple[int, int] | None = None  # first and last stamp read (offset added)
+
+    def _read_until(self, horizon: int) -> None:
+        parts_s, parts_q = [self.st], [self.q]
+        while not self.exhausted and (self.latest is None or self.latest <= horizon):
+            try:
+                s, q = next(self.batches)
+            except StopIteration:
+                self.exhausted = True
+                break
+            ok = np.isfinite(q).all(axis=1)
+            s, q = s[ok] + self.offset, q[ok]
+            if len(s):
+                self.messages += len(s)
+                lo, hi = int(s.min()), int(s.max())
+                self.span = (lo, hi) if self.span is None else (min(self.span[0], lo), max(self.span[1], hi))
+                self.latest = hi if self.latest is None else max(self.latest, hi)
+                parts_s.append(s)
+                parts_q.append(q)
+        if len(parts_s) > 1:
+            s, q = np.concatenate(parts_s), np.concatenate(parts_q)
+            order = np.argsort(s, kind="stable")
+            s, q = s[order], q[order]
+            keep = np.r_[s[1:] != s[:-1], True]  # one message per stamp: the last one
+            self.st, self.q = s[keep], q[keep]
+
+    def at(self, stamps: NDArray[np.int64]) -> NDArray[np.float64]:
+        """Orientations (N, 4) at ``stamps`` (increasing, after those of the previous call); NaN rows: none."""
+        if not len(stamps):
+            return np.zeros((0, 4))
+        last = int(stamps[-1])
+        self._read_until(last + self.gap)
+        out = interpolate(self.st, self.q, stamps, self.gap)
+        cut = int(np.searchsorted(self.st, last - self.gap, side="left"))
+        self.st, self.q = self.st[cut:], self.q[cut:]
+        return out
+
+    def close(self) -> None:
+        close = getattr(self.batches, "close", None)
+        if close is not None:
+            close()
+
+
+def iter_topic_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_topic: str = IMU_TOPIC,
+                      reference_topic: str | None = None, estimate_topics: Sequence[str] = (), t_offset_ns: int = 0,
+                      max_gap_ns: int = round(DEFAULT_MAX_GAP_S * 1e9),
+                      ) -> Iterator[tuple[Recording, dict[str, NDArray[np.float64]]]]:
+    """The IMU samples of ``imu_topic`` in chunks, each with the orientations of ``estimate_topics`` at its samples
+    (stamps + ``t_offset_ns``) and, with ``reference_topic``, that topic as its reference (instead of the layout's
+    ``/ground_truth/attitude``). The score mask is the layout's ``/ground_truth/scored`` if present, else all scored.
+    BagError for missing topics or topics without an orientation."""
+    path = Path(path)
+    topics = [t for t in (reference_topic, *estimate_topics) if t]
+    with _opened(path) as reader:
+        for t in topics:
+            orientation_topic(path, reader, t)
+    ref = Aligner(iter_orientations(path, reference_topic), 0, max_gap_ns) if reference_topic else None
+    ests = {t: Aligner(iter_orientations(path, t), t_offset_ns, max_gap_ns) for t in estimate_topics}
+    try:
+        for rec in iter_imu_chunks(path, chunk, imu_topic=imu_topic, reference=reference_topic is None):
+            if ref is not None:
+                rec.quat_ref = ref.at(rec.stamps_ns)
+            yield rec, {t: a.at(rec.stamps_ns) for t, a in ests.items()}
+    finally:
+        for a in [ref, *ests.values()]:
+            if a is not None:
+                a.close()
