@@ -81,6 +81,7 @@ def main() -> int:
         str(out),
         "--no-plots",
         "-q",
+        "--force",
     ]
     load_before = os.getloadavg()[0]
     t0 = time.perf_counter()
