@@ -76,14 +76,20 @@ def test_reset_clears_the_hidden_state(broad_trial):
     assert np.abs(a - b).max() > 1e-4  # without reset the state carries over
 
 
-def test_batch_equals_a_direct_onnxruntime_run(broad_trial):
+def test_a_clean_stream_in_the_trained_range_gives_the_network_inclination(broad_trial):
+    """At 285.7 Hz the grid rows are the samples: without the bias front end the output's inclination
+    is the network's own (the heading stage only replaces its yaw)."""
     rec = broad_trial("07")
     sess = ort.InferenceSession(str(default_model_path()))
     x = np.column_stack([rec.acc, rec.gyr, gate_dts(rec)]).astype(np.float32)[None]
     out, _ = sess.run(None, {"input": x, "h0": np.zeros((2, 1, 1, 200), np.float32)})
-    q = create("riann").update_batch(rec.acc, rec.gyr, gate_dts(rec))
+    est = create("riann", gyro_bias_estimation=False)
+    q = est.update_batch(rec.acc, rec.gyr, gate_dts(rec))
+    assert est.rows == len(rec)
     ref = out[0] / np.linalg.norm(out[0], axis=1, keepdims=True)
-    assert np.abs(q - ref).max() < 1e-5
+    assert np.degrees(quat.inclination_error(ref, q)).max() < 1e-3
+    # the heading is not the network's: it starts at zero (no rotation about world z)
+    assert abs(2 * np.arctan2(q[0, 3], q[0, 0])) < 1e-9
 
 
 @pytest.mark.slow
@@ -97,8 +103,8 @@ def test_inclination_rmse_on_all_broad_trials(broad_dir, broad_trial):
         est.reset()
         rmses[f.name] = rmse(rec, est.update_batch(rec.acc, rec.gyr, gate_dts(rec)))
     assert all(0.2 < v < 3.0 for v in rmses.values()), rmses
-    if len(rmses) == 12:  # the 12-trial subset: measured mean 1.03 deg
-        assert 1.0 <= np.mean(list(rmses.values())) <= 2.5, rmses
+    if len(rmses) == 12:  # the 12-trial subset: measured mean 0.96 deg (1.03 without the bias front end)
+        assert 0.7 <= np.mean(list(rmses.values())) <= 1.2, rmses
 
 
 @pytest.mark.slow
@@ -110,8 +116,8 @@ def test_rates_outside_the_trained_range_stay_accurate(broad_trial, trial):
     slow = resample_recording(rec, 25.0)
     e_fast = rmse(fast, create("riann").update_batch(fast.acc, fast.gyr, gate_dts(fast)))
     e_slow = rmse(slow, create("riann").update_batch(slow.acc, slow.gyr, gate_dts(slow)))
-    assert e_fast <= 1.2 * native, (native, e_fast)
-    assert e_slow <= 2.0 * native, (native, e_slow)
+    assert e_fast <= 1.3 * native, (native, e_fast)
+    assert e_slow <= 2.5 * native, (native, e_slow)
     # and the adaptation is what makes the difference: fed straight in, 1000 Hz is far worse
     raw = create("riann", rate_adaptation=False)
     e_raw = rmse(fast, raw.update_batch(fast.acc, fast.gyr, gate_dts(fast)))

@@ -4,28 +4,38 @@ Model I/O (the official ``riann.onnx`` of the ``riann`` package, Apache-2.0):
 ``input`` float32 [1, T, 7] = acc xyz (m/s²), gyr xyz (rad/s), dt (s); ``h0`` [2, 1, 1, 200];
 outputs ``output`` [1, T, 4] (unit quaternion w, x, y, z) and ``hn``.
 
-The network was trained for time steps of 2–20 ms (50–500 Hz) and degrades outside that range
-(measured on BROAD: 1000 Hz fed straight in gives 10–25° RMSE). This estimator therefore adapts the
-rate causally, one output per input sample, before the samples reach the network:
+The network was trained on sequences of *constant* time step inside 2–20 ms. Real streams jitter,
+drop messages and run at 25 Hz or 1 kHz, so by default (``rate_adaptation``) the estimator puts four
+stages around it, each causal, with one output per input sample at that sample's stamp:
 
-* **dt < 2 ms (faster than 500 Hz)** — causal block average: samples are accumulated until they span
-  at least ``BLOCK_DT`` = 5 ms, then the network takes one step with their time-weighted mean acc and
-  gyr and the summed dt (1000 Hz → blocks of 5 → 200 Hz). For the samples inside a block the output
-  is the last network output rotated on by the gyroscope integral since then, so there is no hold
-  latency; the network's own correction arrives at most ``BLOCK_DT`` later.
-* **dt > 20 ms (slower than 50 Hz)** — causal up-sampling (the paper's just-in-time resampling,
-  made causal): the interval since the previous sample is split into ``ceil(dt / SUB_DT)`` steps
-  (``SUB_DT`` = 2.5 ms, 400 Hz) with acc and gyr interpolated linearly between the previous and the
-  current sample; the output is the network's state after the last sub-step. No latency is added
-  (only past and present samples are used); compute grows with the number of sub-steps (16 network
-  steps per sample at 25 Hz). Measured on BROAD 02/07/15 resampled to 25 Hz: sub-steps of 10 / 5 /
-  2.5 / 2 ms give 1.52/4.08/1.04°, 1.20/3.23/1.20°, 1.09/2.88/1.34° and 1.22/2.75/1.33° (native rate
-  0.63/1.46/0.98°; without adaptation 12.4/20.4/7.5°); repeating the current sample instead of
-  interpolating is worse (2.5/8.7/1.4°).
-* otherwise the sample goes straight in.
+1. **Gyro-bias front end** (``gyro_bias_estimation``, :mod:`~riann_ros.estimators.bias`): VQF's bias
+   estimator runs on the network's input rows; the bias known before a row is subtracted from its
+   gyro, and from the gyro used in stages 3 and 4.
+2. **Constant-rate grid** (:mod:`~riann_ros.estimators.grid`): the network runs at a constant step
+   ``T`` chosen from a running median of the input steps with hysteresis (2–5 ms: the samples go
+   straight in; slower inputs are up-sampled to ≤ 5 ms, faster ones averaged in blocks of ~5 ms);
+   each grid value is resampled causally from the samples up to that stamp (linear interpolation of
+   point samples; irregular streams are read as interval means).
+3. **Carry-forward**: a sample's attitude is the latest network output (at a grid point at or before
+   the sample) rotated on by the bias-corrected gyro integral up to the sample's stamp. No latency
+   is added; the network's own correction lags by less than one grid step ``T``.
+4. **Heading**: RIANN estimates inclination (roll, pitch) only; its yaw is not meaningful. The
+   output takes the network's inclination and a heading that starts at zero and follows the
+   bias-corrected gyro (each output is the gyro prediction from the previous output, corrected by
+   the smallest rotation — about a horizontal axis — that gives it the network's gravity direction).
 
-``update`` and ``update_batch`` share the same planning code; the batch call runs the network once
-over all planned rows, so both give the same numbers (within float32 round-off).
+**Holes.** A stamp step longer than ``restart_gap`` (and than four input steps) while the network
+runs means that rotation during the hole is unknown. The grid bridges the hole by interpolation, and
+a second network starts from a fresh state after it; once it has run ``RESTART_WARMUP`` (1 s: the
+network's start-up convergence) its state replaces the old one, which would otherwise take several
+seconds to shed the error the hole left. Steps longer than the stream's ``max_dt`` restart the
+estimator through :meth:`restart`, which keeps the bias estimate and the rate estimate.
+
+``rate_adaptation=false`` is the direct path: every sample is one network row with its own dt
+(stages 1 and 4 still apply).
+
+``update`` and ``update_batch`` share the planning code; the batch call runs the network once over
+all planned rows, so both give the same numbers (within float32 round-off).
 """
 
 from __future__ import annotations
@@ -33,6 +43,7 @@ from __future__ import annotations
 import importlib.resources
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import onnxruntime as ort
@@ -40,16 +51,22 @@ from numpy.typing import ArrayLike
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
+from riann_ros.estimators.bias import DEFAULT_CLIP, DEFAULT_SIGMA_INIT, GyroBiasFrontEnd
+from riann_ros.estimators.common import BIAS_KEY, bias_text
+from riann_ros.estimators.grid import DT_MIN, REL_EPS, RateTracker, SignalHistory
 
-DT_MIN = 0.002  # s, 500 Hz: fastest rate the network was trained for
-DT_MAX = 0.020  # s, 50 Hz: slowest
-BLOCK_DT = 0.005  # s, block length for fast inputs (→ 200 Hz)
-SUB_DT = 0.0025  # s, sub-step for slow inputs (→ 400 Hz; chosen on BROAD 02/07/15 at 25 Hz)
 HIDDEN_SHAPE = (2, 1, 1, 200)
 BATCH_CHUNK = 200_000  # network rows per ONNX Runtime call in batch mode
+DEFAULT_DT = 0.01  # s, first step when the stream gives none
+TIME_EPS_NS = 1000.0  # a grid point this close after the newest stamp counts as reached (1 µs)
+RESTART_WARMUP = 0.0  # s a fresh network runs beside the old one after a hole before it takes over
+HOLE_STEPS = 4.0  # a hole is also longer than this many median input steps
 
 Quat = tuple[float, float, float, float]
+Row = tuple[float, ...]
 IDENTITY_T: Quat = (1.0, 0.0, 0.0, 0.0)
+FORK: Row = (1.0,)  # row marker: a fresh network starts beside the running one
+JOIN: Row = (2.0,)  # row marker: the fresh network's state replaces the running one
 
 
 def _qmul(p: Quat, q: Quat) -> Quat:
@@ -69,6 +86,12 @@ def _rotvec(x: float, y: float, z: float) -> Quat:
         return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
     k = math.sin(0.5 * angle) / angle
     return (math.cos(0.5 * angle), x * k, y * k, z * k)
+
+
+def _twist(q: Quat) -> float:
+    """Angle (rad, in (-π, π]) of the rotation about world z in the swing-twist split of ``q``."""
+    a = 2.0 * math.atan2(q[3], q[0])
+    return math.remainder(a, 2.0 * math.pi)
 
 
 def default_model_path() -> Path:
@@ -95,8 +118,24 @@ def make_session(model_path: str | Path | None = None, threads: int = 1) -> ort.
     return session
 
 
+class _Plan:
+    """What the planning of a run of samples produced: network rows and, per sample, the row its
+    output is based on (-1: an earlier one), the carry-forward rotation and the gyro increment."""
+
+    def __init__(self) -> None:
+        self.rows: list[Row] = []
+        self.idx: list[int] = []
+        self.rot: list[Quat] = []
+        self.delta: list[Quat] = []
+
+    def add(self, idx: int, rot: Quat, delta: Quat) -> None:
+        self.idx.append(idx)
+        self.rot.append(rot)
+        self.delta.append(delta)
+
+
 class RiannEstimator(AttitudeEstimator):
-    """RIANN with its GRU hidden state carried between calls."""
+    """RIANN with its GRU hidden state carried between calls (see the module docstring)."""
 
     name = "riann"
     PARAMS = (
@@ -108,141 +147,351 @@ class RiannEstimator(AttitudeEstimator):
         ParamSpec(
             "rate_adaptation",
             True,
-            "Adapt input rates outside the trained 50-500 Hz causally (block average above 500 Hz, "
-            "interpolated sub-steps below 50 Hz). Off: every sample goes straight into the network.",
+            "Run the network on its own constant-rate grid (2-5 ms) resampled causally from the input, "
+            "whatever its rate, jitter or dropouts. Off: every sample goes straight into the network.",
         ),
+        ParamSpec(
+            "gyro_bias_estimation",
+            True,
+            "Subtract a causal gyro-bias estimate (VQF's rest and motion bias estimation) from the gyro "
+            "before the network. The estimate appears in /diagnostics.",
+        ),
+        ParamSpec("bias_clip", DEFAULT_CLIP, "deg/s; largest gyro bias the front end estimates (VQF biasClip).",
+                  min=0.1, max=100.0),
+        ParamSpec("bias_sigma_init", DEFAULT_SIGMA_INIT,
+                  "deg/s; prior std of the turn-on gyro bias (VQF biasSigmaInit).", min=0.0, max=100.0),
+        ParamSpec("restart_gap", 0.1,
+                  "s; after a stamp step longer than this (and than 4 input steps) a fresh network takes "
+                  "over after restart_warmup. 0 = never.", min=0.0, max=3600.0),
+        ParamSpec("restart_warmup", RESTART_WARMUP,
+                  "s; how long the fresh network runs beside the old one after a hole before it takes over.",
+                  min=0.0, max=60.0),
     )
 
-    def __init__(self, session: ort.InferenceSession | None = None, **params: object) -> None:
+    def __init__(self, session: ort.InferenceSession | None = None, **params: Any) -> None:
+        self._session = session or make_session(params.get("model_path") or None)
         super().__init__(**params)
-        self._session = session or make_session(self.params["model_path"] or None)
 
     # -- state ----------------------------------------------------------------------------------
     def reset(self) -> None:
-        self._h = np.zeros(HIDDEN_SHAPE, dtype=np.float32)
-        self._q_net: Array | None = None  # last network output
-        self._prev: tuple[float, ...] | None = None  # previous raw sample (ax, ay, az, gx, gy, gz)
-        self._clear_block()
+        self._rate: RateTracker | None = None
+        self._bias: GyroBiasFrontEnd | None = None
+        self._psi = 0.0  # heading offset of the output (rad)
+        self._qc_prev: Quat | None = None  # previous carried network attitude (heading stage)
+        self.restarts = 0
+        self.holes = 0
+        self.samples = 0  # input samples taken since reset
+        self.rows = 0  # network steps run since reset (compute per sample = rows / samples)
+        self.restart()
+        self._qc_prev = None
 
-    def _clear_block(self) -> None:
-        self._blk_dt = 0.0
-        self._blk_sum = [0.0] * 6  # time-weighted sums of acc and gyr
-        self._blk_rot: Quat = IDENTITY_T
+    def restart(self) -> None:
+        """Start the network afresh at the next sample; keep the bias and rate estimates and the heading."""
+        if getattr(self, "_hist", None) is not None and self._rate is not None:
+            self.restarts += 1
+        self._h = np.zeros(HIDDEN_SHAPE, dtype=np.float32)
+        self._h_cand: np.ndarray | None = None  # the fresh network after a hole
+        self._warm = 0  # rows the fresh network still runs before it takes over
+        self._q_net: Quat | None = None  # last network output
+        self._hist = SignalHistory()
+        self._t = 0.0  # ns of the newest sample, relative to the first one after (re)start
+        self._anchor = 0.0  # ns; grid point m is at anchor + m * T
+        self._m = 0
+        self._t_net = 0.0  # ns of the last grid point run
+        self._started = False
+        self._fork_pending = False
+
+    def diagnostics(self) -> dict[str, str]:
+        out: dict[str, str] = {}
+        if self._bias is not None:
+            out[BIAS_KEY] = bias_text(self._bias.bias)
+        if self._rate is not None and self.params["rate_adaptation"]:
+            out["network rate (Hz)"] = f"{1.0 / self._rate.step:.1f}"
+            out["input model"] = "interval means" if self._rate.irregular else "point samples"
+        out["network restarts after holes"] = str(self.holes)
+        return out
+
+    def _bias_now(self) -> tuple[float, float, float]:
+        return self._bias.bias if self._bias is not None else (0.0, 0.0, 0.0)
 
     # -- planning: which network rows each input sample produces ----------------------------------
-    # Plain Python floats: this runs once per sample, and numpy's per-call overhead would dominate.
-    def _plan_sample(self, x: tuple[float, ...], dt: float, rows: list[tuple[float, ...]]) -> tuple[int, Quat]:
-        """Append the network rows for sample ``x`` = (acc xyz, gyr xyz); return (row, rotation).
+    def _start(self, dt: float) -> None:
+        """First sample after reset/restart: set up the rate tracker and the bias front end."""
+        d = dt if DT_MIN * 0.01 < dt < 10.0 else DEFAULT_DT
+        if self._rate is None:
+            self._rate = RateTracker(d)
+        if self._bias is None and self.params["gyro_bias_estimation"]:
+            ts = self._rate.step if self.params["rate_adaptation"] else d
+            self._bias = GyroBiasFrontEnd(ts, self.params["bias_clip"], self.params["bias_sigma_init"])
+        self._started = True
 
-        The sample's output is ``net_output[row] ⊗ rotation`` where ``row`` indexes this call's
-        rows, or the last network output of an earlier call when -1.
-        """
-        if not self.params["rate_adaptation"]:
-            rows.append((*x, dt))
-            return len(rows) - 1, IDENTITY_T
-        first = self._q_net is None and not rows
-        if dt < DT_MIN and not first:
-            # accumulate into the current block (time-weighted mean)
-            self._blk_dt += dt
-            b = self._blk_sum
-            for k in range(6):
-                b[k] += x[k] * dt
-            self._blk_rot = _qmul(self._blk_rot, _rotvec(x[3] * dt, x[4] * dt, x[5] * dt))
-            if self._blk_dt + 1e-12 >= BLOCK_DT:
-                rows.append(self._close_block())
-                return len(rows) - 1, IDENTITY_T
-            return (len(rows) - 1 if rows else -1), self._blk_rot
-        if self._blk_dt > 0.0:
-            # a pending block followed by a slower sample: close the block with this sample in it
-            self._blk_dt += dt
-            b = self._blk_sum
-            for k in range(6):
-                b[k] += x[k] * dt
-            rows.append(self._close_block())
-            return len(rows) - 1, IDENTITY_T
-        if dt > DT_MAX:
-            n = math.ceil(dt / SUB_DT)
-            x0 = self._prev if self._prev is not None else x
-            for k in range(1, n + 1):
-                s = k / n
-                rows.append((*(x0[j] + s * (x[j] - x0[j]) for j in range(6)), dt / n))
-            return len(rows) - 1, IDENTITY_T
-        rows.append((*x, min(max(dt, DT_MIN), DT_MAX)))
-        return len(rows) - 1, IDENTITY_T
+    def _plan_direct(self, x: Row, dt: float, plan: _Plan) -> None:
+        """rate_adaptation=false: the sample is one row with its own dt."""
+        if not self._started:
+            self._start(dt)
+        bx, by, bz = self._bias_now()
+        gx, gy, gz = x[3] - bx, x[4] - by, x[5] - bz
+        plan.rows.append((x[0], x[1], x[2], gx, gy, gz, dt))
+        if self._bias is not None:
+            self._bias.update(x[0:3], x[3:6], dt)
+        plan.add(len(plan.rows) - 1, IDENTITY_T, _rotvec(gx * dt, gy * dt, gz * dt))
 
-    def _close_block(self) -> tuple[float, ...]:
-        t = self._blk_dt
-        row = (*(v / t for v in self._blk_sum), t)
-        self._clear_block()
-        return row
+    def _plan_grid(self, x: Row, dt: float, plan: _Plan, switched: bool | None = None) -> None:
+        """Take one input sample; append the grid rows it completes (see the module docstring).
+        ``switched``: the rate tracker already took this step (and this is what it answered)."""
+        rows = plan.rows
+        rate = self._rate
+        t_prev = self._t
+        if not self._started:
+            self._start(dt)
+            rate = self._rate
+            assert rate is not None
+            self._anchor = -rate.step * 1e9  # the first grid point on the first sample
+            self._m = 0
+            self._t_net = self._anchor
+            self._t = 0.0
+            t_prev = 0.0
+        else:
+            assert rate is not None
+            self._t += float(round(dt * 1e9))
+            gap = self.params["restart_gap"]
+            if gap > 0.0 and dt > gap and dt > HOLE_STEPS * rate.median:
+                self._fork_pending = True
+            elif rate.push(dt) if switched is None else switched:
+                self._anchor = self._t_net
+                self._m = 0
+                if self._bias is not None:
+                    self._bias.set_ts(rate.step)
+        assert rate is not None
+        self._hist.append(self._t, x)
+        bias = self._bias_now()
+        delta = self._increment(t_prev, bias, rate.irregular)
+        last = self._emit_rows(rows, rate)
+        if self._fork_pending:
+            self._fork_pending = False
+            self.holes += 1
+            rows.append(FORK)
+            self._warm = max(1, math.ceil(self.params["restart_warmup"] / rate.step))
+        rot = IDENTITY_T
+        if self._t > self._t_net + TIME_EPS_NS:
+            g = self._hist.mean(self._t_net, self._t, rate.irregular, 3, 6)
+            s = (self._t - self._t_net) * 1e-9
+            rot = _rotvec((g[0] - bias[0]) * s, (g[1] - bias[1]) * s, (g[2] - bias[2]) * s)
+        self._hist.trim(self._t_net - max(rate.box_width() * 1e9, rate.step * 1e9) - 1.0)
+        plan.add(last, rot, delta)
 
-    def _run(self, rows: list[tuple[float, ...]] | np.ndarray) -> Array:
-        """Run the network over ``rows`` (M, 7) from the current hidden state; return (M, 4)."""
+    def _increment(self, t_prev: float, bias: tuple[float, float, float], means: bool) -> Quat:
+        """Rotation by the bias-corrected gyro from the previous sample to the newest one."""
+        if self._t <= t_prev:
+            return IDENTITY_T
+        g = self._hist.mean(t_prev, self._t, means, 3, 6)
+        s = (self._t - t_prev) * 1e-9
+        return _rotvec((g[0] - bias[0]) * s, (g[1] - bias[1]) * s, (g[2] - bias[2]) * s)
+
+    def _emit_rows(self, rows: list[Row], rate: RateTracker) -> int:
+        """Append every grid row up to the newest stamp; return the index of the last one (or -1)."""
+        last = -1
+        T = rate.step
+        T_ns = T * 1e9
+        w_ns = rate.box_width() * 1e9
+        means = rate.irregular
+        hist = self._hist
+        fe = self._bias
+        while True:
+            tau = self._anchor + (self._m + 1) * T_ns
+            if tau > self._t + TIME_EPS_NS:
+                break
+            v = hist.mean(tau - w_ns, tau, means) if w_ns > 0.0 else hist.value(tau, means)
+            bx, by, bz = self._bias_now()
+            rows.append((v[0], v[1], v[2], v[3] - bx, v[4] - by, v[5] - bz, T))
+            if fe is not None:
+                fe.update(v[0:3], v[3:6])
+            self._m += 1
+            self._t_net = tau
+            last = len(rows) - 1
+            if self._warm > 0:
+                self._warm -= 1
+                if self._warm == 0:
+                    rows.append(JOIN)
+        return last
+
+    def _fast_run(self, dt: np.ndarray, i: int) -> int:
+        """End of the run of samples from ``i`` that land exactly on the grid (a clean stream at the
+        grid step): those can be planned vectorised. ``i`` itself when none."""
+        rate = self._rate
+        if (rate is None or not self._started or rate.irregular or self._warm > 0 or self._h_cand is not None
+                or abs(self._t - self._t_net) > TIME_EPS_NS or abs(rate.median / rate.step - 1.0) > REL_EPS):
+            return i
+        bad = np.abs(dt[i:] / rate.step - 1.0) > REL_EPS
+        return i + int(np.argmax(bad)) if bad.any() else len(dt)
+
+    def _plan_fast(self, acc: Array, gyr: Array, dt: Array, plan: _Plan) -> int:
+        """Vectorised :meth:`_plan_grid` for samples exactly one grid step apart (rows = samples).
+
+        Stops before a sample at which the rate tracker switches or finds the stream irregular (that
+        sample is planned by :meth:`_plan_grid`); returns the number of samples planned."""
+        rate = self._rate
+        assert rate is not None
+        T = rate.step
+        stop: tuple[int, bool] | None = None
+        for k, d in enumerate(dt.tolist()):
+            switched = rate.push(d)
+            if switched or rate.irregular:
+                stop = (k, switched)
+                break
+        n = len(dt) if stop is None else stop[0]
+        if n:
+            self._plan_run(acc[:n], gyr[:n], dt[:n], plan, T)
+        if stop is not None:
+            x = (*acc[n].tolist(), *gyr[n].tolist())
+            self._plan_grid(x, float(dt[n]), plan, switched=stop[1])
+            n += 1
+        return n
+
+    def _plan_run(self, acc: Array, gyr: Array, dt: Array, plan: _Plan, T: float) -> None:
+        """Plan samples that are grid points (the tracker has taken their steps): one row each."""
+        n = len(dt)
+        t_ns = self._t + np.cumsum(np.round(dt * 1e9))
+        if self._bias is not None:
+            bias = self._bias.update_batch(acc, gyr)
+        else:
+            bias = np.zeros((n, 3))
+        g = gyr - bias
+        first = len(plan.rows)
+        plan.rows.extend(np.column_stack([acc, g, np.full(n, T)]).tolist())
+        g_prev = np.vstack([np.asarray(self._hist.x[-1][3:6])[None, :], gyr[:-1]]) - bias
+        s = np.diff(np.concatenate([[self._t], t_ns])) * 1e-9
+        delta = quat.from_rotvec(0.5 * (g_prev + g) * s[:, None])
+        plan.idx.extend(range(first, first + n))
+        plan.rot.extend([IDENTITY_T] * n)
+        plan.delta.extend(map(tuple, delta.tolist()))
+        self._m += n
+        self._t = float(t_ns[-1])
+        self._t_net = self._anchor + self._m * T * 1e9
+        hist = self._hist
+        for k in range(max(0, n - 3), n):
+            hist.append(float(t_ns[k]), (*acc[k].tolist(), *gyr[k].tolist()))
+        hist.trim(self._t_net - T * 1e9 - 1.0)
+
+    # -- network --------------------------------------------------------------------------------
+    def _net(self, rows: list[Row] | np.ndarray, h: np.ndarray) -> tuple[Array, np.ndarray]:
         x = np.asarray(rows, dtype=np.float32).reshape(1, -1, 7)
-        out, self._h = self._session.run(["output", "hn"], {"input": x, "h0": self._h})
+        out, hn = self._session.run(["output", "hn"], {"input": x, "h0": h})
         q = out[0].astype(np.float64)
-        return q / np.linalg.norm(q, axis=-1, keepdims=True)
+        return q / np.linalg.norm(q, axis=-1, keepdims=True), hn
 
-    def _compose(self, net: Array, idx: np.ndarray, rot: Array) -> Array:
-        """Outputs from network rows ``net``, per-sample row indices and rotations."""
-        base = np.empty((len(idx), 4))
+    def _run_rows(self, rows: list[Row]) -> Array:
+        """Run the planned rows through the network(s); (M, 4) outputs, NaN at markers."""
+        out = np.full((len(rows), 4), np.nan)
+        marks = [k for k, r in enumerate(rows) if len(r) == 1]
+        self.rows += len(rows) - len(marks)
+        start = 0
+        for end in [*marks, len(rows)]:
+            for c in range(start, end, BATCH_CHUNK):
+                part = rows[c : min(c + BATCH_CHUNK, end)]
+                out[c : c + len(part)], self._h = self._net(part, self._h)
+                if self._h_cand is not None:
+                    _, self._h_cand = self._net(part, self._h_cand)
+            if end < len(rows):
+                if rows[end] == FORK:
+                    self._h_cand = np.zeros(HIDDEN_SHAPE, dtype=np.float32)
+                elif self._h_cand is not None:
+                    self._h, self._h_cand = self._h_cand, None
+            start = end + 1
+        return out
+
+    # -- output: carry-forward and heading ------------------------------------------------------------
+    def _compose(self, net: Array, plan: _Plan) -> Array:
+        """Per-sample outputs from the network rows and the plan (vectorised heading stage)."""
+        n = len(plan.idx)
+        idx = np.asarray(plan.idx, dtype=np.int64)
+        base = np.empty((n, 4))
         has = idx >= 0
         base[has] = net[idx[has]]
         if (~has).any():
-            if self._q_net is None:  # cannot happen: the first sample always makes a row
-                raise RuntimeError("no network output yet")
-            base[~has] = self._q_net
-        out = quat.normalize(quat.multiply(base, rot))
-        if len(net):
-            self._q_net = net[-1]
-        return out
+            # forward-fill from the last sample with a row of its own (or the previous call's output)
+            pos = np.where(has, np.arange(n), -1)
+            pos = np.maximum.accumulate(pos)
+            if (pos < 0).any():
+                if self._q_net is None:
+                    raise RuntimeError("no network output yet")
+                base[pos < 0] = self._q_net
+            base[pos >= 0] = base[pos[pos >= 0]]
+        if has.any():
+            self._q_net = tuple(base[np.flatnonzero(has)[-1]].tolist())
+        qc = quat.normalize(quat.multiply(base, np.asarray(plan.rot)))
+        prev = np.vstack([np.asarray(self._qc_prev or qc[0])[None, :], qc[:-1]])
+        e = quat.multiply(quat.multiply(prev, np.asarray(plan.delta)), quat.conjugate(qc))
+        tw = np.remainder(2.0 * np.arctan2(e[:, 3], e[:, 0]) + np.pi, 2.0 * np.pi) - np.pi
+        if self._qc_prev is None:
+            tw[0] = -2.0 * math.atan2(qc[0, 3], qc[0, 0]) - self._psi  # the output starts at zero heading
+        psi = self._psi + np.cumsum(tw)
+        self._psi = math.remainder(float(psi[-1]), 2.0 * math.pi)
+        self._qc_prev = tuple(qc[-1].tolist())
+        rz = np.column_stack([np.cos(0.5 * psi), np.zeros(n), np.zeros(n), np.sin(0.5 * psi)])
+        q = quat.normalize(quat.multiply(rz, qc))
+        return np.where(q[:, :1] < 0.0, -q, q)  # sign convention: w >= 0
+
+    def _compose_one(self, q_net: Quat, rot: Quat, delta: Quat) -> Array:
+        """:meth:`_compose` for one sample in plain floats (the node's hot path)."""
+        qc = _qmul(q_net, rot) if rot is not IDENTITY_T else q_net
+        n = math.sqrt(sum(v * v for v in qc))
+        qc = (qc[0] / n, qc[1] / n, qc[2] / n, qc[3] / n)
+        if self._qc_prev is None:
+            self._psi = -2.0 * math.atan2(qc[3], qc[0])
+        else:
+            p = _qmul(self._qc_prev, delta)
+            e = _qmul(p, (qc[0], -qc[1], -qc[2], -qc[3]))
+            self._psi = math.remainder(self._psi + _twist(e), 2.0 * math.pi)
+        self._qc_prev = qc
+        h = 0.5 * self._psi
+        w, x, y, z = _qmul((math.cos(h), 0.0, 0.0, math.sin(h)), qc)
+        n = math.sqrt(w * w + x * x + y * y + z * z)
+        if w < 0.0:  # sign convention: w >= 0
+            n = -n
+        return np.array([w / n, x / n, y / n, z / n])
 
     # -- public API -----------------------------------------------------------------------------
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
-        # The node's hot path: plain floats (numpy per-call overhead dominates for one sample). Same
-        # arithmetic as update_batch's vectorised _compose.
         a0, a1, a2 = acc  # type: ignore[misc, str-unpack]
         g0, g1, g2 = gyr  # type: ignore[misc, str-unpack]
         x = (float(a0), float(a1), float(a2), float(g0), float(g1), float(g2))  # type: ignore[arg-type]
-        rows: list[tuple[float, ...]] = []
-        _, rot = self._plan_sample(x, float(dt), rows)
-        self._prev = x
-        if rows:
-            self._q_net = self._run(rows)[-1]
+        plan = _Plan()
+        self.samples += 1
+        if self.params["rate_adaptation"]:
+            self._plan_grid(x, float(dt), plan)
+        else:
+            self._plan_direct(x, float(dt), plan)
+        if plan.rows:
+            net = self._run_rows(plan.rows)
+            if plan.idx[0] >= 0:
+                self._q_net = tuple(net[plan.idx[0]].tolist())
         if self._q_net is None:  # cannot happen: the first sample always makes a row
             raise RuntimeError("no network output yet")
-        if rot is IDENTITY_T:
-            return self._q_net.copy()
-        w, x1, y1, z1 = _qmul(tuple(self._q_net.tolist()), rot)
-        n = math.sqrt(w * w + x1 * x1 + y1 * y1 + z1 * z1)
-        return np.array([w / n, x1 / n, y1 / n, z1 / n])
+        return self._compose_one(self._q_net, plan.rot[0], plan.delta[0])
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
-        acc = np.asarray(acc, dtype=float)
-        gyr = np.asarray(gyr, dtype=float)
-        dt = np.broadcast_to(np.asarray(dt, dtype=float), (len(acc),)).copy()
+        acc = np.asarray(acc, dtype=float).reshape(-1, 3)
+        gyr = np.asarray(gyr, dtype=float).reshape(-1, 3)
         n = len(acc)
+        dt = np.array(np.broadcast_to(np.asarray(dt, dtype=float), (n,)), dtype=float)
         if n == 0:
             return np.empty((0, 4))
-        in_range = (dt >= DT_MIN) & (dt <= DT_MAX)
-        if not self.params["rate_adaptation"] or (bool(in_range.all()) and self._blk_dt == 0.0):
-            rows = np.column_stack([acc, gyr, dt])
-            idx = np.arange(n)
-            rot = np.broadcast_to(quat.IDENTITY, (n, 4))
-        else:
-            row_list: list[tuple[float, ...]] = []
-            idx_list: list[int] = []
-            rot_list: list[Quat] = []
-            plan = self._plan_sample
-            for x, d in zip(np.column_stack([acc, gyr]).tolist(), dt.tolist(), strict=True):
-                i, r = plan(tuple(x), d, row_list)
-                self._prev = tuple(x)
-                idx_list.append(i)
-                rot_list.append(r)
-            rows = np.asarray(row_list, dtype=float).reshape(-1, 7)
-            idx = np.asarray(idx_list, dtype=np.int64)
-            rot = np.asarray(rot_list, dtype=float)
-        self._prev = (*(float(v) for v in acc[-1]), *(float(v) for v in gyr[-1]))
-        chunks = [self._run(rows[i : i + BATCH_CHUNK]) for i in range(0, len(rows), BATCH_CHUNK)]
-        net = np.concatenate(chunks) if chunks else np.empty((0, 4))
-        return self._compose(net, idx, rot)
+        plan = _Plan()
+        self.samples += n
+        xs = np.column_stack([acc, gyr]).tolist()
+        dts = dt.tolist()
+        grid = self.params["rate_adaptation"]
+        i = 0
+        while i < n:
+            j = self._fast_run(dt, i) if grid else i
+            if j - i >= 2:
+                i += self._plan_fast(acc[i:j], gyr[i:j], dt[i:j], plan)
+                continue
+            if grid:
+                self._plan_grid(tuple(xs[i]), dts[i], plan)
+            else:
+                self._plan_direct(tuple(xs[i]), dts[i], plan)
+            i += 1
+        net = self._run_rows(plan.rows) if plan.rows else np.empty((0, 4))
+        return self._compose(net, plan)

@@ -1,0 +1,190 @@
+"""A constant-rate grid for RIANN: a robust rate estimate and causal resampling (ROS-free).
+
+RIANN was trained on sequences of constant time step inside 2–20 ms. Real streams are not like that:
+stamps jitter, messages drop, sensors run at 25 Hz or 1 kHz. The network therefore runs on its own
+uniform time grid ``tau_m = anchor + m·T`` and never sees the input stamps directly:
+
+* :func:`choose_step` picks ``T`` from the input step ``d``: ``d`` itself inside 2 ms … ``STEP_UP``
+  (one row per sample, the samples go straight in), ``d / ceil(d / STEP_UP)`` for slower inputs
+  (integer up-sampling, grid points stay on the samples of a clean stream) and ``d · ceil(STEP_FAST / d)``
+  for inputs faster than 500 Hz (integer blocks of samples).
+* :class:`RateTracker` estimates ``d`` as the running median of the last ``window`` steps and switches
+  ``T`` only when the candidate differs by more than ``hysteresis`` (relative) for ``window // 2``
+  samples in a row, so jitter or a dropout never makes the grid flap. It also decides the signal
+  model: a stream whose steps spread widely ((p90 − p10) / median > ``IRREGULAR_ON``) is taken as
+  *interval means* (each sample the average since the previous one: what a polled, integrating or
+  decimating sensor delivers); a regular stream as *point samples* (hysteresis down to
+  ``IRREGULAR_OFF``).
+* :class:`SignalHistory` holds the recent samples as a signal over time — piecewise linear through
+  point samples, or piecewise constant over ``(t_{k-1}, t_k]`` for interval means — and gives its
+  value or mean over a window. A grid point is computed as soon as a sample at or after it has
+  arrived, from samples up to that stamp only: the resampling is causal.
+
+Everything here is plain Python floats: it runs once per input sample, where numpy's per-call
+overhead would dominate.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+
+DT_MIN = 0.002  # s, 500 Hz: fastest step the network was trained for
+DT_MAX = 0.020  # s, 50 Hz: slowest
+STEP_UP = 0.005  # s: slower inputs are up-sampled to a grid step of at most this (200 Hz)
+STEP_FAST = 0.005  # s: inputs faster than 500 Hz are averaged in blocks of about this
+REL_EPS = 1e-6  # relative slack: a 20 ms step from ns stamps is 0.020000000000000004 s
+RATE_WINDOW = 64  # input steps in the running median
+HYSTERESIS = 0.1  # relative change of the grid step needed (for window // 2 samples) to switch
+MIN_STEPS = 16  # steps seen before the tracker may switch or judge regularity
+IRREGULAR_ON = 0.3  # (p90 - p10) / median of the steps above which samples are interval means
+IRREGULAR_OFF = 0.15  # ... and below which they are point samples again
+
+Sample = Sequence[float]
+
+
+def choose_step(d: float, step_up: float = STEP_UP, step_fast: float = STEP_FAST) -> float:
+    """The network's grid step (s) for an input step ``d`` (s); see the module docstring."""
+    if not d > 0.0 or not math.isfinite(d):
+        raise ValueError(f"input step must be positive and finite, got {d}")
+    if d < DT_MIN * (1.0 - REL_EPS):
+        return d * math.ceil(step_fast / d - REL_EPS)
+    if d <= step_up * (1.0 + REL_EPS):
+        return d
+    return d / math.ceil(d / step_up - REL_EPS)
+
+
+class RateTracker:
+    """Running-median input step, grid step with hysteresis, and the signal model (see module doc)."""
+
+    def __init__(self, first_dt: float, window: int = RATE_WINDOW, hysteresis: float = HYSTERESIS) -> None:
+        self.window = window
+        self.hysteresis = hysteresis
+        self._dts: deque[float] = deque(maxlen=window)
+        self.median = first_dt
+        self.step = choose_step(first_dt)
+        self.irregular = False
+        self.switches = 0
+        self._pending = 0
+
+    def push(self, dt: float) -> bool:
+        """Take one input step (s); return True when the grid step switched."""
+        dts = self._dts
+        dts.append(dt)
+        n = len(dts)
+        s = sorted(dts)
+        self.median = s[n // 2]
+        if n < min(MIN_STEPS, self.window):
+            return False
+        spread = (s[(9 * n) // 10] - s[n // 10]) / self.median
+        if spread > IRREGULAR_ON:
+            self.irregular = True
+        elif spread < IRREGULAR_OFF:
+            self.irregular = False
+        d = self.median
+        # the current ratio of grid step to input step, kept while it still fits: a rate drifting
+        # across a factor boundary (10 ms ± 1 %) must not flip between 2 and 3 rows per sample
+        same = d * round(self.step / d) if self.step >= d else d / round(d / self.step)
+        if abs(same / self.step - 1.0) <= self.hysteresis:
+            self._pending = 0
+            return False
+        cand = choose_step(d)
+        self._pending += 1
+        if self._pending < max(self.window // 2, 1):
+            return False
+        self.step = cand
+        self._pending = 0
+        self.switches += 1
+        return True
+
+    def box_width(self) -> float:
+        """Averaging window (s) of a grid value: 0 = the signal at the grid point, else its mean over
+        that much time before it. Point samples: up-sampled (T < d), the mean over the grid cell
+        ``(tau − T, tau]`` — each row summarises its own interval, as a sensor sampling at ``1/T``
+        would, instead of carrying the kinks of the linear interpolation; blocks (T = k·d), the mean
+        over ``T − d`` (the k samples of the block); T = d, the sample itself. Interval means: the
+        whole cell when T spans several samples, else the sample covering the grid point."""
+        if self.irregular:
+            return self.step if self.step > self.median * (1.0 + REL_EPS) else 0.0
+        if self.step < self.median * (1.0 - REL_EPS):
+            return self.step
+        return self.step - self.median if self.step > self.median else 0.0
+
+
+class SignalHistory:
+    """Recent samples ``(t, x)`` (t in ns as float, x a 6-vector) read as a continuous signal.
+
+    ``means=False``: linear between samples; ``means=True``: sample k holds over ``(t_{k-1}, t_k]``.
+    Before the first sample the signal holds the first value, after the last the last one.
+    """
+
+    def __init__(self) -> None:
+        self.t: deque[float] = deque()
+        self.x: deque[Sample] = deque()
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def append(self, t: float, x: Sample) -> None:
+        self.t.append(t)
+        self.x.append(x)
+
+    def clear(self) -> None:
+        self.t.clear()
+        self.x.clear()
+
+    def trim(self, before: float) -> None:
+        """Drop samples no window starting at ``before`` or later can need (keeps one before it)."""
+        t = self.t
+        while len(t) > 2 and t[1] <= before:
+            t.popleft()
+            self.x.popleft()
+
+    def value(self, tau: float, means: bool) -> list[float]:
+        """The signal at ``tau``."""
+        t, x = self.t, self.x
+        n = len(t)
+        k = n - 1
+        while k > 0 and t[k - 1] >= tau:  # k = first sample at or after tau (or the last)
+            k -= 1
+        if means or k == 0 or t[k] <= tau:
+            return list(x[k])
+        t0, t1 = t[k - 1], t[k]
+        s = (tau - t0) / (t1 - t0)
+        return [a + s * (b - a) for a, b in zip(x[k - 1], x[k], strict=True)]
+
+    def mean(self, a: float, b: float, means: bool, lo: int = 0, hi: int = 6) -> list[float]:
+        """Mean of channels ``lo:hi`` over ``(a, b]`` (``b > a``)."""
+        t, x = self.t, self.x
+        acc = [0.0] * (hi - lo)
+        if a < t[0]:  # before the first sample: its value held
+            _add(acc, x[0], lo, min(b, t[0]) - a)
+        for k in range(len(t) - 1, 0, -1):
+            if t[k] <= a:
+                break
+            self._add_interval(acc, k, a, b, means, lo)
+        if b > t[-1]:  # after the last sample: its value held
+            _add(acc, x[-1], lo, b - max(a, t[-1]))
+        w = b - a
+        return [v / w for v in acc]
+
+    def _add_interval(self, acc: list[float], k: int, a: float, b: float, means: bool, lo: int) -> None:
+        """Add the integral over ``(a, b] ∩ (t_{k-1}, t_k]`` of the signal model to ``acc``."""
+        t0, t1 = self.t[k - 1], self.t[k]
+        s0, s1 = max(a, t0), min(b, t1)
+        if s1 <= s0:
+            return
+        x0, x1 = self.x[k - 1], self.x[k]
+        span = s1 - s0
+        if means:
+            _add(acc, x1, lo, span)
+            return
+        m = 0.5 * ((s0 - t0) + (s1 - t0)) / (t1 - t0)
+        for j in range(len(acc)):
+            acc[j] += (x0[lo + j] + m * (x1[lo + j] - x0[lo + j])) * span
+
+
+def _add(acc: list[float], x: Sample, lo: int, span: float) -> None:
+    for j in range(len(acc)):
+        acc[j] += x[lo + j] * span

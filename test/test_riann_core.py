@@ -1,0 +1,282 @@
+"""The mechanisms around the RIANN network: rate estimate with hysteresis, causal resampling onto the
+grid, the gyro-bias front end, the dropout rule and the heading stage (issue 11)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from riann_ros import quaternion as quat
+from riann_ros.estimators.bias import GyroBiasFrontEnd
+from riann_ros.estimators.grid import RateTracker, SignalHistory, choose_step
+from riann_ros.estimators.riann import RiannEstimator
+
+G = 9.81
+
+
+# -- grid step policy -------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("d", "step"),
+    [
+        (0.0035, 0.0035),  # inside 2-5 ms: the samples go straight in
+        (0.002, 0.002),
+        (0.005, 0.005),
+        (0.010, 0.005),  # 100 Hz: 2 rows per sample
+        (0.012, 0.004),  # 3 rows
+        (0.020000000000000004, 0.005),  # a 20 ms step from ns stamps: 4 rows, not 5
+        (0.040, 0.005),  # 25 Hz: 8 rows
+        (0.001, 0.005),  # 1 kHz: blocks of 5 samples
+        (0.0015, 0.006),  # blocks of 4
+    ],
+)
+def test_grid_step_keeps_samples_on_the_grid_inside_2_to_5_ms(d, step):
+    assert choose_step(d) == pytest.approx(step, rel=1e-9)
+
+
+def test_grid_step_rejects_a_non_positive_step():
+    with pytest.raises(ValueError):
+        choose_step(0.0)
+
+
+# -- rate estimate with hysteresis ------------------------------------------------------------------
+def test_rate_tracker_switches_only_after_half_a_window_of_the_new_rate():
+    r = RateTracker(0.010, window=64)
+    for _ in range(100):
+        assert not r.push(0.010)
+    assert r.step == pytest.approx(0.005)
+    switched_at = None
+    for k in range(200):
+        if r.push(0.004):  # 250 Hz from now on
+            switched_at = k
+            break
+    # the median flips after 32 new steps, then 32 more are needed to switch
+    assert switched_at is not None and 50 <= switched_at <= 70, switched_at
+    assert r.step == pytest.approx(0.004)
+    assert r.switches == 1
+
+
+def test_rate_tracker_ignores_dropouts_small_drift_and_does_not_flap():
+    r = RateTracker(0.010)
+    rng = np.random.default_rng(0)
+    for k in range(2000):
+        d = 0.010 * (1.0 + 0.05 * math.sin(k / 50.0)) + rng.normal(0, 2e-5)  # ±5 % drift
+        if k % 100 == 50:
+            d = 0.3  # a lost burst of messages
+        r.push(d)
+    assert r.switches == 0
+    assert r.step == pytest.approx(0.005)
+    assert not r.irregular
+
+
+def test_rate_tracker_reads_widely_spread_steps_as_interval_means():
+    r = RateTracker(0.020)
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        r.push(float(rng.choice([0.010, 0.020, 0.030])))
+    assert r.irregular
+    assert r.median == pytest.approx(0.020)
+    assert r.step == pytest.approx(0.005)
+    for _ in range(200):
+        r.push(0.020)
+    assert not r.irregular
+
+
+# -- causal resampling ------------------------------------------------------------------------------
+def _history(means: bool = False) -> SignalHistory:
+    h = SignalHistory()
+    for t, v in [(0.0, 0.0), (10.0, 10.0), (30.0, 50.0)]:
+        h.append(t, (v, 0.0, 0.0, 2 * v, 0.0, 0.0))
+    return h
+
+
+def test_signal_history_interpolates_point_samples_and_holds_interval_means():
+    h = _history()
+    assert h.value(5.0, means=False)[0] == pytest.approx(5.0)
+    assert h.value(20.0, means=False)[3] == pytest.approx(60.0)
+    assert h.value(-5.0, means=False)[0] == 0.0  # before the first sample: held
+    assert h.value(40.0, means=False)[0] == 50.0  # after the last: held
+    # interval means: sample k holds over (t_{k-1}, t_k]
+    assert h.value(5.0, means=True)[0] == 10.0
+    assert h.value(10.0, means=True)[0] == 10.0
+    assert h.value(10.5, means=True)[0] == 50.0
+
+
+def test_signal_history_mean_is_the_exact_integral_of_the_signal_model():
+    h = _history()
+    # linear: over (0, 30] the integral is 10*5 + 20*30 = 650
+    assert h.mean(0.0, 30.0, means=False)[0] == pytest.approx(650.0 / 30.0)
+    assert h.mean(5.0, 20.0, means=False, lo=3, hi=4)[0] == pytest.approx(2 * (5 * 7.5 + 10 * 20.0) / 15.0)
+    # interval means: (5, 20] = 5 s of 10 and 10 s of 50
+    assert h.mean(5.0, 20.0, means=True)[0] == pytest.approx((5 * 10.0 + 10 * 50.0) / 15.0)
+    # beyond the last sample the last value is held
+    assert h.mean(25.0, 35.0, means=False)[0] == pytest.approx((5 * 45.0 + 5 * 50.0) / 10.0)
+
+
+def test_outputs_never_depend_on_later_samples():
+    """Causality: the outputs for a prefix are the same whether or not more samples follow."""
+    rng = np.random.default_rng(2)
+    n = 500
+    dt = rng.choice([0.010, 0.020, 0.030], size=n)
+    acc = np.array([0.0, 0.0, G]) + rng.normal(0, 0.3, (n, 3))
+    gyr = rng.normal(0, 0.5, (n, 3))
+    full = RiannEstimator().update_batch(acc, gyr, dt)
+    part = RiannEstimator().update_batch(acc[:300], gyr[:300], dt[:300])
+    assert np.abs(full[:300] - part).max() < 1e-9
+
+
+def test_slow_input_runs_the_network_on_a_5_ms_grid_and_fast_input_in_blocks():
+    est = RiannEstimator()
+    n = 250
+    acc = np.tile([0.0, 0.0, G], (n, 1))
+    est.update_batch(acc, np.zeros((n, 3)), np.full(n, 0.040))  # 25 Hz
+    assert est.rows == pytest.approx(8 * n, abs=8)
+    est.reset()
+    est.update_batch(np.tile(acc, (20, 1)), np.zeros((20 * n, 3)), np.full(20 * n, 0.001))  # 1 kHz
+    assert est.rows == pytest.approx(20 * n / 5, abs=5)
+
+
+def test_a_clean_stream_at_the_grid_step_is_fed_straight_in():
+    """2-5 ms streams: grid rows are the samples themselves, vectorised or sample by sample."""
+    rng = np.random.default_rng(3)
+    n = 400
+    acc = np.array([0.0, 0.0, G]) + rng.normal(0, 0.3, (n, 3))
+    gyr = rng.normal(0, 0.5, (n, 3))
+    est = RiannEstimator(gyro_bias_estimation=False)
+    qb = est.update_batch(acc, gyr, np.full(n, 0.004))
+    assert est.rows == n
+    est.reset()
+    qs = np.array([est.update(acc[i], gyr[i], 0.004) for i in range(n)])
+    assert np.abs(qb - qs).max() < 1e-5
+
+
+def test_jittery_streaming_equals_batch_and_gives_unit_quaternions():
+    rng = np.random.default_rng(4)
+    n = 600
+    dt = rng.choice([0.0005, 0.003, 0.010, 0.020, 0.030, 0.15], size=n)
+    acc = np.array([0.0, 0.0, G]) + rng.normal(0, 0.5, (n, 3))
+    gyr = rng.normal(0, 0.3, (n, 3))
+    est = RiannEstimator()
+    qb = est.update_batch(acc, gyr, dt)
+    est.reset()
+    qs = np.array([est.update(acc[i], gyr[i], dt[i]) for i in range(n)])
+    assert np.abs(qs - qb).max() < 1e-5
+    assert np.allclose(np.linalg.norm(qb, axis=1), 1.0)
+    assert (qb[:, 0] >= 0).all()
+
+
+# -- gyro-bias front end ----------------------------------------------------------------------------
+def _tilted_rest(n: int, tilt_deg: float = 20.0) -> tuple[np.ndarray, np.ndarray]:
+    q_true = quat.from_rotvec([math.radians(tilt_deg), 0.0, 0.0])
+    acc = quat.rotate(quat.conjugate(q_true), [0.0, 0.0, G])
+    return np.tile(acc, (n, 1)), q_true
+
+
+def test_bias_front_end_learns_a_3_deg_s_turn_on_bias_at_rest():
+    n = 200 * 10
+    acc, _ = _tilted_rest(n)
+    bias = np.radians([3.0, -3.0, 1.0])
+    fe = GyroBiasFrontEnd(0.005)
+    before = fe.update_batch(acc, np.tile(bias, (n, 1)))
+    assert np.all(before[0] == 0.0)  # nothing is known before the first sample
+    assert np.abs(np.degrees(fe.bias) - [3.0, -3.0, 1.0]).max() < 0.2
+    # per sample gives the same estimates
+    fe2 = GyroBiasFrontEnd(0.005)
+    for i in range(n):
+        assert np.allclose(fe2.bias, before[i], atol=1e-12)
+        fe2.update(acc[i], bias)
+    # a new sample time keeps what was learned
+    fe2.set_ts(0.01)
+    assert np.allclose(fe2.bias, fe.bias, atol=1e-12)
+
+
+def test_default_vqf_clip_would_not_learn_the_3_deg_s_bias():
+    n = 200 * 10
+    acc, _ = _tilted_rest(n)
+    fe = GyroBiasFrontEnd(0.005, clip=2.0, sigma_init=0.5)
+    fe.update_batch(acc, np.tile(np.radians([3.0, -3.0, 1.0]), (n, 1)))
+    assert np.abs(np.degrees(fe.bias)).max() <= 2.0 + 1e-9
+
+
+def test_riann_with_the_front_end_does_not_drift_with_a_gyro_bias():
+    n = 200 * 60
+    acc, q_true = _tilted_rest(n)
+    gyr = np.tile(np.radians([3.0, 3.0, 0.0]), (n, 1))
+    dt = np.full(n, 0.005)
+    with_fe = RiannEstimator().update_batch(acc, gyr, dt)
+    without = RiannEstimator(gyro_bias_estimation=False).update_batch(acc, gyr, dt)
+    err_with = np.degrees(quat.inclination_error(q_true, with_fe[-2000:])).max()
+    err_without = np.degrees(quat.inclination_error(q_true, without[-2000:])).max()
+    assert err_with < 1.0, err_with
+    assert err_without > 2 * err_with, (err_with, err_without)
+    est = RiannEstimator()
+    est.update_batch(acc, gyr, dt)
+    assert "gyro bias estimate (deg/s)" in est.diagnostics()
+
+
+# -- heading stage ----------------------------------------------------------------------------------
+def test_heading_starts_at_zero_and_follows_the_gyro():
+    n = 200 * 10
+    acc = np.tile([0.0, 0.0, G], (n, 1))
+    rate = math.radians(10.0)
+    gyr = np.tile([0.0, 0.0, rate], (n, 1))
+    est = RiannEstimator(gyro_bias_estimation=False)
+    q = est.update_batch(acc, gyr, np.full(n, 0.005))
+    yaw = 2 * np.arctan2(q[:, 3], q[:, 0])
+    assert abs(yaw[0]) < 1e-6
+    expected = np.remainder(rate * 0.005 * np.arange(n) + np.pi, 2 * np.pi) - np.pi
+    err = np.remainder(yaw - expected + np.pi, 2 * np.pi) - np.pi
+    assert np.abs(err).max() < math.radians(0.5)
+
+
+# -- dropouts ---------------------------------------------------------------------------------------
+def _hole_stream(restart_gap: float) -> tuple[RiannEstimator, np.ndarray, np.ndarray]:
+    """Level rest at 200 Hz, a 0.4 s hole during which the sensor was tilted by 40°, tilted rest after."""
+    n0, n1 = 200 * 20, 200 * 3
+    acc0 = np.tile([0.0, 0.0, G], (n0, 1))
+    acc1, q_true = _tilted_rest(n1, 40.0)
+    acc = np.vstack([acc0, acc1])
+    dt = np.full(n0 + n1, 0.005)
+    dt[n0] = 0.4
+    est = RiannEstimator(restart_gap=restart_gap, gyro_bias_estimation=False)
+    q = est.update_batch(acc, np.zeros((n0 + n1, 3)), dt)
+    t_after = np.cumsum(dt[n0:]) - dt[n0]
+    err = np.degrees(quat.inclination_error(q_true, q[n0:]))
+    return est, t_after, err
+
+
+def test_after_a_hole_a_fresh_network_takes_over_and_converges_faster():
+    est, t, err = _hole_stream(0.1)
+    assert est.holes == 1
+    _, _, err0 = _hole_stream(0.0)
+    late = (t > 1.5) & (t < 2.5)
+    assert err[late].max() < 5.0, err[late].max()
+    assert err[late].mean() < 0.5 * err0[late].mean(), (err[late].mean(), err0[late].mean())
+
+
+def test_a_hole_is_counted_only_when_longer_than_restart_gap_and_four_input_steps():
+    est = RiannEstimator()
+    n = 400
+    acc = np.tile([0.0, 0.0, G], (n, 1))
+    dt = np.full(n, 0.040)  # 25 Hz: a 0.12 s step is 3 input steps, not a hole
+    dt[200] = 0.12
+    est.update_batch(acc, np.zeros((n, 3)), dt)
+    assert est.holes == 0
+    dt[300] = 0.2
+    est.reset()
+    est.update_batch(acc, np.zeros((n, 3)), dt)
+    assert est.holes == 1
+
+
+def test_restart_keeps_the_bias_estimate_and_heading_reset_forgets_them():
+    n = 200 * 10
+    acc, _ = _tilted_rest(n)
+    gyr = np.tile(np.radians([3.0, -2.0, 0.0]), (n, 1))
+    est = RiannEstimator()
+    est.update_batch(acc, gyr, np.full(n, 0.005))
+    b = est.diagnostics()["gyro bias estimate (deg/s)"]
+    est.restart()
+    assert est.diagnostics()["gyro bias estimate (deg/s)"] == b
+    est.reset()
+    assert "gyro bias estimate (deg/s)" not in est.diagnostics()
