@@ -269,7 +269,7 @@ class EstimatorStream:
         if not r.accepted:
             return None, r
         if r.reset is not None:
-            self.estimator.restart()
+            self.estimator.reset()
         q = self.estimator.update(acc, gyr, r.dt)
         if not _is_unit(q):
             return None, self._fault(r)
@@ -305,7 +305,7 @@ class EstimatorStream:
         for lo, hi in itertools.pairwise(bounds):
             seg = idx[lo:hi]
             if len(seg) and seg[0] in starts:
-                self.estimator.restart()
+                self.estimator.reset()
             self._run_segment(seg, acc, gyr, dts, out, accepted)
         return out, accepted
 

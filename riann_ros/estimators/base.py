@@ -83,13 +83,6 @@ class AttitudeEstimator(ABC):
     def reset(self) -> None:
         """Forget the state; the next sample initialises the filter again."""
 
-    def restart(self) -> None:
-        """Start again after a break in the stream (a gap longer than ``max_dt``, a clock jump).
-
-        Default: :meth:`reset`. An estimator may keep what stays true across a break (RIANN keeps its
-        gyro-bias and rate estimates)."""
-        self.reset()
-
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
         """Process one sample and return the attitude quaternion ``[w, x, y, z]``."""
         return self.update_batch(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])[0]

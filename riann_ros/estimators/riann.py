@@ -28,8 +28,8 @@ stages around it, each causal, with one output per input sample at that sample's
 runs means that rotation during the hole is unknown. The grid bridges the hole by interpolation, and
 a second network starts from a fresh state after it; once it has run ``RESTART_WARMUP`` (1 s: the
 network's start-up convergence) its state replaces the old one, which would otherwise take several
-seconds to shed the error the hole left. Steps longer than the stream's ``max_dt`` restart the
-estimator through :meth:`restart`, which keeps the bias estimate and the rate estimate.
+seconds to shed the error the hole left. Steps longer than the stream's ``max_dt`` reset the whole
+estimator (the input gate's ``gap`` restart; the live evaluator relies on it to separate replays).
 
 ``rate_adaptation=false`` is the direct path: every sample is one network row with its own dt
 (stages 1 and 4 still apply).
