@@ -178,7 +178,6 @@ class RiannEstimator(AttitudeEstimator):
         self._bias: GyroBiasFrontEnd | None = None
         self._psi = 0.0  # heading offset of the output (rad)
         self._qc_prev: Quat | None = None  # previous carried network attitude (heading stage)
-        self.restarts = 0
         self.holes = 0
         self.samples = 0  # input samples taken since reset
         self.rows = 0  # network steps run since reset (compute per sample = rows / samples)
@@ -187,8 +186,6 @@ class RiannEstimator(AttitudeEstimator):
 
     def restart(self) -> None:
         """Start the network afresh at the next sample; keep the bias and rate estimates and the heading."""
-        if getattr(self, "_hist", None) is not None and self._rate is not None:
-            self.restarts += 1
         self._h = np.zeros(HIDDEN_SHAPE, dtype=np.float32)
         self._h_cand: np.ndarray | None = None  # the fresh network after a hole
         self._warm = 0  # rows the fresh network still runs before it takes over
@@ -265,27 +262,25 @@ class RiannEstimator(AttitudeEstimator):
         assert rate is not None
         self._hist.append(self._t, x)
         bias = self._bias_now()
-        delta = self._increment(t_prev, bias, rate.irregular)
+        delta = self._gyro_rotation(t_prev, bias, rate.irregular)
         last = self._emit_rows(rows, rate)
         if self._fork_pending:
             self._fork_pending = False
             self.holes += 1
             rows.append(FORK)
             self._warm = max(1, math.ceil(self.params["restart_warmup"] / rate.step))
-        rot = IDENTITY_T
-        if self._t > self._t_net + TIME_EPS_NS:
-            g = self._hist.mean(self._t_net, self._t, rate.irregular, 3, 6)
-            s = (self._t - self._t_net) * 1e-9
-            rot = _rotvec((g[0] - bias[0]) * s, (g[1] - bias[1]) * s, (g[2] - bias[2]) * s)
+        rot = self._gyro_rotation(self._t_net, bias, rate.irregular, TIME_EPS_NS)
         self._hist.trim(self._t_net - max(rate.box_width() * 1e9, rate.step * 1e9) - 1.0)
         plan.add(last, rot, delta)
 
-    def _increment(self, t_prev: float, bias: tuple[float, float, float], means: bool) -> Quat:
-        """Rotation by the bias-corrected gyro from the previous sample to the newest one."""
-        if self._t <= t_prev:
+    def _gyro_rotation(self, t0: float, bias: tuple[float, float, float], means: bool, eps: float = 0.0) -> Quat:
+        """Rotation by the bias-corrected gyro from ``t0`` (ns) to the newest sample; identity when ``t0``
+        is not more than ``eps`` before it. Serves both the heading increment (from the previous sample)
+        and the carry-forward (from the last grid point)."""
+        if self._t <= t0 + eps:
             return IDENTITY_T
-        g = self._hist.mean(t_prev, self._t, means, 3, 6)
-        s = (self._t - t_prev) * 1e-9
+        g = self._hist.mean(t0, self._t, means, 3, 6)
+        s = (self._t - t0) * 1e-9
         return _rotvec((g[0] - bias[0]) * s, (g[1] - bias[1]) * s, (g[2] - bias[2]) * s)
 
     def _emit_rows(self, rows: list[Row], rate: RateTracker) -> int:
