@@ -13,8 +13,9 @@ Decided behaviour (documented in the README, "Bad input"):
 * stamp earlier than the previous one by at most ``max_dt`` → rejected (``stamp_backwards``);
 * stamp earlier by more than ``max_dt`` (a bag replayed in a loop, a restarted driver, the ROS clock
   jumping back) → estimator reset (``clock_jump``), the sample re-initialises it;
-* stamp later than the previous one by more than ``max_dt`` (a gap) → estimator reset (``gap``), the
-  sample re-initialises it;
+* stamp later than the previous one by more than ``max_dt`` (a gap) → estimator restart (``gap``:
+  :meth:`~riann_ros.estimators.base.AttitudeEstimator.on_gap`, a reset unless the estimator keeps
+  what a gap does not change, as RIANN keeps its gyro-bias estimate), the sample re-initialises it;
 * the first sample after a (re)start gets dt = 1 / ``nominal_rate``;
 * a zero stamp (drivers that do not stamp) → the receive time is used instead, warned once
   (``zero_stamp``); with no receive time (offline) such a sample is rejected;
@@ -269,11 +270,17 @@ class EstimatorStream:
         if not r.accepted:
             return None, r
         if r.reset is not None:
-            self.estimator.reset()
+            self._restart(r.reset)
         q = self.estimator.update(acc, gyr, r.dt)
         if not _is_unit(q):
             return None, self._fault(r)
         return q, r
+
+    def _restart(self, cause: str) -> None:
+        if cause == GAP:
+            self.estimator.on_gap()
+        else:
+            self.estimator.reset()
 
     def _fault(self, r: GateResult) -> GateResult:
         # Never publish garbage: an estimator output that is not a finite unit quaternion restarts it.
@@ -304,19 +311,19 @@ class EstimatorStream:
             bounds.insert(0, 0)  # continuing a sequence begun by an earlier call
         for lo, hi in itertools.pairwise(bounds):
             seg = idx[lo:hi]
-            if len(seg) and seg[0] in starts:
-                self.estimator.reset()
+            if len(seg) and int(seg[0]) in starts:
+                self._restart(starts[int(seg[0])])
             self._run_segment(seg, acc, gyr, dts, out, accepted)
         return out, accepted
 
     def _gate_batch(
         self, stamps: NDArray[np.int64], acc: NDArray[np.float64], gyr: NDArray[np.float64]
-    ) -> tuple[NDArray[np.bool_], NDArray[np.float64], list[int]]:
-        """The gate over a sequence: (accepted mask, dts, indices where the estimator restarts)."""
+    ) -> tuple[NDArray[np.bool_], NDArray[np.float64], dict[int, str]]:
+        """The gate over a sequence: (accepted mask, dts, {index where the estimator restarts: cause})."""
         n = len(stamps)
         accepted = np.zeros(n, dtype=bool)
         dts = np.zeros(n)
-        starts: list[int] = []
+        starts: dict[int, str] = {}
         gate = self.gate
         i = 0
         while i < n:
@@ -333,7 +340,7 @@ class EstimatorStream:
                 accepted[i] = True
                 dts[i] = r.dt
                 if r.reset is not None:
-                    starts.append(i)
+                    starts[i] = r.reset
             i += 1
         return accepted, dts, starts
 

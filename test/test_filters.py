@@ -59,7 +59,8 @@ def test_registry(name: str) -> None:
     assert {MadgwickEstimator, MahonyEstimator, VqfEstimator} >= {cls}
     for spec in cls.PARAMS:
         assert spec.validate(spec.default) == spec.default
-        assert spec.runtime or spec.name == "bias_clip"  # VQF has no setter for biasClip
+        # VQF has no setter for biasClip; the front end is set up at the first sample
+        assert spec.runtime or spec.name in ("bias_clip", "gyro_bias_estimation", "bias_sigma_init")
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -164,8 +165,10 @@ def test_vqf_bool_params() -> None:
 
 
 def test_defaults() -> None:
-    assert MadgwickEstimator().params == {"beta": DEFAULT_BETA} == {"beta": 0.033}
-    assert MahonyEstimator().params == {"kp": DEFAULT_KP, "ki": DEFAULT_KI} == {"kp": 1.0, "ki": 0.3}
+    front_end = {"gyro_bias_estimation": False, "bias_clip": 8.0, "bias_sigma_init": 3.0}
+    assert MadgwickEstimator().params == {"beta": DEFAULT_BETA, **front_end} == {"beta": 0.033, **front_end}
+    assert MahonyEstimator().params == {"kp": DEFAULT_KP, "ki": DEFAULT_KI, **front_end} == {
+        "kp": 1.0, "ki": 0.3, **front_end}
     from vqf import VQF
 
     p = VQF(0.01).params
@@ -256,6 +259,30 @@ def test_mahony_estimates_gyro_bias() -> None:
     est = MahonyEstimator()
     est.update_batch(np.tile([0.0, 0.0, G], (n, 1)), np.tile(bias, (n, 1)), np.full(n, 1.0 / rate))
     np.testing.assert_allclose(est.bias[:2], bias[:2], atol=1e-4)
+
+
+@pytest.mark.parametrize("name", ("madgwick", "mahony"))
+def test_gyro_bias_front_end_removes_a_turn_on_bias(name: str) -> None:
+    """Tilted rest with a (3, 3, 0) °/s gyro bias: the filter alone tilts away (Mahony with its own
+    integral term off); with the front end it stays within 1°, and the bias shows in the diagnostics."""
+    n, rate = 100 * 30, 100.0
+    q_true = quat.from_rotvec([np.radians(20.0), 0.0, 0.0])
+    acc = np.tile(quat.rotate(quat.conjugate(q_true), [0.0, 0.0, G]), (n, 1))
+    gyr = np.tile(np.radians([3.0, 3.0, 0.0]), (n, 1))
+    dt = np.full(n, 1.0 / rate)
+    extra = {"ki": 0.0} if name == "mahony" else {}
+    plain = create(name, **extra)
+    fe = create(name, gyro_bias_estimation=True, **extra)
+    err_plain = heading_free_angle_deg(q_true, plain.update_batch(acc, gyr, dt)[-500:]).max()
+    q_fe = fe.update_batch(acc, gyr, dt)
+    err_fe = heading_free_angle_deg(q_true, q_fe[-500:]).max()
+    assert err_fe < 1.0 and err_plain > 3.0, (err_fe, err_plain)
+    shown = [float(v) for v in fe.diagnostics()["gyro bias estimate (deg/s)"].split(",")]
+    np.testing.assert_allclose(shown, [3.0, 3.0, 0.0], atol=0.3)
+    # per sample equals batch
+    one = create(name, gyro_bias_estimation=True, **extra)
+    q_one = np.array([one.update(acc[i], gyr[i], dt[i]) for i in range(600)])
+    np.testing.assert_allclose(q_one, q_fe[:600], atol=1e-9)
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -280,3 +280,24 @@ def test_restart_keeps_the_bias_estimate_and_heading_reset_forgets_them():
     assert est.diagnostics()["gyro bias estimate (deg/s)"] == b
     est.reset()
     assert "gyro bias estimate (deg/s)" not in est.diagnostics()
+
+
+def test_a_gap_longer_than_max_dt_keeps_the_bias_estimate_a_clock_jump_forgets_it():
+    from riann_ros.stream import EstimatorStream, GateConfig
+
+    n = 200 * 10
+    acc, _ = _tilted_rest(n)
+    gyr = np.tile(np.radians([3.0, -2.0, 0.0]), (n, 1))
+    stamps = (np.arange(n) * 5_000_000).astype(np.int64)
+    s = EstimatorStream(RiannEstimator(), GateConfig(nominal_rate=200.0, max_dt=0.5))
+    s.process_batch(stamps, acc, gyr)
+    learned = np.array(s.estimator._bias_now())
+    assert np.abs(np.degrees(learned) - [3.0, -2.0, 0.0]).max() < 0.5
+    # 1 s later: a gap (messages lost, same sensor)
+    q, r = s.process(int(stamps[-1]) + 1_000_000_000, acc[0], gyr[0])
+    assert r.reset == "gap" and q is not None
+    assert np.abs(np.array(s.estimator._bias_now()) - learned).max() < math.radians(0.05)
+    # 10 s back: a clock jump (a bag loop, a new recording)
+    q, r = s.process(int(stamps[-1]) - 10_000_000_000, acc[0], gyr[0])
+    assert r.reset == "clock_jump" and q is not None
+    assert np.abs(np.degrees(s.estimator._bias_now())).max() < 0.5

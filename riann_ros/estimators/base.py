@@ -83,6 +83,11 @@ class AttitudeEstimator(ABC):
     def reset(self) -> None:
         """Forget the state; the next sample initialises the filter again."""
 
+    def on_gap(self) -> None:
+        """The stream resumes after a stamp gap longer than the gate's ``max_dt`` (messages lost, the
+        sensor the same). Default: :meth:`reset`; an estimator may keep what the gap does not change."""
+        self.reset()
+
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
         """Process one sample and return the attitude quaternion ``[w, x, y, z]``."""
         return self.update_batch(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])[0]

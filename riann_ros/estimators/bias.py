@@ -30,9 +30,48 @@ from numpy.typing import ArrayLike
 from vqf import VQF
 
 from riann_ros.estimators.base import Array
+from riann_ros.params import ParamSpec
 
 DEFAULT_CLIP = 8.0  # °/s
 DEFAULT_SIGMA_INIT = 3.0  # °/s
+FALLBACK_TS = 0.01  # s, the front end's sample time when the first dt is unusable
+
+
+def front_end_params(default_on: bool, what: str) -> tuple[ParamSpec, ...]:
+    """The front end's parameters, for an estimator that offers it (``what`` names the filter behind)."""
+    return (
+        ParamSpec("gyro_bias_estimation", default_on,
+                  f"Subtract a causal gyro-bias estimate (VQF's rest and motion bias estimation) from the gyro "
+                  f"before {what}. The estimate appears in /diagnostics."),
+        ParamSpec("bias_clip", DEFAULT_CLIP, "deg/s; largest gyro bias the front end estimates (VQF biasClip).",
+                  min=0.1, max=100.0),
+        ParamSpec("bias_sigma_init", DEFAULT_SIGMA_INIT,
+                  "deg/s; prior std of the turn-on gyro bias (VQF biasSigmaInit).", min=0.0, max=100.0),
+    )
+
+
+class FrontEndSlot:
+    """A front end that starts at an estimator's first sample (``ts`` = that sample's dt) and takes the
+    raw samples with their own dt, for filters fed at the stream's steps (Madgwick, Mahony)."""
+
+    def __init__(self, params: dict) -> None:
+        self.on = bool(params["gyro_bias_estimation"])
+        self.clip = float(params["bias_clip"])
+        self.sigma_init = float(params["bias_sigma_init"])
+        self.fe: GyroBiasFrontEnd | None = None
+
+    def debias(self, acc: Array, gyr: Array, dt: Array) -> Array:
+        """The gyro minus the bias known before each sample (``gyr`` itself when off)."""
+        if not self.on or len(gyr) == 0:
+            return gyr
+        if self.fe is None:
+            ts = float(dt[0]) if 0.0 < dt[0] < 1.0 else FALLBACK_TS
+            self.fe = GyroBiasFrontEnd(ts, self.clip, self.sigma_init)
+        return gyr - self.fe.update_batch(acc, gyr, dt)
+
+    @property
+    def bias(self) -> tuple[float, float, float]:
+        return self.fe.bias if self.fe is not None else (0.0, 0.0, 0.0)
 
 
 class GyroBiasFrontEnd:

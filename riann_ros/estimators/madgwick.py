@@ -31,7 +31,8 @@ import math
 from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.common import Quat, as_array, initialise, sanitize
+from riann_ros.estimators.bias import FrontEndSlot, front_end_params
+from riann_ros.estimators.common import BIAS_KEY, Quat, as_array, bias_text, initialise, sanitize_arrays
 
 #: ahrs 0.4.0 ``Madgwick`` default ``gain_imu`` (IMU/6D mode); Madgwick's report gives β = √(3/4)·ω̃ with
 #: ω̃ the gyro measurement error, and 0.033 corresponds to ω̃ ≈ 2.2°/s.
@@ -102,16 +103,22 @@ class MadgwickEstimator(AttitudeEstimator):
             max=10.0,
             runtime=True,
         ),
+        *front_end_params(False, "the filter"),
     )
 
     def reset(self) -> None:
         self._q: Quat | None = None
+        self._fe = FrontEndSlot(self.params)
 
     @property
     def initialized(self) -> bool:
         return self._q is not None
 
+    def diagnostics(self) -> dict[str, str]:
+        return {BIAS_KEY: bias_text(self._fe.bias)} if self._fe.on else {}
+
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
-        a, g, h = sanitize(acc, gyr, dt)
-        self._q, out = _madgwick_run(self._q, a, g, h, float(self.params["beta"]))
+        a, g, h = sanitize_arrays(acc, gyr, dt)
+        g = self._fe.debias(a, g, h)
+        self._q, out = _madgwick_run(self._q, a.tolist(), g.tolist(), h.tolist(), float(self.params["beta"]))
         return as_array(out)

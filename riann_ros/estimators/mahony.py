@@ -24,7 +24,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.common import BIAS_KEY, Quat, as_array, bias_text, initialise, sanitize
+from riann_ros.estimators.bias import FrontEndSlot, front_end_params
+from riann_ros.estimators.common import BIAS_KEY, Quat, as_array, bias_text, initialise, sanitize_arrays
 
 #: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
 DEFAULT_KP = 1.0
@@ -111,11 +112,13 @@ class MahonyEstimator(AttitudeEstimator):
             max=10.0,
             runtime=True,
         ),
+        *front_end_params(False, "the filter (its own integral term then tracks what is left)"),
     )
 
     def reset(self) -> None:
         self._q: Quat | None = None
         self._b: Vec = (0.0, 0.0, 0.0)
+        self._fe = FrontEndSlot(self.params)
 
     @property
     def initialized(self) -> bool:
@@ -123,15 +126,16 @@ class MahonyEstimator(AttitudeEstimator):
 
     @property
     def bias(self) -> Array:
-        """Current gyro-bias estimate (rad/s, sensor frame)."""
-        return np.array(self._b)
+        """Current gyro-bias estimate (rad/s, sensor frame): the front end's plus the integral term's."""
+        return np.array(self._b) + np.array(self._fe.bias)
 
     def diagnostics(self) -> dict[str, str]:
-        return {BIAS_KEY: bias_text(self._b)}
+        return {BIAS_KEY: bias_text(self.bias)}
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
-        a, g, h = sanitize(acc, gyr, dt)
+        a, g, h = sanitize_arrays(acc, gyr, dt)
+        g = self._fe.debias(a, g, h)
         self._q, self._b, out = _mahony_run(
-            self._q, self._b, a, g, h, float(self.params["kp"]), float(self.params["ki"])
+            self._q, self._b, a.tolist(), g.tolist(), h.tolist(), float(self.params["kp"]), float(self.params["ki"])
         )
         return as_array(out)

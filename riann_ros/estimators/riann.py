@@ -26,10 +26,11 @@ stages around it, each causal, with one output per input sample at that sample's
 
 **Holes.** A stamp step longer than ``restart_gap`` (and than four input steps) while the network
 runs means that rotation during the hole is unknown. The grid bridges the hole by interpolation, and
-a second network starts from a fresh state after it; once it has run ``RESTART_WARMUP`` (1 s: the
-network's start-up convergence) its state replaces the old one, which would otherwise take several
-seconds to shed the error the hole left. Steps longer than the stream's ``max_dt`` reset the whole
-estimator (the input gate's ``gap`` restart; the live evaluator relies on it to separate replays).
+a second network starts after it from a fresh state; after ``restart_warmup`` (default 0: at once)
+its state replaces the old one, which would otherwise take several seconds to shed the error the hole
+left. Steps longer than the stream's ``max_dt`` (the input gate's ``gap``) start a fresh network
+without the bridge (:meth:`RiannEstimator.on_gap`); the bias estimate, the rate estimate and the
+heading carry on across both. A clock jump, a fault or ``~/reset`` reset everything.
 
 ``rate_adaptation=false`` is the direct path: every sample is one network row with its own dt
 (stages 1 and 4 still apply).
@@ -51,7 +52,7 @@ from numpy.typing import ArrayLike
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.bias import DEFAULT_CLIP, DEFAULT_SIGMA_INIT, GyroBiasFrontEnd
+from riann_ros.estimators.bias import GyroBiasFrontEnd, front_end_params
 from riann_ros.estimators.common import BIAS_KEY, bias_text
 from riann_ros.estimators.grid import DT_MIN, REL_EPS, RateTracker, SignalHistory
 
@@ -150,16 +151,7 @@ class RiannEstimator(AttitudeEstimator):
             "Run the network on its own constant-rate grid (2-5 ms) resampled causally from the input, "
             "whatever its rate, jitter or dropouts. Off: every sample goes straight into the network.",
         ),
-        ParamSpec(
-            "gyro_bias_estimation",
-            True,
-            "Subtract a causal gyro-bias estimate (VQF's rest and motion bias estimation) from the gyro "
-            "before the network. The estimate appears in /diagnostics.",
-        ),
-        ParamSpec("bias_clip", DEFAULT_CLIP, "deg/s; largest gyro bias the front end estimates (VQF biasClip).",
-                  min=0.1, max=100.0),
-        ParamSpec("bias_sigma_init", DEFAULT_SIGMA_INIT,
-                  "deg/s; prior std of the turn-on gyro bias (VQF biasSigmaInit).", min=0.0, max=100.0),
+        *front_end_params(True, "the network"),
         ParamSpec("restart_gap", 0.1,
                   "s; after a stamp step longer than this (and than 4 input steps) a fresh network takes "
                   "over after restart_warmup. 0 = never.", min=0.0, max=3600.0),
@@ -183,6 +175,11 @@ class RiannEstimator(AttitudeEstimator):
         self.rows = 0  # network steps run since reset (compute per sample = rows / samples)
         self.restart()
         self._qc_prev = None
+
+    def on_gap(self) -> None:
+        """A stamp gap longer than the gate's ``max_dt``: the sensor is the same, so its bias, rate and
+        the heading carry on; the network starts afresh (no bridge over such a gap)."""
+        self.restart()
 
     def restart(self) -> None:
         """Start the network afresh at the next sample; keep the bias and rate estimates and the heading."""

@@ -30,7 +30,7 @@ from riann_ros.recording import Recording
 from riann_ros.stream import GateConfig
 
 LIVE_NS = "/riann_eval"
-LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt): each replay restarts them
+LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt), besides the ~/reset call
 IDLE_S = 5.0  # give up waiting for outputs after this long without a new one
 
 Output = tuple[int, float, float, float, float]  # stamp_ns, w, x, y, z
@@ -72,8 +72,9 @@ class LiveRunner:
     Without ``topics`` the runner starts ``<name>_node`` per spec (input remapped to
     ``/riann_eval/imu/data_raw``, output to ``/riann_eval/e<i>/attitude``, reliable QoS) with the
     sequence's rate as ``nominal_rate``; with ``topics`` they name the attitude topics of nodes already
-    running on ``input_topic``. Consecutive replays are separated by a stamp gap larger than the nodes'
-    ``max_dt`` so every replay starts the estimators afresh, as offline. Publishing is paced at ``speed``
+    running on ``input_topic``. Before each replay the started nodes' ``~/reset`` is called, so every
+    replay starts the estimators afresh, as offline; replays are also separated by a stamp gap larger
+    than the nodes' ``max_dt`` (all that separates them for external nodes). Publishing is paced at ``speed``
     × real time (0: as fast as the slowest node keeps up) with at most ``window`` samples in flight.
     One replay at a time: a pass over the input per scenario (``interleaved = False``).
     """
@@ -200,8 +201,29 @@ class LiveRunner:
         self._thread.join(2)
 
     # -- runs -----------------------------------------------------------------------------------
+    def _reset_nodes(self, specs: list[EstimatorSpec], timeout: float = 10.0) -> None:
+        """Call every started node's ``~/reset``: each replay starts them afresh, as offline (a stamp gap
+        alone would not: RIANN keeps its gyro-bias estimate across gaps)."""
+        from std_srvs.srv import Trigger
+
+        for i, spec in enumerate(specs):
+            client = self.node.create_client(Trigger, f"/riann_eval_{i}_{spec.name}/reset")
+            try:
+                if not client.wait_for_service(timeout_sec=timeout):
+                    raise EvalError(f"--live: {spec.name}_node offers no ~/reset service")
+                future = client.call_async(Trigger.Request())
+                end = time.monotonic() + timeout
+                while not future.done() and time.monotonic() < end:
+                    time.sleep(0.002)
+                if not future.done():
+                    raise EvalError(f"--live: {spec.name}_node did not answer ~/reset")
+            finally:
+                self.node.destroy_client(client)
+
     def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> _LiveRun:
         self._ensure_nodes(specs, gate.nominal_rate)
+        if self.external is None:
+            self._reset_nodes(specs)
         for box in self.got:
             box.clear()
         return _LiveRun(self)
