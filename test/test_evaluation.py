@@ -184,6 +184,25 @@ def test_resample_signals_reference_and_mask():
     np.testing.assert_allclose(r.acc, 9.81 + smooth[::4][: len(r)], atol=1e-9)
 
 
+def test_resampled_stamps_are_the_times_of_the_resampled_samples():
+    """1001 samples at 200 Hz to 50 Hz: 250 samples span the 1001 samples' period, so they are
+    20.02 ms apart; stamps 20 ms apart would drift 5 ms from the samples by the end."""
+    from riann_ros.resample import resample_recording
+
+    rec = synthetic(rate=200.0, t0_ns=5_000_000_000).slice(0, 1001)
+    period = len(rec) / 200.0
+    t = np.arange(len(rec)) / 200.0
+    rec.gyr = np.column_stack([np.sin(2 * np.pi * k * t / period) for k in (3, 7, 11)])
+    r = resample_recording(rec, 50.0)
+    tk = (r.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    want = np.column_stack([np.sin(2 * np.pi * k * tk / period) for k in (3, 7, 11)])
+    np.testing.assert_allclose(r.gyr, want, atol=1e-6)
+    assert r.rate_hz == pytest.approx(50.0, rel=2e-3)
+    # the reference is taken at the same times
+    ref = resample_recording(rec, 200.0)  # every sample kept: the identity
+    np.testing.assert_array_equal(ref.stamps_ns, rec.stamps_ns)
+
+
 # -- scoring ------------------------------------------------------------------------------------------
 def test_score_inclination_ignores_heading():
     rec = synthetic()
