@@ -28,7 +28,14 @@ G = 9.81
         (0.020000000000000004, 0.005),  # a 20 ms step from ns stamps: 4 rows, not 5
         (0.040, 0.005),  # 25 Hz: 8 rows
         (0.001, 0.005),  # 1 kHz: blocks of 5 samples
-        (0.0015, 0.006),  # blocks of 4
+        (0.0015, 0.0045),  # blocks of 3
+        (0.0019, 0.0057),  # blocks of 3
+        (0.00099996, 0.0049998),  # a 1 kHz clock a little fast: still blocks of 5
+        (0.0050044, 0.0050044),  # a 200 Hz clock a little slow: still straight in, not up-sampled x2
+        (0.0055, 0.0055),  # 10 % slack
+        (0.0056, 0.0028),
+        (0.0100004, 0.0050002),  # 100 Hz a little slow: 2 rows, not 3
+        (0.0400043, 0.0400043 / 8),  # 25 Hz a little slow: 8 rows, not 9
     ],
 )
 def test_grid_step_keeps_samples_on_the_grid_inside_2_to_5_ms(d, step):

@@ -5,9 +5,12 @@ stamps jitter, messages drop, sensors run at 25 Hz or 1 kHz. The network therefo
 uniform time grid ``tau_m = anchor + m·T`` and never sees the input stamps directly:
 
 * :func:`choose_step` picks ``T`` from the input step ``d``: ``d`` itself inside 2 ms … ``STEP_UP``
-  (one row per sample, the samples go straight in), ``d / ceil(d / STEP_UP)`` for slower inputs
-  (integer up-sampling, grid points stay on the samples of a clean stream) and ``d · ceil(STEP_FAST / d)``
-  for inputs faster than 500 Hz (integer blocks of samples).
+  (one row per sample, the samples go straight in), ``d / k`` with ``k = ceil(d / STEP_UP)`` for
+  slower inputs (integer up-sampling, grid points stay on the samples of a clean stream) and
+  ``d · round(STEP_FAST / d)`` for inputs faster than 500 Hz (integer blocks of samples). ``STEP_UP``
+  may be exceeded by ``STEP_SLACK`` (10 %): a real 200 Hz or 100 Hz sensor runs a few ‰ off its
+  nominal rate, and a strict 5 ms limit would up-sample a 5.0004 ms stream ×2 (and a 10.0004 ms
+  stream ×3) instead of feeding it straight in (×2).
 * :class:`RateTracker` estimates ``d`` as the running median of the last ``window`` steps and switches
   ``T`` only when the candidate differs by more than ``hysteresis`` (relative) for ``window // 2``
   samples in a row, so jitter or a dropout never makes the grid flap. It also decides the signal
@@ -34,6 +37,7 @@ DT_MIN = 0.002  # s, 500 Hz: fastest step the network was trained for
 DT_MAX = 0.020  # s, 50 Hz: slowest
 STEP_UP = 0.005  # s: slower inputs are up-sampled to a grid step of at most this (200 Hz)
 STEP_FAST = 0.005  # s: inputs faster than 500 Hz are averaged in blocks of about this
+STEP_SLACK = 0.1  # relative: the up-sampled grid step may exceed STEP_UP by this much (clock drift)
 REL_EPS = 1e-6  # relative slack: a 20 ms step from ns stamps is 0.020000000000000004 s
 RATE_WINDOW = 64  # input steps in the running median
 HYSTERESIS = 0.1  # relative change of the grid step needed (for window // 2 samples) to switch
@@ -49,10 +53,11 @@ def choose_step(d: float, step_up: float = STEP_UP, step_fast: float = STEP_FAST
     if not d > 0.0 or not math.isfinite(d):
         raise ValueError(f"input step must be positive and finite, got {d}")
     if d < DT_MIN * (1.0 - REL_EPS):
-        return d * math.ceil(step_fast / d - REL_EPS)
-    if d <= step_up * (1.0 + REL_EPS):
+        return d * max(math.ceil(DT_MIN / d - REL_EPS), round(step_fast / d))
+    limit = step_up * (1.0 + STEP_SLACK)
+    if d <= limit * (1.0 + REL_EPS):
         return d
-    return d / math.ceil(d / step_up - REL_EPS)
+    return d / math.ceil(d / limit - REL_EPS)
 
 
 class RateTracker:

@@ -12,8 +12,8 @@ stages around it, each causal, with one output per input sample at that sample's
    estimator runs on the network's input rows; the bias known before a row is subtracted from its
    gyro, and from the gyro used in stages 3 and 4.
 2. **Constant-rate grid** (:mod:`~riann_ros.estimators.grid`): the network runs at a constant step
-   ``T`` chosen from a running median of the input steps with hysteresis (2–5 ms: the samples go
-   straight in; slower inputs are up-sampled to ≤ 5 ms, faster ones averaged in blocks of ~5 ms);
+   ``T`` chosen from a running median of the input steps with hysteresis (2–5.5 ms: the samples go
+   straight in; slower inputs are up-sampled to ≤ 5.5 ms, faster ones averaged in blocks of ~5 ms);
    each grid value is resampled causally from the samples up to that stamp (linear interpolation of
    point samples; irregular streams are read as interval means).
 3. **Carry-forward**: a sample's attitude is the latest network output (at a grid point at or before
@@ -148,7 +148,7 @@ class RiannEstimator(AttitudeEstimator):
         ParamSpec(
             "rate_adaptation",
             True,
-            "Run the network on its own constant-rate grid (2-5 ms) resampled causally from the input, "
+            "Run the network on its own constant-rate grid (2-5.5 ms) resampled causally from the input, "
             "whatever its rate, jitter or dropouts. Off: every sample goes straight into the network.",
         ),
         *front_end_params(True, "the network"),
