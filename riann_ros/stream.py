@@ -5,7 +5,7 @@ dt; :class:`EstimatorStream` couples a gate with an estimator. The node base fee
 time; the evaluator feeds whole sequences through :meth:`EstimatorStream.process_batch`, which gives
 the same numbers as the per-sample path. So an offline score is a score of what the node does.
 
-Decided behaviour (documented in the README, "Bad input"):
+Decided behaviour (documented in docs/node.md, "Bad input"):
 
 * non-finite acc or gyr → rejected (``non_finite``), state untouched;
 * |acc| > ``max_acc`` or |gyr| > ``max_gyr`` → rejected (``out_of_range``), state untouched;

@@ -205,9 +205,9 @@ DT_ANY = st.one_of(DT_OK, st.sampled_from([0.0, -0.01, math.nan, math.inf, -math
 
 @pytest.mark.parametrize("name", ["madgwick", "mahony", "vqf"])
 def test_filters_documented_degenerate_input_gives_unit_quaternions(name):
-    """README (filters): non-finite acc → zero, non-finite gyr → zero rate, non-finite/negative dt → 0."""
+    """docs/filters.md: non-finite acc → zero, non-finite gyr → zero rate, non-finite/negative dt → 0."""
 
-    x = ANY_VQF if name == "vqf" else ANY  # Madgwick/Mahony: even 1e300 (README: output always unit)
+    x = ANY_VQF if name == "vqf" else ANY  # Madgwick/Mahony: even 1e300 (docs/filters.md: output always unit)
 
     @FAST
     @given(samples=st.lists(st.tuples(st.tuples(x, x, x), st.tuples(x, x, x), DT_ANY), min_size=1, max_size=25))

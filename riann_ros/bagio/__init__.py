@@ -1,6 +1,6 @@
 """rosbag2 bag I/O for IMU recordings (ROS-free: ``rosbags`` only, no rclpy).
 
-Bag layout (the evaluator reads exactly this; see README "Bags"):
+Bag layout (the evaluator reads exactly this; see docs/converter.md, "Bag layout"):
 
 * ``/imu/data_raw`` (``sensor_msgs/msg/Imu``): one message per IMU sample. Header stamp = log time =
   sample time; ``orientation_covariance[0] = -1`` (no orientation); ``angular_velocity`` rad/s,

@@ -23,7 +23,7 @@ gravity-aligned world, what this reader wants) have the same four numbers, so th
 The reference is slerp-interpolated onto the IMU stamps inside the ground truth's time span only
 (NaN outside it and across gaps longer than ``max_gap_s``).
 
-Assumption (documented in the README): the ground-truth quaternion is the orientation of the IMU
+Assumption (documented in docs/converter.md): the ground-truth quaternion is the orientation of the IMU
 frame with respect to a gravity-aligned world with z up. In EuRoC the ground truth describes the
 body frame, which coincides with the IMU frame ``imu0`` (its ``T_BS`` is the identity), and the
 reference frame ``R`` of ``state_groundtruth_estimate0`` is gravity aligned. For other ASL-format data

@@ -149,7 +149,8 @@ def plot_rmse_vs_rate(rows: Sequence[ResultRow], out_dir: Path, stem: str = "rms
     estimator and scenario. Only when several rates were evaluated."""
     plt = _plt()
     rows = [r for r in rows if r.resampled and r.perturbation == NONE]
-    rates = sorted({r.rate_hz for r in rows})
+    # the requested rate: a resampled sequence's own rate_hz differs from it by < 1 / its length
+    rates = sorted({float(r.rate) for r in rows})
     if len(rates) < 2:
         return []
     scenarios = scenario_order(r.scenario for r in rows)
@@ -159,7 +160,7 @@ def plot_rmse_vs_rate(rows: Sequence[ResultRow], out_dir: Path, stem: str = "rms
     for ax, scn in zip(axes[0], scenarios, strict=True):
         for est in ests:
             vals = [
-                [r.rmse_deg for r in rows if r.scenario == scn and r.estimator == est and r.rate_hz == f]
+                [r.rmse_deg for r in rows if r.scenario == scn and r.estimator == est and float(r.rate) == f]
                 for f in rates
             ]
             mean = [np.mean(v) if v else np.nan for v in vals]
