@@ -199,9 +199,10 @@ def test_burst_of_500_after_a_pause_is_processed_whole_and_in_order(ros, start_n
     s, a, g = motion(550)
     msgs = [imu_msg(x, y, z) for x, y, z in zip(s, a, g, strict=True)]
     # Best effort: messages sent before the node's reader has matched this writer are lost. Prime
-    # until one gets through (stamped 10 s earlier, so the real stream starts with a gap restart,
-    # exactly like a fresh estimator), then forget the priming output.
-    prime = imu_msg(s[0] - 10_000_000_000, a[0], g[0])
+    # until one gets through (stamped 10 s later, so the real stream starts with a clock-jump reset,
+    # exactly like a fresh estimator; a gap would keep RIANN's bias estimate), then forget the priming
+    # output.
+    prime = imu_msg(s[0] + 10_000_000_000, a[0], g[0])
     wait_for(lambda: pub.publish(prime) or time.sleep(0.05) or len(att.messages) > 0, 20, "a first output")
     time.sleep(0.3)
     att.messages.clear()
