@@ -19,6 +19,9 @@ class Recording:
     ``score_mask``: (N,) bool, samples to be scored (e.g. BROAD's ``movement``); all True when unknown.
     ``name``: sequence name; ``dataset``: dataset/group name; ``source``: citation or origin;
     ``frame_id``: sensor frame; ``meta``: free-form extra metadata (str → str).
+    ``mag``: (N, 3) float64 magnetic field in tesla (REP-145), sensor frame, the magnetometer sample
+    stamped like the IMU sample; NaN rows where there is none; ``None`` when the recording has no
+    magnetometer.
     """
 
     stamps_ns: NDArray[np.int64]
@@ -31,6 +34,7 @@ class Recording:
     source: str = ""
     frame_id: str = "imu_link"
     meta: dict[str, str] = field(default_factory=dict)
+    mag: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.stamps_ns)
@@ -39,6 +43,8 @@ class Recording:
         self.gyr = np.asarray(self.gyr, dtype=np.float64).reshape(n, 3)
         if self.quat_ref is not None:
             self.quat_ref = np.asarray(self.quat_ref, dtype=np.float64).reshape(n, 4)
+        if self.mag is not None:
+            self.mag = np.asarray(self.mag, dtype=np.float64).reshape(n, 3)
         if self.score_mask is None:
             self.score_mask = np.ones(n, dtype=bool)
         self.score_mask = np.asarray(self.score_mask, dtype=bool).reshape(n)
@@ -76,4 +82,5 @@ class Recording:
             source=self.source,
             frame_id=self.frame_id,
             meta=dict(self.meta),
+            mag=None if self.mag is None else self.mag[s].copy(),
         )

@@ -43,7 +43,10 @@ def resample_recording(rec: Recording, rate_hz: float) -> Recording:
         ref = np.full((n1, 4), np.nan)
         ref[ok] = quat.slerp(a[ok], b[ok], s[ok])
     mask = rec.score_mask[np.clip(np.round(pos).astype(int), 0, n0 - 1)]
+    mag = None
+    if rec.mag is not None:  # FFT like acc when complete, else the latest field sample (holes stay holes)
+        mag = fft_resample(rec.mag, n1, axis=0) if np.isfinite(rec.mag).all() else rec.mag[np.floor(pos).astype(int)]
     stamps = rec.stamps_ns[0] + np.round(t1).astype(np.int64)
     meta = dict(rec.meta, resampled_from_hz=repr(f0), sampling_rate=repr(rate_hz))
     return Recording(stamps_ns=stamps, acc=acc, gyr=gyr, quat_ref=ref, score_mask=mask, name=rec.name,
-                     dataset=rec.dataset, source=rec.source, frame_id=rec.frame_id, meta=meta)
+                     dataset=rec.dataset, source=rec.source, frame_id=rec.frame_id, meta=meta, mag=mag)

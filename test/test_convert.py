@@ -340,3 +340,24 @@ def test_cli_euroc_units_checked(tmp_path: Path, capsys: pytest.CaptureFixture[s
     err = capsys.readouterr().err
     assert "median |acc| 1 m/s²" in err and "euroc format fixes the units (ns stamps" in err and not out.exists()
     assert main([str(tmp_path / "seq"), "-o", str(out), "--force-units", "-q"]) == 0
+
+
+def test_cli_csv_magnetometer_columns_units_and_gaps(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """mag_x,mag_y,mag_z are read when present (µT by default), stored in tesla, empty cells = no reading;
+    a field in gauss read as µT is refused and the message names --mag-unit G."""
+    csv = tmp_path / "m.csv"
+    rows = ["t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,mag_x,mag_y,mag_z"]
+    for k in range(200):
+        mag = "0.2,0.3,-0.25" if k % 4 == 0 else ",,"  # a magnetometer at a quarter of the IMU rate, in gauss
+        rows.append(f"{k * 0.01:.2f},0,0,9.81,0,0,0,{mag}")
+    csv.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "m.mcap"
+    assert main([str(csv), "-o", str(out), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "median |mag|" in err and "--mag-unit G" in err and not out.exists()
+    assert main([str(csv), "-o", str(out), "--mag-unit", "G", "-q"]) == 0
+    rec = bagio.read_recording(out)
+    assert rec.mag is not None
+    have = np.isfinite(rec.mag).all(axis=1)
+    assert np.array_equal(have, np.arange(200) % 4 == 0)
+    np.testing.assert_allclose(rec.mag[have], np.tile([20e-6, 30e-6, -25e-6], (50, 1)), rtol=1e-12)

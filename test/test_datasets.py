@@ -460,3 +460,34 @@ def test_units_rest_fallback_and_unit_tables() -> None:
     for table, scales in tables:
         for name, scale in table.items():
             assert scales[units.canonical_unit(name, scales)] == pytest.approx(scale), name
+
+
+@pytest.mark.parametrize(("scale", "unit", "suggest"), [(1.0, "T", None), (1e4, "T", "G"), (1e6, "T", "uT"),
+                                                        (1e9, "T", "nT"), (1e-2, "uT", "G")])
+def test_units_magnetic_field(scale: float, unit: str, suggest: str | None) -> None:
+    """Earth's field (45 µT) is plausible in tesla; the same numbers in another unit are named."""
+    from riann_ros.datasets.units import check_units
+
+    rec = _imu()
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(len(rec), 3))
+    rec.mag = 45e-6 * d / np.linalg.norm(d, axis=1, keepdims=True) * scale
+    rec.meta["mag_unit"] = unit
+    found = [f for f in check_units(rec) if f.check == "mag"]
+    if scale == 1.0:
+        assert found == []
+    else:
+        assert len(found) == 1 and found[0].option == "mag_unit"
+        assert found[0].suggest == suggest, found[0]
+
+
+@pytest.mark.broad
+def test_broad_magnetometer_in_tesla() -> None:
+    from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad
+
+    d = find_broad_dir()
+    if d is None:
+        pytest.skip("BROAD not found")
+    rec = read_broad(broad_files(d)[0])
+    assert rec.mag is not None and rec.mag.shape == (len(rec), 3)
+    assert 25e-6 < np.median(np.linalg.norm(rec.mag, axis=1)) < 65e-6

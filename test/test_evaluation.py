@@ -305,3 +305,19 @@ def test_tuning_finds_a_sensible_gain():
     res = ev.evaluate_source("synthetic", settings, recording=rec)
     best = ev.best_of(res.rows, specs, ev.PARTIAL)
     assert best["best"]["params"] == {"beta": 0.1}
+
+
+def test_resample_carries_the_magnetometer():
+    from riann_ros.resample import resample_recording
+
+    rec = synthetic(rate=200.0)
+    t = np.arange(len(rec)) / 200.0
+    period = len(rec) / 200.0
+    rec.mag = 40e-6 + 1e-6 * np.column_stack([np.sin(2 * np.pi * k * t / period) for k in (2, 5, 9)])
+    r = resample_recording(rec, 100.0)
+    tk = (r.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    want = 40e-6 + 1e-6 * np.column_stack([np.sin(2 * np.pi * k * tk / period) for k in (2, 5, 9)])
+    np.testing.assert_allclose(r.mag, want, atol=1e-12)  # band-limited: FFT keeps it
+    rec.mag[10:20] = np.nan  # holes: the latest sample at or before each new stamp, holes stay holes
+    r = resample_recording(rec, 100.0)
+    np.testing.assert_array_equal(r.mag[:30], rec.mag[0:60:2])

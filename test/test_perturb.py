@@ -123,3 +123,14 @@ def test_dropout_holes_start_in_motion_and_have_the_drawn_lengths():
     first_missing = [int(np.searchsorted(rec.stamps_ns, out.stamps_ns[h])) + 1 for h in holes]
     assert all(rec.score_mask[i] and rec.stamps_ns[i] not in kept for i in first_missing)  # starts in motion
     assert info["samples_removed"] == len(rec) - len(out)
+
+
+def test_magnetometer_follows_its_samples_through_dropout_and_jitter():
+    rec = linear()
+    rec.mag = np.column_stack([np.arange(len(rec)) * 1e-9, np.zeros(len(rec)), np.full(len(rec), 40e-6)])
+    out, _ = run(pt.parse_condition("dropout:0.1-0.6s@10s").parts[0], rec, chunks=[700, 1500], seed=2)
+    kept = np.searchsorted(rec.stamps_ns, out.stamps_ns)
+    assert len(out) < len(rec) and np.array_equal(out.mag, rec.mag[kept])
+    out, _ = run(pt.parse_condition("jitter:10/20/30ms").parts[0], rec, chunks=[700])
+    latest = np.searchsorted(rec.stamps_ns, out.stamps_ns, side="right") - 1  # at or before each new stamp
+    assert np.array_equal(out.mag, rec.mag[latest])

@@ -9,11 +9,15 @@ Bag layout (the evaluator reads exactly this; see docs/converter.md, "Bag layout
 * ``/ground_truth/attitude`` (``geometry_msgs/msg/QuaternionStamped``): reference orientation sensor →
   world (z up), stamped with the IMU sample it belongs to; written only where the reference is finite.
   ``frame_id`` = ``"world"``.
+* ``/imu/mag`` (``sensor_msgs/msg/MagneticField``, only for recordings with a magnetometer): the field
+  in tesla (REP-145), sensor frame, stamped with the IMU sample it belongs to, written only where it is
+  finite; covariance 0 (unknown).
 * ``/ground_truth/scored`` (``std_msgs/msg/Bool``): the score mask, written on change only: a sample
   is scored iff the last message with log time ≤ its stamp says ``True``. The first message is at
   the first sample. No such topic → every sample is scored.
 * ``/dataset/info`` (``std_msgs/msg/String``): one JSON message at the first sample's time with
-  ``format``, ``name``, ``dataset``, ``source``, ``frame_id``, ``samples``, ``rate_hz``, ``meta``. The
+  ``format``, ``name``, ``dataset``, ``source``, ``frame_id``, ``samples``, ``rate_hz``, ``has_reference``,
+  ``has_mag``, ``topics``, ``meta``. The
   same JSON is in ``metadata.yaml`` ``custom_data["riann_ros.info"]`` for directory bags.
 
 A "bag" is a rosbag2 directory (``metadata.yaml`` + one storage file) or, for a target path ending in
@@ -27,7 +31,7 @@ Everything public is re-exported here: use ``from riann_ros import bagio; bagio.
 
 from __future__ import annotations
 
-from riann_ros.bagio.cdr import imu_messages, parse_imu, parse_quats, quat_messages
+from riann_ros.bagio.cdr import imu_messages, mag_messages, parse_imu, parse_mags, parse_quats, quat_messages
 from riann_ros.bagio.layout import (
     BOOL_TYPE,
     COMPRESSIONS,
@@ -36,6 +40,8 @@ from riann_ros.bagio.layout import (
     INFO_FORMAT,
     INFO_KEY,
     INFO_TOPIC,
+    MAG_TOPIC,
+    MAG_TYPE,
     QUAT_TYPE,
     REF_TOPIC,
     SCORED_TOPIC,
@@ -57,6 +63,8 @@ __all__ = [
     "INFO_FORMAT",
     "INFO_KEY",
     "INFO_TOPIC",
+    "MAG_TOPIC",
+    "MAG_TYPE",
     "QUAT_TYPE",
     "REF_TOPIC",
     "SCORED_TOPIC",
@@ -70,7 +78,9 @@ __all__ = [
     "dataset_info",
     "imu_messages",
     "iter_imu_chunks",
+    "mag_messages",
     "parse_imu",
+    "parse_mags",
     "parse_quats",
     "quat_messages",
     "read_info",

@@ -11,7 +11,7 @@ import struct
 
 import numpy as np
 
-from riann_ros.bagio.layout import BOOL_TYPE, IMU_TYPE, QUAT_TYPE, STRING_TYPE, WORLD_FRAME, typestore
+from riann_ros.bagio.layout import BOOL_TYPE, IMU_TYPE, MAG_TYPE, QUAT_TYPE, STRING_TYPE, WORLD_FRAME, typestore
 from riann_ros.stamps import join_ns, split_ns, to_ns
 
 # Little-endian CDR of a message that starts with a std_msgs/Header: 4-byte encapsulation header (byte 1
@@ -76,6 +76,17 @@ def _quat_template(frame_id: str) -> tuple[np.ndarray, list[int]]:
     return np.frombuffer(buf, dtype=np.uint8), [_find(buf, m[k]) for k in range(6, 10)]
 
 
+def _mag_template(frame_id: str) -> tuple[np.ndarray, list[int]]:
+    """Serialised MagneticField bytes (covariance all 0: unknown) and the offsets of x, y, z."""
+    ts = typestore()
+    v3 = ts.types["geometry_msgs/msg/Vector3"]
+    m = _MARKERS
+    msg = ts.types[MAG_TYPE](header=_header(frame_id), magnetic_field=v3(x=m[0], y=m[1], z=m[2]),
+                             magnetic_field_covariance=np.zeros(9))
+    buf = bytes(ts.serialize_cdr(msg, MAG_TYPE))
+    return np.frombuffer(buf, dtype=np.uint8), [_find(buf, m[k]) for k in range(3)]
+
+
 def _patch_stamps(rows: np.ndarray, stamps_ns: np.ndarray) -> None:
     sec, nsec = split_ns(stamps_ns)
     rows[:, _SEC : _SEC + 4] = sec.astype("<i4").view(np.uint8).reshape(-1, 4)
@@ -105,6 +116,15 @@ def quat_messages(stamps_ns: np.ndarray, quats_wxyz: np.ndarray, frame_id: str =
     rows = np.tile(tpl, (len(stamps_ns), 1))
     _patch_stamps(rows, np.asarray(stamps_ns, dtype=np.int64))
     _patch_f64(rows, off, q[:, [1, 2, 3, 0]])
+    return rows
+
+
+def mag_messages(stamps_ns: np.ndarray, field_t: np.ndarray, frame_id: str) -> np.ndarray:
+    """(N, L) uint8 array, row i = CDR bytes of a MagneticField (tesla, sensor frame)."""
+    tpl, off = _mag_template(frame_id)
+    rows = np.tile(tpl, (len(stamps_ns), 1))
+    _patch_stamps(rows, np.asarray(stamps_ns, dtype=np.int64))
+    _patch_f64(rows, off, np.asarray(field_t, dtype=np.float64))
     return rows
 
 
@@ -198,3 +218,22 @@ def parse_quats(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
         stamps[i] = to_ns(m.header.stamp)
         q[i] = (m.quaternion.w, m.quaternion.x, m.quaternion.y, m.quaternion.z)
     return stamps, q
+
+
+def parse_mags(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
+    """stamps_ns and fields (N, 3) in tesla of serialised MagneticField messages."""
+    if not raws:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    frame = _frame_of(raws[0]) if raws[0][1] == 1 else ""
+    tpl, off = _mag_template(frame)
+    rows = _uniform_rows(raws, len(tpl))
+    if rows is not None:
+        return _stamps_of(rows), _f64_cols(rows, off)
+    ts = typestore()
+    stamps = np.empty(len(raws), np.int64)
+    b = np.empty((len(raws), 3))
+    for i, r in enumerate(raws):
+        m = ts.deserialize_cdr(r, MAG_TYPE)
+        stamps[i] = to_ns(m.header.stamp)
+        b[i] = (m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z)
+    return stamps, b

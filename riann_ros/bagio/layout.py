@@ -16,7 +16,9 @@ IMU_TOPIC = "/imu/data_raw"
 REF_TOPIC = "/ground_truth/attitude"
 SCORED_TOPIC = "/ground_truth/scored"
 INFO_TOPIC = "/dataset/info"
+MAG_TOPIC = "/imu/mag"
 IMU_TYPE = "sensor_msgs/msg/Imu"
+MAG_TYPE = "sensor_msgs/msg/MagneticField"
 QUAT_TYPE = "geometry_msgs/msg/QuaternionStamped"
 BOOL_TYPE = "std_msgs/msg/Bool"
 STRING_TYPE = "std_msgs/msg/String"
@@ -60,6 +62,8 @@ def dataset_info(rec: Recording) -> dict:
         "samples": len(rec),
         "rate_hz": None if not np.isfinite(rate) else rate,
         "has_reference": rec.quat_ref is not None,
-        "topics": {"imu": IMU_TOPIC, "reference": REF_TOPIC, "scored": SCORED_TOPIC},
+        "has_mag": rec.mag is not None,
+        "topics": {"imu": IMU_TOPIC, "reference": REF_TOPIC, "scored": SCORED_TOPIC,
+                   **({"mag": MAG_TOPIC} if rec.mag is not None else {})},
         "meta": {str(k): str(v) for k, v in rec.meta.items()},
     }

@@ -11,12 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
-from riann_ros.bagio.cdr import parse_imu, parse_quats
+from riann_ros.bagio.cdr import parse_imu, parse_mags, parse_quats
 from riann_ros.bagio.layout import (
     BOOL_TYPE,
     IMU_TOPIC,
     IMU_TYPE,
     INFO_TOPIC,
+    MAG_TOPIC,
+    MAG_TYPE,
     QUAT_TYPE,
     REF_TOPIC,
     SCORED_TOPIC,
@@ -131,8 +133,10 @@ def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_t
     Memory stays bounded by the chunk size. Each chunk carries its reference (NaN rows where no
     ``/ground_truth/attitude`` message has the sample's stamp; ``quat_ref=None`` when the bag has no
     reference topic, or with ``reference=False``), its score mask and the bag's name/dataset/source/frame_id/meta.
-    ``imu_topic``: the ``sensor_msgs/msg/Imu`` topic of the samples (a bag not written by the converter). Raises
-    :class:`BagError` for anything that is not a readable IMU bag.
+    ``imu_topic``: the ``sensor_msgs/msg/Imu`` topic of the samples (a bag not written by the converter). The
+    magnetometer (``/imu/mag``, tesla) comes in ``mag`` the same way as the reference: NaN rows where no message
+    has the sample's stamp, ``None`` without the topic. Raises :class:`BagError` for anything that is not a
+    readable IMU bag.
     """
     path = Path(path)
     if chunk < 1:
@@ -157,17 +161,19 @@ class _ChunkBuffer:
     """
 
     def __init__(self, path: Path, info: dict, has_ref: bool, imu_ids: set, ref_ids: set,
-                 imu_topic: str = IMU_TOPIC) -> None:
+                 imu_topic: str = IMU_TOPIC, mag_ids: set | None = None) -> None:
         self.path = path
         self.imu_topic = imu_topic
         self.info = info
         self.has_ref = has_ref
         self.imu_ids = imu_ids
         self.ref_ids = ref_ids
+        self.mag_ids = mag_ids or set()
         self.bool_deser = typestore().deserialize_cdr
         self.imu_raw: list[bytes] = []
         self.imu_log: list[int] = []
         self.ref_raw: list[bytes] = []
+        self.mag_raw: list[bytes] = []
         self.events: list[tuple[int, bool]] = []
         self.mask = True  # score mask value in force
         self.last: int | None = None  # stamp of the last sample
@@ -181,6 +187,8 @@ class _ChunkBuffer:
             self.imu_log.append(t)
         elif conn_id in self.ref_ids:
             self.ref_raw.append(raw)
+        elif conn_id in self.mag_ids:
+            self.mag_raw.append(raw)
         else:
             self.events.append((t, bool(self.bool_deser(raw, BOOL_TYPE).data)))
 
@@ -208,11 +216,12 @@ class _ChunkBuffer:
         first = self.index
         self._check_increasing(stamps, first)
         last = int(stamps[-1])
-        quat = self._reference(stamps, last) if self.has_ref else None
+        quat = _at_stamps(self.ref_raw, parse_quats, 4, stamps, last) if self.has_ref else None
+        mag = _at_stamps(self.mag_raw, parse_mags, 3, stamps, last) if self.mag_ids else None
         mask = self._score_mask(stamps, last)
         self.last = last
         self.index = first + len(stamps)
-        return self._recording(stamps, acc, gyr, quat, mask)
+        return self._recording(stamps, acc, gyr, quat, mask, mag)
 
     def _check_increasing(self, stamps: np.ndarray, first: int) -> None:
         """BagError naming the global sample index where header stamps stop increasing (across chunks too)."""
@@ -221,17 +230,6 @@ class _ChunkBuffer:
         if len(bad):
             i = first + int(bad[0]) + (0 if self.last is not None else 1)
             raise BagError(self.path, f"{self.imu_topic} header stamps not strictly increasing at sample {i}")
-
-    def _reference(self, stamps: np.ndarray, last: int) -> np.ndarray:
-        """Reference rows at the chunk's stamps (NaN where none); keeps the messages stamped after ``last``."""
-        quat = np.full((len(stamps), 4), np.nan)
-        rs, rq = parse_quats(self.ref_raw)
-        pos = np.searchsorted(stamps, rs)
-        ok = (pos < len(stamps)) & (stamps[np.minimum(pos, len(stamps) - 1)] == rs)
-        quat[pos[ok]] = rq[ok]
-        keep = [r for r, s in zip(self.ref_raw, rs, strict=True) if s > last]
-        self.ref_raw[:] = keep
-        return quat
 
     def _score_mask(self, stamps: np.ndarray, last: int) -> np.ndarray:
         """Score mask from on-change events with log time <= stamp; keeps the events logged after ``last``."""
@@ -247,7 +245,8 @@ class _ChunkBuffer:
         return mask
 
     def _recording(
-        self, stamps: np.ndarray, acc: np.ndarray, gyr: np.ndarray, quat: np.ndarray | None, mask: np.ndarray
+        self, stamps: np.ndarray, acc: np.ndarray, gyr: np.ndarray, quat: np.ndarray | None, mask: np.ndarray,
+        mag: np.ndarray | None = None,
     ) -> Recording:
         info = self.info
         return Recording(
@@ -261,7 +260,20 @@ class _ChunkBuffer:
             source=str(info.get("source") or ""),
             frame_id=str(info.get("frame_id") or self.frame or "imu_link"),
             meta={str(k): str(v) for k, v in (info.get("meta") or {}).items()},
+            mag=mag,
         )
+
+
+def _at_stamps(raws: list[bytes], parse, width: int, stamps: np.ndarray, last: int) -> np.ndarray:
+    """Rows of stamped messages (reference, magnetometer) at the chunk's IMU stamps, NaN where none has the
+    stamp; keeps in ``raws`` the messages stamped after ``last`` (they belong to later chunks)."""
+    out = np.full((len(stamps), width), np.nan)
+    ts, vals = parse(raws)
+    pos = np.searchsorted(stamps, ts)
+    ok = (pos < len(stamps)) & (stamps[np.minimum(pos, len(stamps) - 1)] == ts)
+    out[pos[ok]] = vals[ok]
+    raws[:] = [r for r, t in zip(raws, ts, strict=True) if t > last]
+    return out
 
 
 def _iter_chunks(path: Path, reader, chunk: int, imu_topic: str = IMU_TOPIC,
@@ -269,9 +281,11 @@ def _iter_chunks(path: Path, reader, chunk: int, imu_topic: str = IMU_TOPIC,
     c_imu = _topic_connections(path, reader, imu_topic, IMU_TYPE, required=True)
     c_ref = _topic_connections(path, reader, REF_TOPIC, QUAT_TYPE, required=False) if reference else []
     c_scored = _topic_connections(path, reader, SCORED_TOPIC, BOOL_TYPE, required=False)
+    c_mag = _topic_connections(path, reader, MAG_TOPIC, MAG_TYPE, required=False)
     info = _info_from(path, reader)
-    buf = _ChunkBuffer(path, info, bool(c_ref), {c.id for c in c_imu}, {c.id for c in c_ref}, imu_topic)
-    for conn, t, raw in reader.messages(connections=[*c_imu, *c_ref, *c_scored]):
+    buf = _ChunkBuffer(path, info, bool(c_ref), {c.id for c in c_imu}, {c.id for c in c_ref}, imu_topic,
+                       {c.id for c in c_mag})
+    for conn, t, raw in reader.messages(connections=[*c_imu, *c_ref, *c_scored, *c_mag]):
         if buf.complete(chunk, t):
             yield buf.flush(chunk)
         buf.add(conn.id, t, raw)
@@ -286,6 +300,7 @@ def concat(chunks: list[Recording]) -> Recording:
         return chunks[0]
     first = chunks[0]
     has_ref = first.quat_ref is not None
+    has_mag = first.mag is not None
     return Recording(
         stamps_ns=np.concatenate([c.stamps_ns for c in chunks]),
         acc=np.concatenate([c.acc for c in chunks]),
@@ -297,6 +312,7 @@ def concat(chunks: list[Recording]) -> Recording:
         source=first.source,
         frame_id=first.frame_id,
         meta=dict(first.meta),
+        mag=np.concatenate([c.mag for c in chunks if c.mag is not None]) if has_mag else None,
     )
 
 

@@ -13,13 +13,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.bagio.atomic import _AtomicBag
-from riann_ros.bagio.cdr import _bool_msg, _string_msg, imu_messages, quat_messages
+from riann_ros.bagio.cdr import _bool_msg, _string_msg, imu_messages, mag_messages, quat_messages
 from riann_ros.bagio.layout import (
     BOOL_TYPE,
     IMU_TOPIC,
     IMU_TYPE,
     INFO_KEY,
     INFO_TOPIC,
+    MAG_TOPIC,
+    MAG_TYPE,
     QUAT_TYPE,
     REF_TOPIC,
     SCORED_TOPIC,
@@ -84,11 +86,14 @@ def write_recording(
     info = json.dumps(dataset_info(rec), sort_keys=True)
     stamps = rec.stamps_ns
     imu_rows = imu_messages(stamps, rec.acc, rec.gyr, rec.frame_id)
-    ref_idx = np.zeros(0, dtype=np.int64)
-    ref_rows = None
+    # optional per-sample topics: (topic, type, rows present, their messages)
+    extra: list[tuple[str, str, np.ndarray, np.ndarray]] = []
     if rec.quat_ref is not None:
-        ref_idx = np.flatnonzero(np.isfinite(rec.quat_ref).all(axis=1))
-        ref_rows = quat_messages(stamps[ref_idx], rec.quat_ref[ref_idx])
+        idx = np.flatnonzero(np.isfinite(rec.quat_ref).all(axis=1))
+        extra.append((REF_TOPIC, QUAT_TYPE, idx, quat_messages(stamps[idx], rec.quat_ref[idx])))
+    if rec.mag is not None:
+        idx = np.flatnonzero(np.isfinite(rec.mag).all(axis=1))
+        extra.append((MAG_TOPIC, MAG_TYPE, idx, mag_messages(stamps[idx], rec.mag[idx], rec.frame_id)))
     mask = rec.score_mask
     change = np.concatenate([[0], np.flatnonzero(mask[1:] != mask[:-1]) + 1])
     bool_bytes = {True: _bool_msg(True), False: _bool_msg(False)}
@@ -97,22 +102,24 @@ def write_recording(
         writer.set_custom_data(INFO_KEY, info)
         c_info = _add_connection(writer, INFO_TOPIC, STRING_TYPE)
         c_imu = _add_connection(writer, IMU_TOPIC, IMU_TYPE)
-        c_ref = _add_connection(writer, REF_TOPIC, QUAT_TYPE) if ref_rows is not None else None
+        # per sample: -1 = no message of that topic, else the row of its message
+        rows_at = []
+        for topic, msgtype, idx, rows in extra:
+            row_of = np.full(len(rec), -1, dtype=np.int64)
+            row_of[idx] = np.arange(len(idx))
+            rows_at.append((_add_connection(writer, topic, msgtype), row_of.tolist(), rows))
         c_scored = _add_connection(writer, SCORED_TOPIC, BOOL_TYPE)
         write = writer.write
         write(c_info, int(stamps[0]), _string_msg(info))
-        is_ref = np.zeros(len(rec), dtype=bool)
-        is_ref[ref_idx] = True
-        ref_pos = np.cumsum(is_ref) - 1
         is_change = np.zeros(len(rec), dtype=bool)
         is_change[change] = True
-        stamp_list = stamps.tolist()
-        for i, t in enumerate(stamp_list):
+        for i, t in enumerate(stamps.tolist()):
             if is_change[i]:
                 write(c_scored, t, bool_bytes[bool(mask[i])])
             write(c_imu, t, imu_rows[i].tobytes())
-            if is_ref[i]:
-                write(c_ref, t, ref_rows[ref_pos[i]].tobytes())  # type: ignore[index]  # is_ref: rows exist
+            for conn, at, rows in rows_at:
+                if at[i] >= 0:
+                    write(conn, t, rows[at[i]].tobytes())
     return target
 
 
@@ -162,7 +169,7 @@ def _prepare_estimates(estimates: Mapping[str, tuple[NDArray[np.int64], NDArray[
     for topic, (stamps, quats) in estimates.items():
         if not topic.startswith("/"):
             raise ValueError(f"estimate topic {topic!r} must start with '/'")
-        if topic in (IMU_TOPIC, REF_TOPIC, SCORED_TOPIC, INFO_TOPIC):
+        if topic in (IMU_TOPIC, REF_TOPIC, SCORED_TOPIC, INFO_TOPIC, MAG_TOPIC):
             raise ValueError(f"estimate topic {topic!r} clashes with the bag layout")
         st = np.asarray(stamps, dtype=np.int64).reshape(-1)
         q = np.asarray(quats, dtype=np.float64).reshape(len(st), 4)

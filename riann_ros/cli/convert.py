@@ -31,8 +31,10 @@ from riann_ros.datasets.csvfile import (
     ACC_UNITS,
     DEFAULT_ACC,
     DEFAULT_GYR,
+    DEFAULT_MAG,
     DEFAULT_TIME,
     GYR_UNITS,
+    MAG_UNITS,
     QUAT_ORDERS,
     TIME_UNITS,
 )
@@ -113,6 +115,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quat-cols", type=_cols(4), help="reference quaternion columns, in --quat-order order")
     c.add_argument("--quat-order", choices=QUAT_ORDERS, default="wxyz", help="default wxyz")
     c.add_argument("--mask-col", help="score-mask column (default: 'scored' if present)")
+    c.add_argument("--mag-cols", type=_cols(3),
+                   help=f"magnetometer columns (default: {','.join(DEFAULT_MAG)} if present)")
+    c.add_argument("--mag-unit", default="uT", help=f"{'|'.join(MAG_UNITS)} (default uT)")
     c.add_argument("--delimiter", help="column delimiter (default: detect , ; tab or blanks)")
 
     e = p.add_argument_group("EuRoC/ASL")
@@ -170,6 +175,8 @@ def _reader_opts(fmt: str, args: argparse.Namespace) -> dict:
             "quat_order": args.quat_order,
             "mask_col": args.mask_col,
             "delimiter": args.delimiter,
+            "mag_cols": args.mag_cols,
+            "mag_unit": args.mag_unit,
         }
     if fmt == "euroc":
         return {
@@ -276,7 +283,7 @@ class UnitCheckFailed(ValueError):
 
 # The units each format fixes (the unit checks read the numbers in these; CSV units come from the options).
 _FIXED_UNITS = {"broad": {"time_unit": "s"}, "euroc": {"time_unit": "ns"}}
-_FIXED_TEXT = {"broad": "sampling_rate in Hz, m/s², rad/s", "euroc": "ns stamps, m/s², rad/s"}
+_FIXED_TEXT = {"broad": "sampling_rate in Hz, m/s², rad/s, µT", "euroc": "ns stamps, m/s², rad/s"}
 
 
 def _advice(finding: Finding, fmt: str) -> str:

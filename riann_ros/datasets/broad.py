@@ -1,7 +1,8 @@
 """Reader for BROAD trials (Laidig et al. 2021, CC BY 4.0), ``.hdf5`` and ``.mat`` files.
 
 Keys: ``imu_acc`` (N,3) m/s², ``imu_gyr`` (N,3) rad/s, ``opt_quat`` (N,4) w,x,y,z sensor→ENU with NaN
-rows, ``movement`` (N,) scoring mask, ``sampling_rate`` (HDF5 attribute or .mat variable).
+rows, ``movement`` (N,) scoring mask, ``sampling_rate`` (HDF5 attribute or .mat variable); optional
+``imu_mag`` (N,3) magnetic field in µT, read into :attr:`Recording.mag` in tesla (REP-145).
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ SOURCE = (
     "https://doi.org/10.3390/data6070072 (CC BY 4.0)"
 )
 REQUIRED = ("imu_acc", "imu_gyr", "opt_quat", "movement")
+OPTIONAL = ("imu_mag",)
+MICROTESLA = 1e-6  # T per µT
 
 
 def _read_hdf5(path: Path) -> dict[str, np.ndarray]:
@@ -27,7 +30,7 @@ def _read_hdf5(path: Path) -> dict[str, np.ndarray]:
         missing = [k for k in REQUIRED if k not in f]
         if missing:
             raise ValueError(f"{path}: missing BROAD key(s) {', '.join(missing)}")
-        data = {k: np.asarray(f[k][()]) for k in REQUIRED}
+        data = {k: np.asarray(f[k][()]) for k in (*REQUIRED, *OPTIONAL) if k in f}
         rate = f.attrs.get("sampling_rate", f["sampling_rate"][()] if "sampling_rate" in f else None)
     if rate is None:
         raise ValueError(f"{path}: no sampling_rate attribute")
@@ -42,7 +45,7 @@ def _read_mat(path: Path) -> dict[str, np.ndarray]:
     missing = [k for k in (*REQUIRED, "sampling_rate") if k not in m]
     if missing:
         raise ValueError(f"{path}: missing BROAD variable(s) {', '.join(missing)}")
-    return {k: np.asarray(m[k]) for k in (*REQUIRED, "sampling_rate")}
+    return {k: np.asarray(m[k]) for k in (*REQUIRED, *OPTIONAL, "sampling_rate") if k in m}
 
 
 def read_broad(path: str | os.PathLike[str]) -> Recording:
@@ -62,6 +65,11 @@ def read_broad(path: str | os.PathLike[str]) -> Recording:
     n = len(acc)
     if not (gyr.shape == (n, 3) and acc.shape == (n, 3) and q.shape == (n, 4) and mask.shape == (n,)):
         raise ValueError(f"{path}: inconsistent array shapes acc {acc.shape} gyr {gyr.shape} quat {q.shape}")
+    mag = None
+    if "imu_mag" in d:
+        mag = np.asarray(d["imu_mag"], dtype=np.float64) * MICROTESLA
+        if mag.shape != (n, 3):
+            raise ValueError(f"{path}: imu_mag has shape {mag.shape}, expected ({n}, 3)")
     stamps = np.round(np.arange(n) * (1e9 / rate)).astype(np.int64)
     q = np.where(np.isfinite(q).all(axis=1, keepdims=True), q, np.nan)
     return Recording(
@@ -74,6 +82,7 @@ def read_broad(path: str | os.PathLike[str]) -> Recording:
         dataset="broad",
         source=SOURCE,
         meta={"sampling_rate": repr(rate), "file": path.name},
+        mag=mag,
     )
 
 

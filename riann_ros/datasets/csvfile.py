@@ -14,7 +14,9 @@ Columns (names and units by option; defaults in brackets):
 * optional reference quaternion [``qw,qx,qy,qz``], listed in the order given by ``quat_order``
   (``wxyz`` | ``xyzw``) [``wxyz``], sensor → world (z up); empty or NaN cells mark a missing reference
   (NaN row); non-empty rows are normalised (norm must be within 10 % of 1);
-* optional score mask [``scored``]: 1/0, true/false.
+* optional score mask [``scored``]: 1/0, true/false;
+* optional magnetometer [``mag_x,mag_y,mag_z``], unit ``uT`` | ``nT`` | ``mT`` | ``G`` | ``T`` [``uT``],
+  stored in tesla; empty or NaN cells mark a sample without a field reading (a slower magnetometer).
 
 The optional columns are used when all their default names are present; when given explicitly
 they are required. IMU cells must be finite numbers. Errors name the file and line.
@@ -36,12 +38,14 @@ from riann_ros.recording import Recording
 TIME_UNITS = {"s": 10**9, "ms": 10**6, "us": 10**3, "µs": 10**3, "ns": 1}
 ACC_UNITS = {"m/s2": 1.0, "m/s^2": 1.0, "m/s²": 1.0, "g": 9.80665}
 GYR_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0, "dps": np.pi / 180.0}
+MAG_UNITS = {"uT": 1e-6, "µT": 1e-6, "nT": 1e-9, "mT": 1e-3, "G": 1e-4, "gauss": 1e-4, "T": 1.0}
 QUAT_ORDERS = ("wxyz", "xyzw")
 DEFAULT_TIME = "t"
 DEFAULT_ACC = ("acc_x", "acc_y", "acc_z")
 DEFAULT_GYR = ("gyr_x", "gyr_y", "gyr_z")
 DEFAULT_QUAT = ("qw", "qx", "qy", "qz")
 DEFAULT_MASK = "scored"
+DEFAULT_MAG = ("mag_x", "mag_y", "mag_z")
 _TRUE = {"1", "true", "yes", "y", "t", "1.0"}
 _FALSE = {"0", "false", "no", "n", "f", "0.0"}
 
@@ -308,21 +312,34 @@ def read_csv(
     delimiter: str | None = None,
     name: str | None = None,
     frame_id: str = "imu_link",
+    mag_cols: Sequence[str] | None = None,
+    mag_unit: str = "uT",
 ) -> Recording:
     """Read a generic CSV file (format in the module docstring)."""
     path = Path(path)
     a_scale, g_scale = _check_options(time_unit, acc_unit, gyr_unit, quat_order, acc_cols, gyr_cols, quat_cols)
+    m_scale = unit_factor("magnetometer", mag_unit, MAG_UNITS)
+    if mag_cols is not None and len(mag_cols) != 3:
+        raise InputError(f"magnetometer needs 3 column names, got {len(mag_cols)}: {', '.join(mag_cols)}")
     table = _CsvTable(path, delimiter)
     (ti,) = table.columns([time_col], "time")
     ai = table.columns(acc_cols, "accelerometer")
     gi = table.columns(gyr_cols, "gyroscope")
     quat_cols, mask_col = _optional_columns(table.header, quat_cols, quat_order, mask_col)
+    if mag_cols is None and all(c in table.header for c in DEFAULT_MAG):
+        mag_cols = DEFAULT_MAG
 
     stamps = table.stamps(ti, time_unit)
     acc = table.floats(ai, "accelerometer") * a_scale
     gyr = table.floats(gi, "gyroscope") * g_scale
     quat = table.quaternions(quat_cols, quat_order) if quat_cols is not None else None
     mask = table.score_mask(mask_col) if mask_col is not None else None
+    mag = None
+    if mag_cols is not None:
+        mag = table.floats(table.columns(mag_cols, "magnetometer"), "magnetometer", allow_nan=True) * m_scale
+    meta = {"file": path.name, "time_unit": time_unit, "acc_unit": acc_unit, "gyr_unit": gyr_unit}
+    if mag is not None:
+        meta["mag_unit"] = mag_unit
     return Recording(
         stamps_ns=stamps,
         acc=acc,
@@ -333,5 +350,6 @@ def read_csv(
         dataset="csv",
         source=f"CSV file {path.name}",
         frame_id=frame_id,
-        meta={"file": path.name, "time_unit": time_unit, "acc_unit": acc_unit, "gyr_unit": gyr_unit},
+        meta=meta,
+        mag=mag,
     )

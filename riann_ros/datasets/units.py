@@ -55,21 +55,30 @@ REST_MIN_SAMPLES = 10
 GYR_MAX_RAD_S = 35.0
 GYR_PERCENTILE = 99.0
 
+# Magnetic field. Earth's field is 25–65 µT at the surface (WMM); an uncalibrated magnetometer adds a
+# hard-iron offset of tens of µT, up to ~100 µT beside motors or steel, and indoor fields vary by tens of
+# µT. 10–200 µT keeps all of that and rejects every unit mix-up, each a factor of 100 or more: gauss
+# (1 G = 100 µT), mT (1000 µT), nT (1/1000 µT), T read as µT (10⁶). The median over the finite samples
+# ignores short disturbances.
+MAG_MIN_T = 10e-6
+MAG_MAX_T = 200e-6
+
 # Canonical units (aliases such as "µs", "dps", "m/s^2" map onto these) and their scale to ns, m/s², rad/s.
 TIME_SCALES: dict[str, float] = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}
 ACC_SCALES: dict[str, float] = {"m/s2": 1.0, "g": GRAVITY}
 GYR_SCALES: dict[str, float] = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
-_ALIASES = {"µs": "us", "m/s^2": "m/s2", "m/s²": "m/s2", "dps": "deg/s"}
+MAG_SCALES: dict[str, float] = {"T": 1.0, "mT": 1e-3, "G": 1e-4, "uT": 1e-6, "nT": 1e-9}
+_ALIASES = {"µs": "us", "m/s^2": "m/s2", "m/s²": "m/s2", "dps": "deg/s", "µT": "uT", "gauss": "G", "tesla": "T"}
 
 
 @dataclass(frozen=True)
 class Finding:
     """One implausible quantity.
 
-    ``check``: ``"rate"``, ``"acc"`` or ``"gyr"``; ``option``: the reader option that sets the unit
-    (``time_unit``, ``acc_unit``, ``gyr_unit``); ``value``: the measured value in Hz, m/s² or rad/s (as
-    read); ``unit``: the unit the values were read in; ``suggest``: the unit that makes it plausible, or
-    None when none does; ``message``: what was measured and what it looks like.
+    ``check``: ``"rate"``, ``"acc"``, ``"gyr"`` or ``"mag"``; ``option``: the reader option that sets the
+    unit (``time_unit``, ``acc_unit``, ``gyr_unit``, ``mag_unit``); ``value``: the measured value in Hz,
+    m/s², rad/s or T (as read); ``unit``: the unit the values were read in; ``suggest``: the unit that
+    makes it plausible, or None when none does; ``message``: what was measured and what it looks like.
     """
 
     check: str
@@ -81,7 +90,7 @@ class Finding:
 
     @property
     def flag(self) -> str:
-        """The converter option that sets this unit: ``--time-unit``, ``--acc-unit`` or ``--gyr-unit``."""
+        """The converter option that sets this unit: ``--time-unit``, ``--acc-unit``, ``--gyr-unit``, ``--mag-unit``."""
         return "--" + self.option.replace("_", "-")
 
     def __str__(self) -> str:
@@ -207,10 +216,36 @@ def check_gyro(rec: Recording, gyr_unit: str = "rad/s") -> Finding | None:
     return Finding("gyr", "gyr_unit", value, unit, best, f"{text}: looks like {best} read as {unit}")
 
 
+def check_mag(rec: Recording, mag_unit: str = "T") -> Finding | None:
+    """Median |field| over the finite magnetometer samples within [MAG_MIN_T, MAG_MAX_T], else a Finding
+    (None without a magnetometer)."""
+    if rec.mag is None:
+        return None
+    norm = np.linalg.norm(rec.mag, axis=1)
+    norm = norm[np.isfinite(norm)]
+    if len(norm) == 0:
+        return None
+    unit = canonical_unit(mag_unit, MAG_SCALES)
+    value = float(np.median(norm))
+    if MAG_MIN_T <= value <= MAG_MAX_T:
+        return None
+    cands = _candidates(value, unit, MAG_SCALES, lambda v: MAG_MIN_T <= v <= MAG_MAX_T)
+    text = (
+        f"median |mag| {value * 1e6:.4g} µT, expected Earth's field 25–65 µT "
+        f"({MAG_MIN_T * 1e6:g}–{MAG_MAX_T * 1e6:g} with calibration offsets)"
+    )
+    if not cands:
+        return Finding(
+            "mag", "mag_unit", value, unit, None, f"{text}: implausible in any unit ({', '.join(MAG_SCALES)})"
+        )
+    best = cands[0][0]
+    return Finding("mag", "mag_unit", value, unit, best, f"{text}: looks like {best} read as {unit}")
+
+
 def check_units(
     rec: Recording, *, time_unit: str | None = None, acc_unit: str | None = None, gyr_unit: str | None = None
 ) -> list[Finding]:
-    """The implausible rate, gravity and gyro range findings of ``rec`` (empty list: all plausible).
+    """The implausible rate, gravity, gyro range and magnetic field findings of ``rec`` (empty: all plausible).
 
     The units are those the raw numbers were read in (they decide which other unit is suggested); by
     default ``rec.meta["time_unit"]`` etc. when present (the CSV reader records them), else s, m/s², rad/s.
@@ -223,5 +258,5 @@ def check_units(
     gyr_scale = 1.0
     if gyr is not None and gyr.suggest is not None:  # find rest with the gyro in the suggested unit
         gyr_scale = GYR_SCALES[gyr.suggest] / GYR_SCALES[gyr.unit]
-    findings += [check_gravity(rec, acc_unit, gyr_scale), gyr]
+    findings += [check_gravity(rec, acc_unit, gyr_scale), gyr, check_mag(rec, rec.meta.get("mag_unit", "T"))]
     return [f for f in findings if f is not None]

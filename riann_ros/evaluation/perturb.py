@@ -89,6 +89,7 @@ def _with(rec: Recording, keep: NDArray[np.bool_] | None = None, **fields: Any) 
         "gyr": rec.gyr[sel],
         "quat_ref": None if rec.quat_ref is None else rec.quat_ref[sel],
         "score_mask": rec.score_mask[sel],
+        "mag": None if rec.mag is None else rec.mag[sel],
     }
     base.update(fields)
     return Recording(**base, name=rec.name, dataset=rec.dataset, source=rec.source, frame_id=rec.frame_id,
@@ -245,12 +246,14 @@ def _concat(*recs: Recording) -> Recording:
         gyr=np.concatenate([r.gyr for r in recs]),
         quat_ref=np.concatenate([r.quat_ref for r in recs if r.quat_ref is not None]) if has_ref else None,
         score_mask=np.concatenate([r.score_mask for r in recs]),
+        mag=np.concatenate([r.mag for r in recs if r.mag is not None]) if recs[0].mag is not None else None,
     )
 
 
 def _interval_means(buf: Recording, edges: NDArray[np.int64]) -> Recording:
     """Samples at ``edges[1:]``: means of acc and gyr (piecewise linear between ``buf``'s samples) over each
-    (edges[k-1], edges[k]]; reference slerped at the edge, score mask of the nearest sample."""
+    (edges[k-1], edges[k]]; reference slerped at the edge, score mask of the nearest sample, magnetic
+    field of the latest sample at or before the edge (a magnetometer read when the sample is made)."""
     t0 = int(buf.stamps_ns[0])
     t = (buf.stamps_ns - t0) * 1e-9
     x = np.concatenate([buf.acc, buf.gyr], axis=1)
@@ -276,8 +279,11 @@ def _interval_means(buf: Recording, edges: NDArray[np.int64]) -> Recording:
             ref[ok] = quat.slerp(a[ok], b[ok], np.clip(s[ok], 0.0, 1.0))
         ref = ref[1:]
     nearest = np.clip(i + np.round(np.clip(s, 0.0, 1.0)).astype(int), 0, len(t) - 1)
+    mag = None
+    if buf.mag is not None:
+        mag = buf.mag[np.clip(np.searchsorted(t, q[1:], side="right") - 1, 0, len(t) - 1)]
     return _with(buf, None, stamps_ns=edges[1:], acc=means[:, :3], gyr=means[:, 3:],
-                 quat_ref=ref, score_mask=buf.score_mask[nearest[1:]])
+                 quat_ref=ref, score_mask=buf.score_mask[nearest[1:]], mag=mag)
 
 
 # ---------------------------------------------------------------------------------------------------

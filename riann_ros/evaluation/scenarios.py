@@ -150,6 +150,7 @@ class ScenarioPlan:
             source=c.source,
             frame_id=c.frame_id,
             meta=c.meta,
+            mag=c.mag,
         )
         if self.scenario == AS_RECORDED and isinstance(chunk, Chunk) and chunk.recorded:
             return Chunk.of(out, chunk.recorded)

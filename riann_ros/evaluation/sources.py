@@ -69,7 +69,7 @@ class Chunk(Recording):
     def of(cls, rec: Recording, recorded: dict[str, NDArray[np.float64]]) -> Chunk:
         return cls(stamps_ns=rec.stamps_ns, acc=rec.acc, gyr=rec.gyr, quat_ref=rec.quat_ref,
                    score_mask=rec.score_mask, name=rec.name, dataset=rec.dataset, source=rec.source,
-                   frame_id=rec.frame_id, meta=rec.meta, recorded=recorded)
+                   frame_id=rec.frame_id, meta=rec.meta, mag=rec.mag, recorded=recorded)
 
 
 class Source:
