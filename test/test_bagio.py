@@ -392,9 +392,11 @@ def test_foreign_bag_generic_path_and_stamp_order(tmp_path: Path) -> None:
         )
 
     msgs = [(s * 10**9 + 5, imu(s, "a" * (s % 3 + 1))) for s in range(1, 6)]
-    p = _foreign_bag(tmp_path / "foreign", {bagio.IMU_TOPIC: (bagio.IMU_TYPE, msgs)})
+    # an /imu/mag of another type is not this layout's magnetometer: ignored, not an error
+    p = _foreign_bag(tmp_path / "foreign", {bagio.IMU_TOPIC: (bagio.IMU_TYPE, msgs),
+                                            bagio.MAG_TOPIC: ("std_msgs/msg/String", [(10**9, _string("x"))])})
     rec = bagio.read_recording(p)
-    assert rec.quat_ref is None and rec.score_mask.all() and rec.name == "foreign"
+    assert rec.quat_ref is None and rec.score_mask.all() and rec.name == "foreign" and rec.mag is None
     assert np.array_equal(rec.stamps_ns, [s * 10**9 + 5 for s in range(1, 6)])
     assert np.allclose(rec.gyr[:, 0], [0.1 * s for s in range(1, 6)])
     # header stamps going back in time (log times increasing) → BagError naming the sample

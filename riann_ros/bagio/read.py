@@ -281,7 +281,8 @@ def _iter_chunks(path: Path, reader, chunk: int, imu_topic: str = IMU_TOPIC,
     c_imu = _topic_connections(path, reader, imu_topic, IMU_TYPE, required=True)
     c_ref = _topic_connections(path, reader, REF_TOPIC, QUAT_TYPE, required=False) if reference else []
     c_scored = _topic_connections(path, reader, SCORED_TOPIC, BOOL_TYPE, required=False)
-    c_mag = _topic_connections(path, reader, MAG_TOPIC, MAG_TYPE, required=False)
+    # the magnetometer is optional: a /imu/mag of another type (a foreign bag) is ignored, not an error
+    c_mag = [c for c in reader.connections if c.topic == MAG_TOPIC and c.msgtype == MAG_TYPE]
     info = _info_from(path, reader)
     buf = _ChunkBuffer(path, info, bool(c_ref), {c.id for c in c_imu}, {c.id for c in c_ref}, imu_topic,
                        {c.id for c in c_mag})
