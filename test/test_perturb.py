@@ -134,3 +134,27 @@ def test_magnetometer_follows_its_samples_through_dropout_and_jitter():
     out, _ = run(pt.parse_condition("jitter:10/20/30ms").parts[0], rec, chunks=[700])
     latest = np.searchsorted(rec.stamps_ns, out.stamps_ns, side="right") - 1  # at or before each new stamp
     assert np.array_equal(out.mag, rec.mag[latest])
+
+
+def test_magnetic_offset_and_disturbance_window():
+    rec = linear()  # 10 s at 200 Hz
+    rec.mag = np.tile([20e-6, 0.0, -40e-6], (len(rec), 1))
+    cond = pt.parse_condition("magnetic:offset:5,-5,1")
+    assert cond.label == "magnetic:offset:5,-5,1"
+    out, info = run(cond.parts[0], rec, chunks=[333, 1200])
+    np.testing.assert_allclose(out.mag - rec.mag, np.tile([5e-6, -5e-6, 1e-6], (len(rec), 1)), atol=1e-18)
+    assert np.array_equal(out.gyr, rec.gyr) and np.array_equal(out.stamps_ns, rec.stamps_ns)
+    p = pt.parse_condition("magnetic:disturb:40@2-4.5s").parts[0]
+    a, info = run(p, rec, chunks=[100, 700, 1500], seed=3)
+    b, _ = run(p, rec, seed=3)  # chunking does not matter
+    assert np.array_equal(a.mag, b.mag)
+    t = (rec.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    on = (t >= 2.0) & (t < 4.5)
+    added = a.mag - rec.mag
+    assert np.allclose(np.linalg.norm(added[on], axis=1), 40e-6) and not added[~on].any()
+    assert np.allclose(added[on], added[on][0])  # one direction per sequence
+    assert info["samples"] == on.sum()
+    no_mag = linear()
+    assert run(p, no_mag)[0].mag is None
+    with pytest.raises(ValueError, match="magnetic:disturb"):
+        pt.parse_condition("magnetic:disturb:40@5-2s")

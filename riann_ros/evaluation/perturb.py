@@ -18,6 +18,11 @@ sequence, after the scenario and before the estimators:
 ``dropout:0.1-0.6s@10s``
     Lost messages: holes of a length drawn uniformly from the range, about every 10 s (exponential
     spacing), starting only where the sensor moves (a scored sample); the samples in a hole are removed.
+``magnetic:offset:20,0,-10`` / ``magnetic:disturb:40@10-20s``
+    The magnetometer (recordings without one are left as they are): a constant hard-iron offset (µT
+    per sensor axis) from the first sample, or a field of 40 µT fixed in the sensor frame (a magnet or
+    a steel part carried with the sensor), in a direction drawn per sequence, from 10 s to 20 s after
+    the sequence's first sample.
 
 Every random draw is seeded per sequence, condition and perturbation (``--seed``), so every estimator
 sees the same perturbed stream and a bag gives the same stream whatever its chunking.
@@ -46,6 +51,9 @@ DEFINITIONS = {
     "from the first sample of the sequence",
     "dropout": "dropout:LO-HIs@Ts: holes of LO-HI s (uniform) about every T s (exponential spacing), starting at "
     "a scored sample; the samples in a hole are removed",
+    "magnetic": "magnetic:offset:X,Y,Z (µT, sensor frame, from the first sample) or magnetic:disturb:B@T0-T1s "
+    "(B µT fixed in the sensor frame, direction drawn per sequence, T0-T1 s after the first sample): added "
+    "to the magnetometer; recordings without one are left as they are",
     "seeding": "per sequence, condition and perturbation: sha256 of '<seed>:<sequence>:<condition>:<index>'",
 }
 DRAW_BLOCK = 1024  # random intervals drawn at a time (consumed in order: independent of chunking)
@@ -126,6 +134,55 @@ class _AddBias(Transform):
 
     def info(self) -> dict[str, Any]:
         return {"bias_dps": np.degrees(self.bias).round(6).tolist()}
+
+
+# ---------------------------------------------------------------------------------------------------
+# magnetic: hard-iron offset, disturbance window
+# ---------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Magnetic(Perturbation):
+    """A field added to the magnetometer (µT, sensor frame): constant from the first sample (``offset``),
+    or ``strength`` µT in a direction drawn per sequence between ``t0`` and ``t1`` s after it."""
+
+    offset: tuple[float, float, float] | None = None
+    strength: float = 0.0
+    t0: float = 0.0
+    t1: float = 0.0
+    kind = "magnetic"
+
+    def text(self) -> str:
+        if self.offset is not None:
+            return "magnetic:offset:" + ",".join(f"{v:g}" for v in self.offset)
+        return f"magnetic:disturb:{self.strength:g}@{self.t0:g}-{self.t1:g}s"
+
+    def start(self, rng: np.random.Generator) -> Transform:
+        if self.offset is not None:
+            return _AddField(np.asarray(self.offset, dtype=float) * 1e-6, None)
+        d = rng.normal(size=3)
+        return _AddField(self.strength * 1e-6 * d / np.linalg.norm(d), (self.t0, self.t1))
+
+
+class _AddField(Transform):
+    def __init__(self, field_t: NDArray[np.float64], window: tuple[float, float] | None) -> None:
+        self.field = field_t
+        self.window = window
+        self.first: int | None = None  # stamp of the sequence's first sample (ns)
+        self.samples = 0
+
+    def __call__(self, rec: Recording) -> Recording:
+        if rec.mag is None or len(rec) == 0:
+            return rec
+        if self.first is None:
+            self.first = int(rec.stamps_ns[0])
+        on = np.ones(len(rec), dtype=bool)
+        if self.window is not None:
+            t = (rec.stamps_ns - self.first) * 1e-9
+            on = (t >= self.window[0]) & (t < self.window[1])
+        self.samples += int(on.sum())
+        return _with(rec, mag=rec.mag + np.where(on[:, None], self.field, 0.0))
+
+    def info(self) -> dict[str, Any]:
+        return {"field_uT": (self.field * 1e6).round(6).tolist(), "samples": self.samples}
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -405,7 +462,18 @@ def _dropout(args: str) -> Perturbation | None:
     return Dropout(lo, hi, every) if 0 < lo <= hi and every > 0 else None
 
 
-_PARSERS = {"jitter": _jitter, "rate": _rate, "bias": _bias, "dropout": _dropout}
+def _magnetic(args: str) -> Perturbation | None:
+    m = re.fullmatch(rf"offset:(-?{_NUM}),(-?{_NUM}),(-?{_NUM})", args)
+    if m:
+        return Magnetic(offset=(float(m.group(1)), float(m.group(2)), float(m.group(3))))
+    m = re.fullmatch(rf"disturb:({_NUM})(?:ut)?@({_NUM})-({_NUM})s", args)
+    if not m:
+        return None
+    strength, t0, t1 = (float(v) for v in m.groups())
+    return Magnetic(strength=strength, t0=t0, t1=t1) if t0 < t1 else None
+
+
+_PARSERS = {"jitter": _jitter, "rate": _rate, "bias": _bias, "dropout": _dropout, "magnetic": _magnetic}
 
 
 def parse_perturbation(text: str) -> Perturbation:
@@ -416,7 +484,7 @@ def parse_perturbation(text: str) -> Perturbation:
     if p is None:
         raise ValueError(
             f"bad perturbation {text!r}; accepted: jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, "
-            "bias:random:2 (deg/s), dropout:0.1-0.6s@10s"
+            "bias:random:2 (deg/s), dropout:0.1-0.6s@10s, magnetic:offset:20,0,-10 (µT), magnetic:disturb:40@10-20s"
         )
     return p
 
