@@ -200,40 +200,34 @@ def parse_imu(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray, st
     return stamps, acc, gyr, frame
 
 
-def parse_quats(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
-    """stamps_ns and quaternions (N, 4) w, x, y, z of serialised QuaternionStamped messages."""
+def _parse_stamped(raws: list[bytes], template, msgtype: str, width: int, values) -> tuple[np.ndarray, np.ndarray]:
+    """stamps_ns and the (N, width) float fields at ``template``'s offsets of serialised stamped messages: the
+    vectorised path when all share one layout, else the generic deserialiser with ``values(msg)``."""
     if not raws:
-        return np.zeros(0, np.int64), np.zeros((0, 4))
+        return np.zeros(0, np.int64), np.zeros((0, width))
     frame = _frame_of(raws[0]) if raws[0][1] == 1 else ""
-    tpl, off = _quat_template(frame)
-    rows = _uniform_rows(raws, len(tpl))
-    if rows is not None:
-        xyzw = _f64_cols(rows, off)
-        return _stamps_of(rows), xyzw[:, [3, 0, 1, 2]]
-    ts = typestore()
-    stamps = np.empty(len(raws), np.int64)
-    q = np.empty((len(raws), 4))
-    for i, r in enumerate(raws):
-        m = ts.deserialize_cdr(r, QUAT_TYPE)
-        stamps[i] = to_ns(m.header.stamp)
-        q[i] = (m.quaternion.w, m.quaternion.x, m.quaternion.y, m.quaternion.z)
-    return stamps, q
-
-
-def parse_mags(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
-    """stamps_ns and fields (N, 3) in tesla of serialised MagneticField messages."""
-    if not raws:
-        return np.zeros(0, np.int64), np.zeros((0, 3))
-    frame = _frame_of(raws[0]) if raws[0][1] == 1 else ""
-    tpl, off = _mag_template(frame)
+    tpl, off = template(frame)
     rows = _uniform_rows(raws, len(tpl))
     if rows is not None:
         return _stamps_of(rows), _f64_cols(rows, off)
     ts = typestore()
     stamps = np.empty(len(raws), np.int64)
-    b = np.empty((len(raws), 3))
+    out = np.empty((len(raws), width))
     for i, r in enumerate(raws):
-        m = ts.deserialize_cdr(r, MAG_TYPE)
+        m = ts.deserialize_cdr(r, msgtype)
         stamps[i] = to_ns(m.header.stamp)
-        b[i] = (m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z)
-    return stamps, b
+        out[i] = values(m)
+    return stamps, out
+
+
+def parse_quats(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
+    """stamps_ns and quaternions (N, 4) w, x, y, z of serialised QuaternionStamped messages."""
+    stamps, xyzw = _parse_stamped(raws, _quat_template, QUAT_TYPE, 4,
+                                  lambda m: (m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w))
+    return stamps, xyzw[:, [3, 0, 1, 2]]
+
+
+def parse_mags(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
+    """stamps_ns and fields (N, 3) in tesla of serialised MagneticField messages."""
+    return _parse_stamped(raws, _mag_template, MAG_TYPE, 3,
+                          lambda m: (m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z))

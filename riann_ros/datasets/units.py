@@ -120,6 +120,17 @@ def _candidates(value: float, unit: str, scales: Mapping[str, float], ok) -> lis
     return out
 
 
+def _scale_finding(check: str, value: float, unit: str, scales: Mapping[str, float], ok, text: str) -> Finding:
+    """The Finding of an implausible ``value`` (read as ``unit``): the first other unit of ``scales`` in which
+    ``ok`` holds is suggested, or none."""
+    option = f"{check}_unit"
+    cands = _candidates(value, unit, scales, ok)
+    if not cands:
+        return Finding(check, option, value, unit, None, f"{text}: implausible in any unit ({', '.join(scales)})")
+    best = cands[0][0]
+    return Finding(check, option, value, unit, best, f"{text}: looks like {best} read as {unit}")
+
+
 def _fmt_duration(seconds: float) -> str:
     for unit, scale in (("s", 1.0), ("ms", 1e-3), ("µs", 1e-6)):
         if abs(seconds) >= scale:
@@ -182,17 +193,11 @@ def check_gravity(rec: Recording, acc_unit: str = "m/s2", gyr_scale: float = 1.0
     value = float(np.median(norm[rest]))
     if ACC_REST_MIN <= value <= ACC_REST_MAX:
         return None
-    cands = _candidates(value, unit, ACC_SCALES, lambda v: ACC_REST_MIN <= v <= ACC_REST_MAX)
     text = (
         f"median |acc| {value:.4g} m/s² over {over}, expected gravity ≈ {GRAVITY:.2f} "
         f"({ACC_REST_MIN:g}–{ACC_REST_MAX:g})"
     )
-    if not cands:
-        return Finding(
-            "acc", "acc_unit", value, unit, None, f"{text}: implausible in any unit ({', '.join(ACC_SCALES)})"
-        )
-    best = cands[0][0]
-    return Finding("acc", "acc_unit", value, unit, best, f"{text}: looks like {best} read as {unit}")
+    return _scale_finding("acc", value, unit, ACC_SCALES, lambda v: ACC_REST_MIN <= v <= ACC_REST_MAX, text)
 
 
 def check_gyro(rec: Recording, gyr_unit: str = "rad/s") -> Finding | None:
@@ -203,17 +208,11 @@ def check_gyro(rec: Recording, gyr_unit: str = "rad/s") -> Finding | None:
     value = float(np.percentile(np.linalg.norm(rec.gyr, axis=1), GYR_PERCENTILE))
     if value <= GYR_MAX_RAD_S:
         return None
-    cands = _candidates(value, unit, GYR_SCALES, lambda v: v <= GYR_MAX_RAD_S)
     text = (
         f"{GYR_PERCENTILE:g}th percentile of |gyr| {value:.4g} rad/s is above {GYR_MAX_RAD_S:g} rad/s "
         f"(2000 °/s, the full scale of common MEMS gyros)"
     )
-    if not cands:
-        return Finding(
-            "gyr", "gyr_unit", value, unit, None, f"{text}: implausible in any unit ({', '.join(GYR_SCALES)})"
-        )
-    best = cands[0][0]
-    return Finding("gyr", "gyr_unit", value, unit, best, f"{text}: looks like {best} read as {unit}")
+    return _scale_finding("gyr", value, unit, GYR_SCALES, lambda v: v <= GYR_MAX_RAD_S, text)
 
 
 def check_mag(rec: Recording, mag_unit: str = "T") -> Finding | None:
@@ -229,17 +228,11 @@ def check_mag(rec: Recording, mag_unit: str = "T") -> Finding | None:
     value = float(np.median(norm))
     if MAG_MIN_T <= value <= MAG_MAX_T:
         return None
-    cands = _candidates(value, unit, MAG_SCALES, lambda v: MAG_MIN_T <= v <= MAG_MAX_T)
     text = (
         f"median |mag| {value * 1e6:.4g} µT, expected Earth's field 25–65 µT "
         f"({MAG_MIN_T * 1e6:g}–{MAG_MAX_T * 1e6:g} with calibration offsets)"
     )
-    if not cands:
-        return Finding(
-            "mag", "mag_unit", value, unit, None, f"{text}: implausible in any unit ({', '.join(MAG_SCALES)})"
-        )
-    best = cands[0][0]
-    return Finding("mag", "mag_unit", value, unit, best, f"{text}: looks like {best} read as {unit}")
+    return _scale_finding("mag", value, unit, MAG_SCALES, lambda v: MAG_MIN_T <= v <= MAG_MAX_T, text)
 
 
 def check_units(
