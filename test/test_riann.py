@@ -11,7 +11,7 @@ import pytest
 from conftest import gate_dts, rmse
 from riann_ros import quaternion as quat
 from riann_ros.estimators import create
-from riann_ros.estimators.riann import RiannEstimator, default_model_path
+from riann_ros.estimators.riann import default_model_path
 from riann_ros.resample import resample_recording
 
 
@@ -122,17 +122,3 @@ def test_rates_outside_the_trained_range_stay_accurate(broad_trial, trial):
     raw = create("riann", rate_adaptation=False)
     e_raw = rmse(fast, raw.update_batch(fast.acc, fast.gyr, gate_dts(fast)))
     assert e_raw > 3 * native
-
-
-def test_rate_adaptation_streaming_equals_batch_with_mixed_rates():
-    rng = np.random.default_rng(1)
-    n = 600
-    dt = rng.choice([0.001, 0.0015, 0.005, 0.01, 0.04, 0.1], size=n)
-    acc = np.array([0.0, 0.0, 9.81]) + rng.normal(0, 0.5, (n, 3))
-    gyr = rng.normal(0, 0.3, (n, 3))
-    est = RiannEstimator()
-    qb = est.update_batch(acc, gyr, dt)
-    est.reset()
-    qs = np.array([est.update(acc[i], gyr[i], dt[i]) for i in range(n)])
-    assert np.abs(qs - qb).max() < 1e-5
-    assert np.allclose(np.linalg.norm(qb, axis=1), 1.0)

@@ -158,10 +158,17 @@ def test_a_clean_stream_at_the_grid_step_is_fed_straight_in():
     assert np.abs(qb - qs).max() < 1e-5
 
 
-def test_jittery_streaming_equals_batch_and_gives_unit_quaternions():
-    rng = np.random.default_rng(4)
+@pytest.mark.parametrize(
+    ("seed", "steps"),
+    [
+        (4, (0.0005, 0.003, 0.010, 0.020, 0.030, 0.15)),  # jitter, with holes
+        (1, (0.001, 0.0015, 0.005, 0.01, 0.04, 0.1)),  # mixed rates: blocks, up-sampling, switches
+    ],
+)
+def test_jittery_streaming_equals_batch_and_gives_unit_quaternions(seed, steps):
+    rng = np.random.default_rng(seed)
     n = 600
-    dt = rng.choice([0.0005, 0.003, 0.010, 0.020, 0.030, 0.15], size=n)
+    dt = rng.choice(steps, size=n)
     acc = np.array([0.0, 0.0, G]) + rng.normal(0, 0.5, (n, 3))
     gyr = rng.normal(0, 0.3, (n, 3))
     est = RiannEstimator()
