@@ -15,6 +15,7 @@ from std_srvs.srv import Trigger
 from conftest import ROOT, rmse, wait_for
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
 from riann_ros.estimators import create
+from riann_ros.nodes.live import call_service
 from riann_ros.stream import EstimatorStream, GateConfig
 
 pytestmark = pytest.mark.ros
@@ -163,9 +164,8 @@ def test_reset_service_clears_state(ros, start_node):
     wait_for(lambda: len(att.messages) >= 30, 10, "first half")
     client = ros.node.create_client(Trigger, "/riann_node/reset")
     assert client.wait_for_service(timeout_sec=10)
-    fut = client.call_async(Trigger.Request())
-    wait_for(fut.done, 10, "reset response")
-    assert fut.result().success
+    res = call_service(client, Trigger.Request(), 10)
+    assert res is not None and res.success, "no answer from ~/reset"
     send_slowly(pub, msgs[30:])
     wait_for(lambda: len(att.messages) >= 60, 10, "second half")
     q = create("riann").update_batch(acc[30:], gyr[30:], np.r_[1 / 200.0, np.diff(stamps[30:]) * 1e-9])
@@ -199,9 +199,9 @@ def test_runtime_parameter_validation(ros, start_node):
         req = SetParameters.Request()
         req.parameters = [ParamMsg(name="beta", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
                                                                      double_value=v))]
-        fut = client.call_async(req)
-        wait_for(fut.done, 10, "set_parameters")
-        return fut.result().results[0].successful
+        res = call_service(client, req, 10)
+        assert res is not None, "no answer from set_parameters"
+        return res.results[0].successful
 
     assert set_beta(0.1)
     assert not set_beta(-1.0)  # outside the declared range

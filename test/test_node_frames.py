@@ -21,6 +21,7 @@ from conftest import wait_for
 from helpers_ros import imu_msg, quats, stamp_ns
 from riann_ros import frames
 from riann_ros.estimators import create
+from riann_ros.nodes.live import call_service
 from riann_ros.nodes.madgwick_node import MadgwickNode
 from riann_ros.nodes.mahony_node import MahonyNode
 from riann_ros.nodes.node_base import StampRateCheck, make_transform, rpy_topic, tf_frames_problem
@@ -186,9 +187,9 @@ def _param_client(ros, srv_type, node_name: str, what: str):
 
 
 def _call(client, req):
-    fut = client.call_async(req)
-    wait_for(fut.done, 10, "parameter service")
-    return fut.result()
+    res = call_service(client, req, 10)
+    assert res is not None, "no answer from the parameter service"
+    return res
 
 
 def _set(client, name: str, value) -> tuple[bool, str]:

@@ -56,6 +56,32 @@ def node_topics(name: str) -> tuple[str, str]:
     return "imu/attitude", "imu/data"
 
 
+def call_service(client: Any, request: Any, timeout: float, resend_every: float = 2.0) -> Any | None:
+    """Call a service and wait up to ``timeout`` s for the answer; None when none came.
+
+    The request is sent again every ``resend_every`` s: with Fast DDS, ``wait_for_service`` can return
+    before the server has matched the client's response reader, and the first answer is then lost (seen
+    once in a few hundred CI runs). Use it for idempotent requests only (``~/reset``, set_parameters).
+    """
+    futures = [client.call_async(request)]
+    end = time.monotonic() + timeout
+    next_send = time.monotonic() + resend_every
+    try:
+        while time.monotonic() < end:
+            for f in futures:
+                if f.done():
+                    return f.result()
+            if time.monotonic() >= next_send:
+                futures.append(client.call_async(request))
+                next_send += resend_every
+            time.sleep(0.002)
+        return None
+    finally:
+        for f in futures:
+            if not f.done():
+                client.remove_pending_request(f)
+
+
 def node_executable(name: str) -> str:
     exe = Path(sys.executable).parent / f"{name}_node"
     if exe.exists():
@@ -211,11 +237,7 @@ class LiveRunner:
             try:
                 if not client.wait_for_service(timeout_sec=timeout):
                     raise EvalError(f"--live: {spec.name}_node offers no ~/reset service")
-                future = client.call_async(Trigger.Request())
-                end = time.monotonic() + timeout
-                while not future.done() and time.monotonic() < end:
-                    time.sleep(0.002)
-                if not future.done():
+                if call_service(client, Trigger.Request(), timeout) is None:
                     raise EvalError(f"--live: {spec.name}_node did not answer ~/reset")
             finally:
                 self.node.destroy_client(client)
