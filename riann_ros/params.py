@@ -18,12 +18,13 @@ class ParamSpec:
     """One parameter: what the node declares, the CLI parses and the evaluator can tune."""
 
     name: str
-    default: float | int | bool | str
+    default: float | int | bool | str | tuple[float, ...]
     description: str
     min: float | None = None
     max: float | None = None
     runtime: bool = False  # may change while running (validated), without a reset
     choices: tuple[str, ...] = ()  # allowed values of a string parameter (empty: any string)
+    # a tuple default makes a fixed-length array of floats (ROS double array), each element within min/max
 
     def validate(self, value: Any) -> Any:
         """Return ``value`` converted to the parameter's type, or raise ``ValueError``.
@@ -40,7 +41,15 @@ class ParamSpec:
             if self.choices and value not in self.choices:
                 raise ValueError(f"{self.name} must be one of {', '.join(self.choices)}, got {value!r}")
             return value
+        if isinstance(self.default, tuple):
+            return self._validate_array(value)
         return self._validate_number(value)
+
+    def _validate_array(self, value: Any) -> tuple[float, ...]:
+        n = len(self.default)  # type: ignore[arg-type]
+        if isinstance(value, str | bytes) or not hasattr(value, "__len__") or len(value) != n:
+            raise ValueError(f"{self.name} must be a list of {n} numbers, got {value!r}")
+        return tuple(float(ParamSpec(self.name, 0.0, "", self.min, self.max)._validate_number(v)) for v in value)
 
     def _validate_number(self, value: Any) -> float | int:
         if isinstance(value, bool) or not isinstance(value, int | float):
@@ -60,6 +69,13 @@ class ParamSpec:
         """The value of a command-line string (``"0.1"``, ``"true"``, ``"sensor_data"``), validated."""
         if isinstance(self.default, str):
             return self.validate(text)
+        if isinstance(self.default, tuple):  # "1,2,3" or "[1, 2, 3]"
+            parts = [t for t in text.strip().strip("[]").replace(" ", "").split(",") if t]
+            try:
+                return self.validate([float(t) for t in parts])
+            except ValueError:
+                raise ValueError(f"{self.name} must be {len(self.default)} comma-separated numbers, "
+                                 f"got {text!r}") from None
         low = text.strip().lower()
         if isinstance(self.default, bool):
             if low not in ("true", "false"):

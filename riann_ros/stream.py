@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riann_ros.estimators.base import AttitudeEstimator
+from riann_ros.mag import MagConfig, MagInput
 from riann_ros.params import ParamSpec, defaults, find
 
 # rejection reasons
@@ -253,27 +254,36 @@ class InputGate:
 class EstimatorStream:
     """A gate in front of an estimator: what the node runs per message, and the evaluator per sequence."""
 
-    def __init__(self, estimator: AttitudeEstimator, config: GateConfig | None = None) -> None:
+    def __init__(self, estimator: AttitudeEstimator, config: GateConfig | None = None,
+                 mag_config: MagConfig | None = None) -> None:
         self.estimator = estimator
         self.gate = InputGate(config)
+        self.mag = MagInput(mag_config)
 
     def reset(self) -> None:
         """Clear the estimator and restart the stamp sequence (the node's ~/reset service)."""
         self.estimator.reset()
         self.gate.restart()
+        self.mag.reset()
 
     def process(
-        self, stamp_ns: int, acc: ArrayLike, gyr: ArrayLike, receive_ns: int | None = None
+        self, stamp_ns: int, acc: ArrayLike, gyr: ArrayLike, receive_ns: int | None = None,
+        mag: ArrayLike | None = None,
     ) -> tuple[NDArray[np.float64] | None, GateResult]:
-        """One sample → (quaternion wxyz or None when rejected, the gate's verdict)."""
+        """One sample (and the field paired with it, see :mod:`riann_ros.mag`) → (quaternion wxyz or None
+        when rejected, the gate's verdict)."""
         r = self.gate.check(stamp_ns, acc, gyr, receive_ns)
         if not r.accepted:
             return None, r
         if r.reset is not None:
             self._restart(r.reset)
-        q = self.estimator.update(acc, gyr, r.dt)
+        field = self.mag.prepare(mag) if self.estimator.USES_MAG else None
+        q = self.estimator.update(acc, gyr, r.dt, field)
         if not _is_unit(q):
             return None, self._fault(r)
+        if field is not None or self.mag.seen:
+            seen = self.mag.used(np.array([field is not None]))
+            q = self.mag.declination_applied(q[None, :], seen)[0]
         return q, r
 
     def _restart(self, cause: str) -> None:
@@ -281,19 +291,22 @@ class EstimatorStream:
             self.estimator.on_gap()
         else:
             self.estimator.reset()
+            self.mag.reset()
 
     def _fault(self, r: GateResult) -> GateResult:
         # Never publish garbage: an estimator output that is not a finite unit quaternion restarts it.
         self.estimator.reset()
+        self.mag.reset()
         self.gate.rejected[ESTIMATOR_FAULT] += 1
         r.accepted = False
         r.reason = ESTIMATOR_FAULT
         return r
 
     def process_batch(
-        self, stamps_ns: ArrayLike, acc: ArrayLike, gyr: ArrayLike
+        self, stamps_ns: ArrayLike, acc: ArrayLike, gyr: ArrayLike, mag: ArrayLike | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        """A sequence → (quaternions (N, 4) with NaN rows for rejected samples, accepted mask).
+        """A sequence (with the fields paired to its samples, NaN rows = none) → (quaternions (N, 4) with NaN
+        rows for rejected samples, accepted mask).
 
         Equal to calling :meth:`process` per sample (the gate runs per sample; the estimator runs
         vectorised over each run of accepted samples between restarts).
@@ -301,6 +314,7 @@ class EstimatorStream:
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         acc = np.asarray(acc, dtype=float)
         gyr = np.asarray(gyr, dtype=float)
+        self._fields = self.mag.prepare_batch(mag) if self.estimator.USES_MAG else None
         out = np.full((len(stamps), 4), np.nan)
         accepted, dts, starts = self._gate_batch(stamps, acc, gyr)
         idx = np.flatnonzero(accepted)
@@ -347,19 +361,26 @@ class EstimatorStream:
     def _run_segment(self, seg: NDArray[np.intp], acc: NDArray[np.float64], gyr: NDArray[np.float64],
                      dts: NDArray[np.float64], out: NDArray[np.float64], accepted: NDArray[np.bool_]) -> None:
         """The estimator over accepted samples ``seg`` (no restart inside), outputs into ``out``."""
+        fields = self._fields
         while len(seg):
-            q = self.estimator.update_batch(acc[seg], gyr[seg], dts[seg])
+            m = None if fields is None else fields[seg]
+            q = self.estimator.update_batch(acc[seg], gyr[seg], dts[seg], m)
             bad = ~_rows_unit(q)
+            n_ok = int(np.argmax(bad)) if bad.any() else len(seg)
+            if m is not None or self.mag.seen:
+                ok: NDArray[np.bool_] = (np.zeros(n_ok, dtype=bool) if m is None
+                                         else np.asarray(np.isfinite(m[:n_ok]).all(axis=1), dtype=bool))
+                q[:n_ok] = self.mag.declination_applied(q[:n_ok], self.mag.used(ok))
             if not bad.any():
                 out[seg] = q
                 return
             # as in process(): the faulty sample is dropped and the estimator restarts after it
-            first = int(np.argmax(bad))
-            out[seg[:first]] = q[:first]
-            accepted[seg[first]] = False
+            out[seg[:n_ok]] = q[:n_ok]
+            accepted[seg[n_ok]] = False
             self.estimator.reset()
+            self.mag.reset()
             self.gate.rejected[ESTIMATOR_FAULT] += 1
-            seg = seg[first + 1 :]
+            seg = seg[n_ok + 1 :]
 
 
 def _is_unit(q: NDArray[np.float64]) -> bool:

@@ -166,7 +166,8 @@ def test_vqf_bool_params() -> None:
 
 def test_defaults() -> None:
     front_end = {"gyro_bias_estimation": False, "bias_clip": 8.0, "bias_sigma_init": 3.0}
-    assert MadgwickEstimator().params == {"beta": DEFAULT_BETA, **front_end} == {"beta": 0.033, **front_end}
+    assert MadgwickEstimator().params == {"beta": DEFAULT_BETA, "beta_marg": 0.041, **front_end} == {
+        "beta": 0.033, "beta_marg": 0.041, **front_end}
     assert MahonyEstimator().params == {"kp": DEFAULT_KP, "ki": DEFAULT_KI, **front_end} == {
         "kp": 1.0, "ki": 0.3, **front_end}
     from vqf import VQF
@@ -177,6 +178,8 @@ def test_defaults() -> None:
         "motion_bias_est": p["motionBiasEstEnabled"],
         "rest_bias_est": p["restBiasEstEnabled"],
         "bias_clip": p["biasClip"],
+        "tau_mag": p["tauMag"],
+        "mag_dist_rejection": p["magDistRejectionEnabled"],
     }
 
 

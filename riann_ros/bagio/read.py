@@ -26,6 +26,7 @@ from riann_ros.bagio.layout import (
     BagError,
     typestore,
 )
+from riann_ros.mag import MagConfig, pair_fields
 from riann_ros.recording import Recording
 
 
@@ -134,9 +135,10 @@ def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_t
     ``/ground_truth/attitude`` message has the sample's stamp; ``quat_ref=None`` when the bag has no
     reference topic, or with ``reference=False``), its score mask and the bag's name/dataset/source/frame_id/meta.
     ``imu_topic``: the ``sensor_msgs/msg/Imu`` topic of the samples (a bag not written by the converter). The
-    magnetometer (``/imu/mag``, tesla) comes in ``mag`` the same way as the reference: NaN rows where no message
-    has the sample's stamp, ``None`` without the topic. Raises :class:`BagError` for anything that is not a
-    readable IMU bag.
+    magnetometer (``/imu/mag``, tesla) comes in ``mag`` paired with the samples as the nodes pair it
+    (:func:`riann_ros.mag.pair_fields`: the newest field stamped at or before the sample, at most the default
+    ``mag_timeout`` older; NaN rows where none), ``None`` without the topic. Raises :class:`BagError` for
+    anything that is not a readable IMU bag.
     """
     path = Path(path)
     if chunk < 1:
@@ -174,6 +176,7 @@ class _ChunkBuffer:
         self.imu_log: list[int] = []
         self.ref_raw: list[bytes] = []
         self.mag_raw: list[bytes] = []
+        self.mag_carry: tuple[np.ndarray, np.ndarray] = (np.empty(0, np.int64), np.empty((0, 3)))
         self.events: list[tuple[int, bool]] = []
         self.mask = True  # score mask value in force
         self.last: int | None = None  # stamp of the last sample
@@ -217,11 +220,25 @@ class _ChunkBuffer:
         self._check_increasing(stamps, first)
         last = int(stamps[-1])
         quat = _at_stamps(self.ref_raw, parse_quats, 4, stamps, last) if self.has_ref else None
-        mag = _at_stamps(self.mag_raw, parse_mags, 3, stamps, last) if self.mag_ids else None
+        mag = self._paired_mag(stamps, last) if self.mag_ids else None
         mask = self._score_mask(stamps, last)
         self.last = last
         self.index = first + len(stamps)
         return self._recording(stamps, acc, gyr, quat, mask, mag)
+
+    def _paired_mag(self, stamps: np.ndarray, last: int) -> np.ndarray:
+        """The field paired with each of the chunk's samples; keeps the newest reading at or before ``last``
+        for the next chunk and the readings stamped after ``last``."""
+        ts, vals = parse_mags(self.mag_raw)
+        order = np.argsort(ts, kind="stable")
+        ts = np.concatenate([self.mag_carry[0], ts[order]])
+        vals = np.concatenate([self.mag_carry[1], vals[order].reshape(-1, 3)])
+        out = pair_fields(stamps, ts, vals, MagConfig().timeout_ns)
+        done = ts <= last
+        k = int(np.count_nonzero(done))
+        self.mag_carry = (ts[max(k - 1, 0):k], vals[max(k - 1, 0):k])
+        self.mag_raw[:] = [r for r, t in zip(self.mag_raw, parse_mags(self.mag_raw)[0], strict=True) if t > last]
+        return out
 
     def _check_increasing(self, stamps: np.ndarray, first: int) -> None:
         """BagError naming the global sample index where header stamps stop increasing (across chunks too)."""

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from riann_ros import evaluation as ev
 from riann_ros.evaluation import report
+from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
 DEFAULT_MAX_GAP_S = 0.1  # riann_ros.bagio.topics.DEFAULT_MAX_GAP_S (as riann-bag-convert --max-gap)
@@ -101,7 +102,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", "-o", type=Path, default=None,
                    help="write results.csv, results.json, report.md and plots (PNG+SVG) here (a folder already holding "
                    "results needs --force)")
-    p.add_argument("--heading", action="store_true", help="also score heading and total error (extra columns)")
+    p.add_argument("--heading", action="store_true",
+                   help="also score heading and total error of 6D runs (heading drift; 9D runs always have them)")
+    p.add_argument("--use-mag", choices=USE_MAG_CHOICES, default="auto",
+                   help="the magnetometer (/imu/mag), as the nodes' use_mag: auto (default) = every estimator runs 9D "
+                   "where the recording has a field, with heading and total error in the results; false = 6D only")
     p.add_argument("--plot-sequence", default=None,
                    help="sequence for the error-over-time and roll/pitch plots (default: the first input); 'all': "
                    "a roll/pitch figure (roll_pitch_<sequence>) for every sequence")
@@ -179,6 +184,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         rates=parse_rates(args.rates),
         conditions=[ev.parse_condition(c) for c in args.perturb] or [ev.Condition()],
         with_heading=args.heading,
+        use_mag=args.use_mag,
         series_for=None if args.no_plots or not args.out else (args.plot_sequence or "*"),
         keep_estimates=args.write_estimates is not None,
         rest=ev.parse_rest(args.rest) if args.rest else None,
@@ -282,6 +288,9 @@ def _write_estimates(results: list[ev.SequenceResult], out_dir: Path, force: boo
 
 def _print_summary(rep: report.Report, live: bool) -> None:
     print(report.format_table(rep.summary))
+    nine = report.format_heading_table(rep.rows)
+    if nine:
+        print("\n" + nine)
     rows = rep.rows
     if live and rows:
         lost: dict[str, list[int]] = {}

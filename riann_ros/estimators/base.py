@@ -2,12 +2,20 @@
 
 Every estimator is a causal filter over IMU samples:
 
-* ``update(acc, gyr, dt)`` — one sample (acc in m/s², gyr in rad/s, dt in s since the previous
-  sample) → unit quaternion ``[w, x, y, z]``, sensor to world (ENU, z up);
-* ``update_batch(acc, gyr, dt)`` — a whole sequence ``(N, 3), (N, 3), (N,)`` → ``(N, 4)``; it
-  continues from the current state and leaves the state after the last sample, so a batch call gives
-  the same numbers as ``N`` calls of ``update`` (tested per estimator);
+* ``update(acc, gyr, dt, mag=None)`` — one sample (acc in m/s², gyr in rad/s, dt in s since the
+  previous sample, optionally the magnetic field in the sensor frame) → unit quaternion
+  ``[w, x, y, z]``, sensor to world (ENU, z up);
+* ``update_batch(acc, gyr, dt, mag=None)`` — a whole sequence ``(N, 3), (N, 3), (N,), (N, 3)`` →
+  ``(N, 4)``; it continues from the current state and leaves the state after the last sample, so a
+  batch call gives the same numbers as ``N`` calls of ``update`` (tested per estimator);
 * ``reset()`` — forget everything; the next sample re-initialises the filter.
+
+**Magnetometer (9D).** ``mag`` is the calibrated field in the sensor frame, in tesla (only its
+direction and its norm relative to a learned reference matter). ``None`` or a non-finite row means
+"no field for this sample": the estimator runs its 6D step and its heading follows the gyro. With a
+field, the world frame is magnetic ENU (y = magnetic north); without one, the heading starts at zero.
+Estimators that use the field set ``USES_MAG``; :meth:`AttitudeEstimator.heading_observed` says whether
+the last sample's heading was tied to the field (the node reports a finite yaw covariance only then).
 
 A subclass implements ``reset`` and at least one of ``update`` / ``update_batch``: the base class
 derives the other (one sample as a batch of one, or a batch as a loop of samples). Construction
@@ -38,6 +46,7 @@ class AttitudeEstimator(ABC):
 
     name: ClassVar[str] = ""
     PARAMS: ClassVar[tuple[ParamSpec, ...]] = ()
+    USES_MAG: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -88,16 +97,23 @@ class AttitudeEstimator(ABC):
         sensor the same). Default: :meth:`reset`; an estimator may keep what the gap does not change."""
         self.reset()
 
-    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
-        """Process one sample and return the attitude quaternion ``[w, x, y, z]``."""
-        return self.update_batch(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])[0]
+    def heading_observed(self) -> bool:
+        """True while the heading is tied to the magnetic field (the last sample's field was used and
+        not rejected as disturbed); False for 6D estimators and while the heading follows the gyro."""
+        return False
 
-    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
+    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
+        """Process one sample and return the attitude quaternion ``[w, x, y, z]``."""
+        m = None if mag is None else np.reshape(np.asarray(mag, dtype=float), (1, 3))
+        return self.update_batch(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt], m)[0]
+
+    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
         """Process a sequence (a loop over :meth:`update` unless a subclass vectorises it)."""
         acc = np.asarray(acc, dtype=float)
         gyr = np.asarray(gyr, dtype=float)
         dt = np.broadcast_to(np.asarray(dt, dtype=float), (len(acc),))
+        m = None if mag is None else np.asarray(mag, dtype=float).reshape(-1, 3)
         out = np.empty((len(acc), 4))
         for i in range(len(acc)):
-            out[i] = self.update(acc[i], gyr[i], float(dt[i]))
+            out[i] = self.update(acc[i], gyr[i], float(dt[i]), None if m is None else m[i])
         return out

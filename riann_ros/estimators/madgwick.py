@@ -1,4 +1,4 @@
-"""Madgwick's gradient-descent attitude filter, IMU (6D) form, in plain Python (ROS-free).
+"""Madgwick's gradient-descent attitude filter, IMU (6D) and MARG (9D) forms, in plain Python (ROS-free).
 
 S. O. H. Madgwick, "An efficient orientation filter for inertial and inertial/magnetic sensor
 arrays", 2010; IMU update as in Madgwick's reference code and in ``ahrs.filters.Madgwick.updateIMU``:
@@ -8,17 +8,38 @@ arrays", 2010; IMU update as in Madgwick's reference code and in ``ahrs.filters.
 with ``â`` the normalised accelerometer sample. ``q`` is sensor → world with world z up (ENU): at rest
 the accelerometer reads +g along the world z axis seen from the sensor, ``R(q)ᵀ e_z``.
 
+**MARG (9D) form**, used when ``mag`` is given (Madgwick 2010 eqs. 45-46, as ``ahrs.filters.Madgwick.updateMARG``):
+the objective gets the magnetometer rows
+
+    f = [R(q)ᵀ e_z − â ;  R(q)ᵀ (b_x, 0, b_z) − m̂],   h = R(q) m̂,   b_x = √(h_x² + h_y²),   b_z = h_z
+
+with ``m̂`` the normalised field and gain ``beta_marg`` (default 0.041, the ahrs 0.4.0 ``gain_marg``).
+Madgwick's reference field (b_x, 0, b_z) puts magnetic north on the earth *x* axis: his earth frame is
+NWU (x north, y west, z up), while this package's is ENU (x east, y north, z up). The recursion therefore
+runs on ``q_NWU = C⁻¹ ⊗ q_ENU`` and every output is ``q_ENU = C ⊗ q_NWU`` with ``C`` = +90° about z
+(:data:`C_NWU_TO_ENU`). The objective is deliberately not rewritten for ENU: Madgwick's polynomial
+objective equals the rotation only on the unit sphere, and a world-rotated version has a different radial
+gradient component, which changes ∇f/‖∇f‖ (up to ~1e-3 per component on BROAD); in his frame the numbers
+equal ``ahrs`` to round-off. The state kept between calls is the NWU quaternion itself, so streaming and
+batch stay identical. Samples without a field (non-finite or all-zero ``mag`` row) get the IMU step above
+with ``beta`` (in the NWU frame; the 6D objective is invariant under rotations about world z, so this is
+the 6D filter up to round-off); ``ahrs`` instead calls ``updateIMU`` with its single gain and its
+default ``Dt``. Initialisation with a field: :func:`~riann_ros.estimators.common.initial_attitude_marg`
+(accelerometer attitude, heading from the tilt-compensated field: its horizontal part along +y).
+:meth:`MadgwickEstimator.heading_observed` is True iff the last sample's correction used a field.
+
 Conventions shared with :mod:`riann_ros.estimators.mahony`:
 
 * **initialisation** — the first sample with a finite, non-zero accelerometer sets the attitude with
-  :func:`riann_ros.quaternion.from_accelerometer` (zero heading) and is output as it is (its gyro and dt
-  are not integrated: there is no previous sample). Samples before that return the identity.
+  :func:`riann_ros.quaternion.from_accelerometer` (zero heading; with ``mag`` and a field in that sample,
+  the heading of the field) and is output as it is (its gyro and dt are not integrated: there is no
+  previous sample). Samples before that return the identity.
 * **per-sample dt** — each step integrates over its own ``dt``; non-finite or negative dt counts as 0.
 * **degenerate input** — a zero (or non-finite) accelerometer sample gives a gyro-only step, as in
-  Madgwick's reference code; a non-finite gyro sample counts as zero rate. If a step ever produced a
-  non-finite or zero quaternion the previous one is kept, so the output is always a finite unit
-  quaternion. (Unlike ``ahrs``, a gyro sample of exactly zero still gets the accelerometer correction;
-  ``ahrs`` skips such samples entirely.)
+  Madgwick's reference code (no magnetometer correction either, as ``ahrs``); a non-finite gyro sample
+  counts as zero rate. If a step ever produced a non-finite or zero quaternion the previous one is kept, so
+  the output is always a finite unit quaternion. (Unlike ``ahrs``, a gyro sample of exactly zero still
+  gets the accelerometer (and magnetometer) correction; ``ahrs`` skips such samples entirely.)
 * **speed** — the recursion cannot be vectorised over time, so the loop runs on Python floats in local
   variables (no numpy per sample). :meth:`update` runs the very same loop with one sample, so
   streaming and batch give identical numbers.
@@ -32,11 +53,38 @@ from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import BIAS_KEY, Quat, as_array, bias_text, initialise, sanitize_arrays
+from riann_ros.estimators.common import (
+    BIAS_KEY,
+    Quat,
+    as_array,
+    bias_text,
+    initialise,
+    initialise_marg,
+    sanitize_arrays,
+    sanitize_mag,
+)
 
 #: ahrs 0.4.0 ``Madgwick`` default ``gain_imu`` (IMU/6D mode); Madgwick's report gives β = √(3/4)·ω̃ with
 #: ω̃ the gyro measurement error, and 0.033 corresponds to ω̃ ≈ 2.2°/s.
 DEFAULT_BETA = 0.033
+#: ahrs 0.4.0 ``Madgwick`` default ``gain_marg`` (MARG/9D mode, samples with a field).
+DEFAULT_BETA_MARG = 0.041
+
+_C = math.sqrt(0.5)
+#: ``q_ENU = C ⊗ q_NWU``: Madgwick's MARG earth frame NWU (x magnetic north, y west, z up) → ENU is +90° about z.
+C_NWU_TO_ENU: Quat = (_C, 0.0, 0.0, _C)
+
+
+def enu_to_nwu(q: Quat) -> Quat:
+    """``C⁻¹ ⊗ q`` (:data:`C_NWU_TO_ENU`): a sensor → ENU attitude as sensor → NWU."""
+    w, x, y, z = q
+    return _C * (w + z), _C * (x + y), _C * (y - x), _C * (z - w)
+
+
+def nwu_to_enu(q: Quat) -> Quat:
+    """``C ⊗ q``: a sensor → NWU attitude as sensor → ENU."""
+    w, x, y, z = q
+    return _C * (w - z), _C * (x - y), _C * (y + x), _C * (z + w)
 
 
 def _madgwick_run(q: Quat | None, acc: list, gyr: list, dt: list, beta: float) -> tuple[Quat | None, list]:
@@ -89,10 +137,101 @@ def _madgwick_run(q: Quat | None, acc: list, gyr: list, dt: list, beta: float) -
     return (qw, qx, qy, qz), out
 
 
+def _madgwick_marg_run(
+    qn: Quat | None, used: bool, acc: list, gyr: list, mag: list, dt: list, beta: float, beta_marg: float
+) -> tuple[Quat | None, bool, list]:
+    """The MARG filter from state ``qn`` (sensor → NWU, None = not initialised) over the samples.
+
+    ``used`` is the heading-observed flag before these samples; returns (new NWU state, whether the last
+    sample's correction used a field, ENU outputs).
+    """
+    out: list = []
+    append = out.append
+    sqrt = math.sqrt
+    inf = math.inf
+    c = _C
+    i = 0
+    if qn is None:
+        q, i, used = initialise_marg(None, acc, mag, out)
+        if q is None:
+            return None, False, out
+        qn = enu_to_nwu(q)
+    qw, qx, qy, qz = qn
+    for (ax, ay, az), (gx, gy, gz), (mx, my, mz), h in zip(acc[i:], gyr[i:], mag[i:], dt[i:], strict=True):
+        # rate of change from the gyroscope: ½ q ⊗ [0, ω]
+        dw = 0.5 * (-qx * gx - qy * gy - qz * gz)
+        dx = 0.5 * (qw * gx + qy * gz - qz * gy)
+        dy = 0.5 * (qw * gy - qx * gz + qz * gx)
+        dz = 0.5 * (qw * gz + qx * gy - qy * gx)
+        used = False
+        an = sqrt(ax * ax + ay * ay + az * az)
+        if an > 0.0:
+            ax /= an
+            ay /= an
+            az /= an
+            # accelerometer rows of f and of the gradient Jᵀ f
+            f1 = 2.0 * (qx * qz - qw * qy) - ax
+            f2 = 2.0 * (qw * qx + qy * qz) - ay
+            f3 = 2.0 * (0.5 - qx * qx - qy * qy) - az
+            s0 = -2.0 * qy * f1 + 2.0 * qx * f2
+            s1 = 2.0 * qz * f1 + 2.0 * qw * f2 - 4.0 * qx * f3
+            s2 = -2.0 * qw * f1 + 2.0 * qz * f2 - 4.0 * qy * f3
+            s3 = 2.0 * qx * f1 + 2.0 * qy * f2
+            k = beta
+            mn = sqrt(mx * mx + my * my + mz * mz)
+            if 0.0 < mn < inf:
+                used = True
+                k = beta_marg
+                mx /= mn
+                my /= mn
+                mz /= mn
+                # h = q ⊗ m̂ ⊗ q* (earth frame), reference field (b_x, 0, b_z)
+                tx = 2.0 * (qy * mz - qz * my)
+                ty = 2.0 * (qz * mx - qx * mz)
+                tz = 2.0 * (qx * my - qy * mx)
+                hx = mx + qw * tx + (qy * tz - qz * ty)
+                hy = my + qw * ty + (qz * tx - qx * tz)
+                bz = mz + qw * tz + (qx * ty - qy * tx)
+                bx = sqrt(hx * hx + hy * hy)
+                # magnetometer rows of f and of Jᵀ f
+                f4 = 2.0 * bx * (0.5 - qy * qy - qz * qz) + 2.0 * bz * (qx * qz - qw * qy) - mx
+                f5 = 2.0 * bx * (qx * qy - qw * qz) + 2.0 * bz * (qw * qx + qy * qz) - my
+                f6 = 2.0 * bx * (qw * qy + qx * qz) + 2.0 * bz * (0.5 - qx * qx - qy * qy) - mz
+                s0 += -2.0 * bz * qy * f4 + (-2.0 * bx * qz + 2.0 * bz * qx) * f5 + 2.0 * bx * qy * f6
+                s1 += 2.0 * bz * qz * f4 + (2.0 * bx * qy + 2.0 * bz * qw) * f5 + (2.0 * bx * qz - 4.0 * bz * qx) * f6
+                s2 += (
+                    (-4.0 * bx * qy - 2.0 * bz * qw) * f4
+                    + (2.0 * bx * qx + 2.0 * bz * qz) * f5
+                    + (2.0 * bx * qw - 4.0 * bz * qy) * f6
+                )
+                s3 += (-4.0 * bx * qz + 2.0 * bz * qx) * f4 + (-2.0 * bx * qw + 2.0 * bz * qy) * f5 + 2.0 * bx * qx * f6
+            sn = sqrt(s0 * s0 + s1 * s1 + s2 * s2 + s3 * s3)
+            if 0.0 < sn < inf:
+                k /= sn
+                dw -= k * s0
+                dx -= k * s1
+                dy -= k * s2
+                dz -= k * s3
+        nw = qw + dw * h
+        nx = qx + dx * h
+        ny = qy + dy * h
+        nz = qz + dz * h
+        nn = sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+        if 0.0 < nn < inf:
+            qw = nw / nn
+            qx = nx / nn
+            qy = ny / nn
+            qz = nz / nn
+        # q_ENU = C ⊗ q_NWU
+        append((c * (qw - qz), c * (qx - qy), c * (qy + qx), c * (qz + qw)))
+    return (qw, qx, qy, qz), used, out
+
+
 class MadgwickEstimator(AttitudeEstimator):
-    """Madgwick IMU filter with gain ``beta``; see the module docstring."""
+    """Madgwick IMU/MARG filter with gains ``beta`` (no field) and ``beta_marg`` (field); see the module docstring."""
 
     name = "madgwick"
+    USES_MAG = True
     PARAMS = (
         ParamSpec(
             "beta",
@@ -103,11 +242,23 @@ class MadgwickEstimator(AttitudeEstimator):
             max=10.0,
             runtime=True,
         ),
+        ParamSpec(
+            "beta_marg",
+            DEFAULT_BETA_MARG,
+            "Gradient-descent gain β (rad/s) for samples with a magnetometer field (MARG/9D mode): weight of the "
+            "accelerometer and magnetometer correction. Default 0.041 = the ahrs 0.4.0 default (gain_marg).",
+            min=0.0,
+            max=10.0,
+            runtime=True,
+        ),
         *front_end_params(False, "the filter"),
     )
 
     def reset(self) -> None:
-        self._q: Quat | None = None
+        self._q: Quat | None = None  # sensor → ENU, the last output
+        # (ENU state, the same attitude in NWU) as the MARG loop left them: the NWU value continues exactly
+        self._marg: tuple[Quat, Quat] | None = None
+        self._observed = False
         self._fe = FrontEndSlot(self.params)
 
     @property
@@ -117,8 +268,32 @@ class MadgwickEstimator(AttitudeEstimator):
     def diagnostics(self) -> dict[str, str]:
         return {BIAS_KEY: bias_text(self._fe.bias)} if self._fe.on else {}
 
-    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
+    def heading_observed(self) -> bool:
+        return self._observed
+
+    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
         a, g, h = sanitize_arrays(acc, gyr, dt)
+        m = None if mag is None else sanitize_mag(mag, len(a))
         g = self._fe.debias(a, g, h)
-        self._q, out = _madgwick_run(self._q, a.tolist(), g.tolist(), h.tolist(), float(self.params["beta"]))
+        beta = float(self.params["beta"])
+        if m is None:
+            self._q, out = _madgwick_run(self._q, a.tolist(), g.tolist(), h.tolist(), beta)
+            if out:
+                self._observed = False
+            return as_array(out)
+        qn = self._nwu_state()
+        qn, self._observed, out = _madgwick_marg_run(
+            qn, self._observed, a.tolist(), g.tolist(), m, h.tolist(), beta, float(self.params["beta_marg"])
+        )
+        if qn is not None and out:
+            self._q = out[-1]
+            self._marg = (out[-1], qn)
         return as_array(out)
+
+    def _nwu_state(self) -> Quat | None:
+        """The state as sensor → NWU: the MARG loop's own value if nothing changed the attitude since."""
+        if self._q is None:
+            return None
+        if self._marg is not None and self._marg[0] == self._q:
+            return self._marg[1]
+        return enu_to_nwu(self._q)

@@ -1,4 +1,4 @@
-"""Mahony's explicit complementary filter, IMU (6D) form, in plain Python (ROS-free).
+"""Mahony's explicit complementary filter, IMU (6D) and MARG (9D) forms, in plain Python (ROS-free).
 
 R. Mahony, T. Hamel, J.-M. Pflimlin, "Nonlinear complementary filters on the special orthogonal
 group", IEEE TAC 53(5), 2008; quaternion form as in ``ahrs.filters.Mahony.updateIMU``:
@@ -9,11 +9,26 @@ group", IEEE TAC 53(5), 2008; quaternion form as in ``ahrs.filters.Mahony.update
 with ``â`` the normalised accelerometer sample and ``b`` the gyro-bias estimate (integral term,
 starts at zero, cleared by :meth:`~MahonyEstimator.reset`). ``q`` is sensor → world, world z up (ENU).
 
+**MARG (9D) form**, used when ``mag`` is given (as ``ahrs.filters.Mahony.updateMARG``): with ``m̂`` the
+normalised field, ``h = R(q) m̂`` its tilt-compensated direction in the world frame and the reference
+field ``(0, √(h_x² + h_y²), h_z)``,
+
+    v_m = R(q)ᵀ (0, √(h_x² + h_y²), h_z) / ‖·‖,   e = â × v + m̂ × v_m
+
+and the same bias and attitude update with the same ``k_P``, ``k_I`` as the IMU form (as ``ahrs``). The
+reference field puts magnetic north on the world *y* axis, so this earth frame is already ENU (no frame
+conversion, unlike :mod:`riann_ros.estimators.madgwick`). Samples without a field (non-finite or
+all-zero ``mag`` row) get the IMU step; the initialisation takes the heading from the field of the
+initialising sample when it has one (:func:`~riann_ros.estimators.common.initial_attitude_marg`: the
+horizontal part of the tilt-compensated field along +y). :meth:`MahonyEstimator.heading_observed` is
+True iff the last sample's correction used a field.
+
 Initialisation, per-sample dt, degenerate input and the fast loop follow
 :mod:`riann_ros.estimators.madgwick`: initialised from the first usable accelerometer sample with
 :func:`riann_ros.quaternion.from_accelerometer`; a zero accelerometer sample gives a gyro-only step
-(bias integral frozen); the output is always a finite unit quaternion; :meth:`update` runs the same
-loop as :meth:`update_batch` with one sample.
+(bias integral frozen, the current bias still subtracted; ``ahrs`` integrates the raw gyro there, and
+skips samples whose gyro is exactly zero); the output is always a finite unit quaternion;
+:meth:`update` runs the same loop as :meth:`update_batch` with one sample.
 """
 
 from __future__ import annotations
@@ -25,7 +40,16 @@ from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import BIAS_KEY, Quat, as_array, bias_text, initialise, sanitize_arrays
+from riann_ros.estimators.common import (
+    BIAS_KEY,
+    Quat,
+    as_array,
+    bias_text,
+    initialise,
+    initialise_marg,
+    sanitize_arrays,
+    sanitize_mag,
+)
 
 #: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
 DEFAULT_KP = 1.0
@@ -88,10 +112,95 @@ def _mahony_run(
     return (qw, qx, qy, qz), (bx, by, bz), out
 
 
+def _mahony_marg_run(
+    q: Quat | None, b: Vec, used: bool, acc: list, gyr: list, mag: list, dt: list, kp: float, ki: float
+) -> tuple[Quat | None, Vec, bool, list]:
+    """The MARG filter from state (q, bias) over the samples; ``used`` is the heading-observed flag before
+    them. Returns (new q, new bias, whether the last sample's correction used a field, outputs)."""
+    out: list = []
+    append = out.append
+    sqrt = math.sqrt
+    inf = math.inf
+    i = 0
+    if q is None:
+        q, i, used = initialise_marg(None, acc, mag, out)
+        if q is None:
+            return None, b, False, out
+    qw, qx, qy, qz = q
+    bx, by, bz = b
+    for (ax, ay, az), (gx, gy, gz), (mx, my, mz), h in zip(acc[i:], gyr[i:], mag[i:], dt[i:], strict=True):
+        used = False
+        an = sqrt(ax * ax + ay * ay + az * az)
+        if an > 0.0:
+            ax /= an
+            ay /= an
+            az /= an
+            # expected direction of "up" in the sensor frame: third row of R(q)
+            vx = 2.0 * (qx * qz - qw * qy)
+            vy = 2.0 * (qw * qx + qy * qz)
+            vz = 1.0 - 2.0 * (qx * qx + qy * qy)
+            ex = ay * vz - az * vy
+            ey = az * vx - ax * vz
+            ez = ax * vy - ay * vx
+            mn = sqrt(mx * mx + my * my + mz * mz)
+            if 0.0 < mn < inf:
+                mx /= mn
+                my /= mn
+                mz /= mn
+                # h = R(q) m̂ (world frame), reference (0, ry, rz)
+                tx = 2.0 * (qy * mz - qz * my)
+                ty = 2.0 * (qz * mx - qx * mz)
+                tz = 2.0 * (qx * my - qy * mx)
+                hx = mx + qw * tx + (qy * tz - qz * ty)
+                hy = my + qw * ty + (qz * tx - qx * tz)
+                rz = mz + qw * tz + (qx * ty - qy * tx)
+                ry = sqrt(hx * hx + hy * hy)
+                # expected field direction in the sensor frame v_m = R(q)ᵀ (0, ry, rz), normalised
+                wx = 2.0 * ry * (qx * qy + qw * qz) + 2.0 * rz * (qx * qz - qw * qy)
+                wy = ry * (1.0 - 2.0 * (qx * qx + qz * qz)) + 2.0 * rz * (qw * qx + qy * qz)
+                wz = 2.0 * ry * (qy * qz - qw * qx) + rz * (1.0 - 2.0 * (qx * qx + qy * qy))
+                wn = sqrt(wx * wx + wy * wy + wz * wz)
+                if 0.0 < wn < inf:
+                    used = True
+                    wx /= wn
+                    wy /= wn
+                    wz /= wn
+                    ex += my * wz - mz * wy
+                    ey += mz * wx - mx * wz
+                    ez += mx * wy - my * wx
+            kih = ki * h
+            bx -= kih * ex
+            by -= kih * ey
+            bz -= kih * ez
+            gx = gx - bx + kp * ex
+            gy = gy - by + kp * ey
+            gz = gz - bz + kp * ez
+        else:
+            gx -= bx
+            gy -= by
+            gz -= bz
+        hh = 0.5 * h
+        nw = qw + (-qx * gx - qy * gy - qz * gz) * hh
+        nx = qx + (qw * gx + qy * gz - qz * gy) * hh
+        ny = qy + (qw * gy - qx * gz + qz * gx) * hh
+        nz = qz + (qw * gz + qx * gy - qy * gx) * hh
+        nn = sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+        if 0.0 < nn < inf:
+            qw = nw / nn
+            qx = nx / nn
+            qy = ny / nn
+            qz = nz / nn
+        append((qw, qx, qy, qz))
+    if not (math.isfinite(bx) and math.isfinite(by) and math.isfinite(bz)):
+        bx = by = bz = 0.0
+    return (qw, qx, qy, qz), (bx, by, bz), used, out
+
+
 class MahonyEstimator(AttitudeEstimator):
     """Mahony IMU filter with proportional gain ``kp`` and integral (gyro-bias) gain ``ki``."""
 
     name = "mahony"
+    USES_MAG = True
     PARAMS = (
         ParamSpec(
             "kp",
@@ -118,6 +227,7 @@ class MahonyEstimator(AttitudeEstimator):
     def reset(self) -> None:
         self._q: Quat | None = None
         self._b: Vec = (0.0, 0.0, 0.0)
+        self._observed = False
         self._fe = FrontEndSlot(self.params)
 
     @property
@@ -132,10 +242,21 @@ class MahonyEstimator(AttitudeEstimator):
     def diagnostics(self) -> dict[str, str]:
         return {BIAS_KEY: bias_text(self.bias)}
 
-    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
+    def heading_observed(self) -> bool:
+        return self._observed
+
+    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
         a, g, h = sanitize_arrays(acc, gyr, dt)
+        m = None if mag is None else sanitize_mag(mag, len(a))
         g = self._fe.debias(a, g, h)
-        self._q, self._b, out = _mahony_run(
-            self._q, self._b, a.tolist(), g.tolist(), h.tolist(), float(self.params["kp"]), float(self.params["ki"])
-        )
+        kp = float(self.params["kp"])
+        ki = float(self.params["ki"])
+        if m is None:
+            self._q, self._b, out = _mahony_run(self._q, self._b, a.tolist(), g.tolist(), h.tolist(), kp, ki)
+            if out:
+                self._observed = False
+        else:
+            self._q, self._b, self._observed, out = _mahony_marg_run(
+                self._q, self._b, self._observed, a.tolist(), g.tolist(), m, h.tolist(), kp, ki
+            )
         return as_array(out)

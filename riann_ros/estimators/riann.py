@@ -23,6 +23,9 @@ stages around it, each causal, with one output per input sample at that sample's
    output takes the network's inclination and a heading that starts at zero and follows the
    bias-corrected gyro (each output is the gyro prediction from the previous output, corrected by
    the smallest rotation — about a horizontal axis — that gives it the network's gravity direction).
+   With a magnetometer the heading is also pulled toward the tilt-compensated field, with disturbance
+   rejection (:mod:`~riann_ros.estimators.heading`); that correction is about the vertical only, so
+   the inclination is the same with and without a field.
 
 **Holes.** A stamp step longer than ``restart_gap`` (and than four input steps) while the network
 runs means that rotation during the hole is unknown. The grid bridges the hole by interpolation, and
@@ -55,6 +58,7 @@ from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import GyroBiasFrontEnd, front_end_params
 from riann_ros.estimators.common import BIAS_KEY, bias_text
 from riann_ros.estimators.grid import DT_MIN, REL_EPS, RateTracker, SignalHistory
+from riann_ros.estimators.heading import MagHeading
 
 HIDDEN_SHAPE = (2, 1, 1, 200)
 BATCH_CHUNK = 200_000  # network rows per ONNX Runtime call in batch mode
@@ -158,7 +162,15 @@ class RiannEstimator(AttitudeEstimator):
         ParamSpec("restart_warmup", RESTART_WARMUP,
                   "s; how long the fresh network runs beside the old one after a hole before it takes over.",
                   min=0.0, max=60.0),
+        ParamSpec("tau_mag", 9.0, "s; time constant of the heading correction toward the magnetometer (9D only; "
+                  "the default is VQF's tauMag).", min=0.01, max=1000.0, runtime=True),
+        ParamSpec("mag_delay", 0.0, "s; latency of the magnetometer behind the gyro, compensated by rotating the "
+                  "field with the gyro (9D only; docs/magnetometer.md shows how to measure it).",
+                  min=0.0, max=0.5, runtime=True),
+        ParamSpec("mag_dist_rejection", True, "Detect magnetic disturbances (field norm and dip against a learned "
+                  "reference) and hold the heading with the gyro while disturbed (9D only).", runtime=True),
     )
+    USES_MAG = True
 
     def __init__(self, session: ort.InferenceSession | None = None, **params: Any) -> None:
         self._session = session or make_session(params.get("model_path") or None)
@@ -173,8 +185,17 @@ class RiannEstimator(AttitudeEstimator):
         self.holes = 0
         self.samples = 0  # input samples taken since reset
         self.rows = 0  # network steps run since reset (compute per sample = rows / samples)
+        self._heading = MagHeading(self.params["tau_mag"], self.params["mag_delay"], self.params["mag_dist_rejection"])
         self.restart()
         self._qc_prev = None
+
+    def _on_params_changed(self) -> None:
+        h = self._heading
+        h.tau_mag, h.mag_delay, h.reject = (self.params["tau_mag"], self.params["mag_delay"],
+                                            self.params["mag_dist_rejection"])
+
+    def heading_observed(self) -> bool:
+        return self._heading.observed
 
     def on_gap(self) -> None:
         """A stamp gap longer than the gate's ``max_dt``: the sensor is the same, so its bias, rate and
@@ -203,6 +224,8 @@ class RiannEstimator(AttitudeEstimator):
             out["network rate (Hz)"] = f"{1.0 / self._rate.step:.1f}"
             out["input model"] = "interval means" if self._rate.irregular else "point samples"
         out["network restarts after holes"] = str(self.holes)
+        if self._heading.started:
+            out["magnetic disturbance"] = "detected" if self._heading.disturbed else "none"
         return out
 
     def _bias_now(self) -> tuple[float, float, float]:
@@ -393,8 +416,9 @@ class RiannEstimator(AttitudeEstimator):
         return out
 
     # -- output: carry-forward and heading ------------------------------------------------------------
-    def _compose(self, net: Array, plan: _Plan) -> Array:
-        """Per-sample outputs from the network rows and the plan (vectorised heading stage)."""
+    def _compose(self, net: Array, plan: _Plan, dt: Array, mag: Array | None) -> Array:
+        """Per-sample outputs from the network rows and the plan (vectorised heading stage up to the first
+        field, then per sample with the magnetic correction)."""
         n = len(plan.idx)
         idx = np.asarray(plan.idx, dtype=np.int64)
         base = np.empty((n, 4))
@@ -417,14 +441,42 @@ class RiannEstimator(AttitudeEstimator):
         tw = np.remainder(2.0 * np.arctan2(e[:, 3], e[:, 0]) + np.pi, 2.0 * np.pi) - np.pi
         if self._qc_prev is None:
             tw[0] = -2.0 * math.atan2(qc[0, 3], qc[0, 0]) - self._psi  # the output starts at zero heading
+        first = self._first_heading_row(mag, n)
         psi = self._psi + np.cumsum(tw)
+        if first < n:
+            assert mag is not None
+            psi[first:] = self._mag_psi(float(psi[first - 1]) if first else self._psi, tw[first:], qc[first:],
+                                        plan.delta[first:], dt[first:], mag[first:])
         self._psi = math.remainder(float(psi[-1]), 2.0 * math.pi)
         self._qc_prev = tuple(qc[-1].tolist())
         rz = np.column_stack([np.cos(0.5 * psi), np.zeros(n), np.zeros(n), np.sin(0.5 * psi)])
         q = quat.normalize(quat.multiply(rz, qc))
         return np.where(q[:, :1] < 0.0, -q, q)  # sign convention: w >= 0
 
-    def _compose_one(self, q_net: Quat, rot: Quat, delta: Quat) -> Array:
+    def _first_heading_row(self, mag: Array | None, n: int) -> int:
+        """The first row that runs the magnetic heading stage: 0 once a field was seen, else the first row with
+        a field (n: none)."""
+        if self._heading.started:
+            return 0
+        if mag is None:
+            return n
+        has = np.isfinite(mag).all(axis=1)
+        return int(np.argmax(has)) if has.any() else n
+
+    def _mag_psi(self, psi: float, tw: Array, qc: Array, delta: list[Quat], dt: Array, mag: Array) -> Array:
+        """Heading angles of the rows after the first field: gyro increment plus the magnetic correction."""
+        out = np.empty(len(tw))
+        step = self._heading.step
+        for i, (t, q, m, h) in enumerate(zip(tw.tolist(), qc.tolist(), mag.tolist(), dt.tolist(), strict=True)):
+            psi += t
+            c, s = math.cos(0.5 * psi), math.sin(0.5 * psi)
+            qo = (c * q[0] - s * q[3], c * q[1] - s * q[2], c * q[2] + s * q[1], c * q[3] + s * q[0])
+            psi += step(qo, delta[i], h, None if m[0] != m[0] or m[1] != m[1] or m[2] != m[2] else (m[0], m[1], m[2]))
+            out[i] = psi
+        return out
+
+    def _compose_one(self, q_net: Quat, rot: Quat, delta: Quat, dt: float,
+                     mag: tuple[float, float, float] | None) -> Array:
         """:meth:`_compose` for one sample in plain floats (the node's hot path)."""
         qc = _qmul(q_net, rot) if rot is not IDENTITY_T else q_net
         n = math.sqrt(sum(v * v for v in qc))
@@ -436,6 +488,10 @@ class RiannEstimator(AttitudeEstimator):
             e = _qmul(p, (qc[0], -qc[1], -qc[2], -qc[3]))
             self._psi = math.remainder(self._psi + _twist(e), 2.0 * math.pi)
         self._qc_prev = qc
+        if mag is not None or self._heading.started:
+            h = 0.5 * self._psi
+            qo = _qmul((math.cos(h), 0.0, 0.0, math.sin(h)), qc)
+            self._psi = math.remainder(self._psi + self._heading.step(qo, delta, dt, mag), 2.0 * math.pi)
         h = 0.5 * self._psi
         w, x, y, z = _qmul((math.cos(h), 0.0, 0.0, math.sin(h)), qc)
         n = math.sqrt(w * w + x * x + y * y + z * z)
@@ -444,7 +500,7 @@ class RiannEstimator(AttitudeEstimator):
         return np.array([w / n, x / n, y / n, z / n])
 
     # -- public API -----------------------------------------------------------------------------
-    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
+    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
         a0, a1, a2 = acc  # type: ignore[misc, str-unpack]
         g0, g1, g2 = gyr  # type: ignore[misc, str-unpack]
         x = (float(a0), float(a1), float(a2), float(g0), float(g1), float(g2))  # type: ignore[arg-type]
@@ -460,9 +516,13 @@ class RiannEstimator(AttitudeEstimator):
                 self._q_net = tuple(net[plan.idx[0]].tolist())
         if self._q_net is None:  # cannot happen: the first sample always makes a row
             raise RuntimeError("no network output yet")
-        return self._compose_one(self._q_net, plan.rot[0], plan.delta[0])
+        m = None
+        if mag is not None:
+            m0, m1, m2 = (float(v) for v in mag)  # type: ignore[union-attr, arg-type]
+            m = (m0, m1, m2) if math.isfinite(m0 + m1 + m2) else None
+        return self._compose_one(self._q_net, plan.rot[0], plan.delta[0], _step_dt(float(dt)), m)
 
-    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
+    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
         acc = np.asarray(acc, dtype=float).reshape(-1, 3)
         gyr = np.asarray(gyr, dtype=float).reshape(-1, 3)
         n = len(acc)
@@ -486,4 +546,10 @@ class RiannEstimator(AttitudeEstimator):
                 self._plan_direct(tuple(xs[i]), dts[i], plan)
             i += 1
         net = self._run_rows(plan.rows) if plan.rows else np.empty((0, 4))
-        return self._compose(net, plan)
+        m = None if mag is None else np.asarray(mag, dtype=float).reshape(n, 3)
+        return self._compose(net, plan, np.array([_step_dt(v) for v in dts]), m)
+
+
+def _step_dt(dt: float) -> float:
+    """A sample's dt for the heading stage (non-finite or negative: 0)."""
+    return dt if math.isfinite(dt) and dt > 0.0 else 0.0

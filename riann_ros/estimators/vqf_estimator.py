@@ -1,4 +1,4 @@
-"""VQF (Laidig & Seel 2023) through the ``vqf`` package, 6D output (ROS-free).
+"""VQF (Laidig & Seel 2023) through the ``vqf`` package, 6D or 9D output (ROS-free).
 
 D. Laidig, T. Seel, "VQF: Highly accurate IMU orientation estimation with bias estimation and magnetic
 disturbance rejection", Information Fusion 91:187-204, 2023, https://doi.org/10.1016/j.inffus.2022.10.014.
@@ -10,6 +10,13 @@ The C++ implementation of the ``vqf`` package (MIT) does the work; this class on
   whose heading is arbitrary: it starts at the sensor's initial heading and drifts with the remaining
   gyro bias about z (no magnetometer). So it is sensor → world ENU up to a heading offset, like the
   other 6D estimators here.
+* **magnetometer (9D)** — with a field (``mag``, converted to µT for VQF) the output is ``getQuat9D()``:
+  VQF's heading correction toward the magnetic field, its earth frame ENU with y = magnetic north,
+  with VQF's own magnetic disturbance rejection (``mag_dist_rejection``) and time constant
+  ``tau_mag`` (``tauMag``). The correction changes the heading only, so the inclination is the 6D one.
+  Samples without a field (NaN or zero rows, ``mag=None``) skip ``updateMag``: the heading follows the
+  gyro. The output is always ``quat9D``: before the first field VQF's heading offset is the identity,
+  so it equals ``quat6D`` exactly, and after the magnetometer stops the heading continues without a jump.
 * **dt** — VQF is built for a fixed sampling time ``Ts`` given at construction. The filter is created at
   the first sample with ``Ts`` = that sample's dt (the stream gives the first sample ``1/nominal_rate``;
   ``DEFAULT_TS`` if that dt is not positive). Every sample's gyroscope reading is then scaled by
@@ -45,6 +52,9 @@ DEFAULT_TAU_ACC = 3.0
 DEFAULT_MOTION_BIAS_EST = True
 DEFAULT_REST_BIAS_EST = True
 DEFAULT_BIAS_CLIP = 2.0  # °/s
+DEFAULT_TAU_MAG = 9.0  # s
+DEFAULT_MAG_DIST_REJECTION = True
+TESLA_TO_UT = 1e6
 
 
 class VqfEstimator(AttitudeEstimator):
@@ -82,11 +92,32 @@ class VqfEstimator(AttitudeEstimator):
             min=0.1,
             max=100.0,
         ),
+        ParamSpec(
+            "tau_mag",
+            DEFAULT_TAU_MAG,
+            "s; time constant of the heading correction toward the magnetometer (VQF tauMag; 9D only). "
+            "Default 9.0 = the vqf default.",
+            min=0.01,
+            max=1000.0,
+            runtime=True,
+        ),
+        ParamSpec(
+            "mag_dist_rejection",
+            DEFAULT_MAG_DIST_REJECTION,
+            "Detect magnetic disturbances (field norm and dip against a learned reference) and hold the heading "
+            "with the gyro while disturbed (VQF magDistRejectionEnabled; 9D only). Default true = vqf default.",
+            runtime=True,
+        ),
     )
+    USES_MAG = True
 
     def reset(self) -> None:
         self._vqf: VQF | None = None
         self._ts: float | None = None
+        self._mag_used = False
+
+    def heading_observed(self) -> bool:
+        return self._mag_used and self._vqf is not None and not self._vqf.getMagDistDetected()
 
     @property
     def initialized(self) -> bool:
@@ -113,6 +144,8 @@ class VqfEstimator(AttitudeEstimator):
         self._vqf.setTauAcc(float(self.params["tau_acc"]))
         self._vqf.setMotionBiasEstEnabled(bool(self.params["motion_bias_est"]))
         self._vqf.setRestBiasEstEnabled(bool(self.params["rest_bias_est"]))
+        self._vqf.setTauMag(float(self.params["tau_mag"]))
+        self._vqf.setMagDistRejectionEnabled(bool(self.params["mag_dist_rejection"]))
 
     def _ensure(self, first_dt: float) -> tuple[VQF, float]:
         """The filter and its Ts, built at the first sample."""
@@ -124,20 +157,38 @@ class VqfEstimator(AttitudeEstimator):
                 motionBiasEstEnabled=bool(self.params["motion_bias_est"]),
                 restBiasEstEnabled=bool(self.params["rest_bias_est"]),
                 biasClip=float(self.params["bias_clip"]),
+                tauMag=float(self.params["tau_mag"]),
+                magDistRejectionEnabled=bool(self.params["mag_dist_rejection"]),
             )
         return self._vqf, self._ts
 
-    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float) -> Array:
+    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
         a, g, h = sanitize_arrays(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])
         v, ts = self._ensure(float(h[0]))
-        v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]))
-        return np.asarray(v.getQuat6D(), dtype=float).copy()
+        m = _field_ut(None if mag is None else np.reshape(mag, (1, 3)), 1)[0]
+        self._mag_used = bool(m.any())
+        if self._mag_used:
+            v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]), m)
+        else:
+            v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]))
+        return np.asarray(v.getQuat9D(), dtype=float).copy()
 
-    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> Array:
+    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
         a, g, h = sanitize_arrays(acc, gyr, dt)
         if len(a) == 0:
             return np.empty((0, 4))
         v, ts = self._ensure(float(h[0]))
         g = np.ascontiguousarray(g * (h / ts)[:, None])
-        out = v.updateBatch(g, np.ascontiguousarray(a))["quat6D"]
+        m = _field_ut(mag, len(a))  # zero rows: VQF skips updateMag
+        self._mag_used = bool(m[-1].any())
+        out = v.updateBatch(g, np.ascontiguousarray(a), m)["quat9D"]
         return np.array(out, dtype=float)
+
+
+def _field_ut(mag: ArrayLike | None, n: int) -> Array:
+    """The field as a C-contiguous (n, 3) array in µT; rows without a usable field are zeros."""
+    if mag is None:
+        return np.zeros((n, 3))
+    m = np.array(mag, dtype=float).reshape(n, 3) * TESLA_TO_UT
+    m[~np.isfinite(m).all(axis=1)] = 0.0
+    return np.ascontiguousarray(m)

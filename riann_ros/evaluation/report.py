@@ -138,6 +138,42 @@ def format_markdown_table(agg: Sequence[Group]) -> str:
     return "\n".join(out)
 
 
+def heading_rows(rows: Sequence[ResultRow]) -> list[list[str]]:
+    """Cells of the 9D table: per estimator × scenario × perturbation × rate of the 9D runs, heading and total
+    RMSE (BROAD's definitions, mean / max over the sequences) beside the inclination. 6D runs never enter it:
+    their heading is not referenced to anything (``--heading`` scores it as drift in results.json)."""
+    nine = [r for r in rows if r.sensors == "9D" and r.score.heading_rmse_deg is not None]
+    out = []
+    keys = dict.fromkeys((r.estimator, r.scenario, r.perturbation, r.rate) for r in nine)
+    for key in keys:
+        grp = [r for r in nine if (r.estimator, r.scenario, r.perturbation, r.rate) == key]
+        h = np.array([r.score.heading_rmse_deg for r in grp], dtype=float)
+        t = np.array([r.score.total_rmse_deg for r in grp], dtype=float)
+        i = np.array([r.rmse_deg for r in grp], dtype=float)
+        out.append([key[1], key[2], rate_label(key[3]), key[0], str(len(grp)), f"{h.mean():.2f}", f"{h.max():.2f}",
+                    f"{t.mean():.2f}", f"{t.max():.2f}", f"{i.mean():.2f}"])
+    return out
+
+
+HEADING_HEADERS = ["scenario", "perturbation", "rate", "estimator", "n", "heading mean °", "heading max °",
+                   "total mean °", "total max °", "inclination mean °"]
+
+
+def format_heading_table(rows: Sequence[ResultRow], markdown_table: bool = False) -> str:
+    """The 9D table (empty string when no run used a magnetometer)."""
+    cells = heading_rows(rows)
+    if not cells:
+        return ""
+    if markdown_table:
+        return "\n".join(["| " + " | ".join(HEADING_HEADERS) + " |", "|---|---|---:|---|" + "---:|" * 6]
+                         + ["| " + " | ".join(c) + " |" for c in cells])
+    widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(HEADING_HEADERS)]
+    lines = ["9D runs (magnetometer): heading and total error RMSE (°) per sequence",
+             "  ".join(h.ljust(w) for h, w in zip(HEADING_HEADERS, widths, strict=True))]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in cells]
+    return "\n".join(lines)
+
+
 # ---------------------------------------------------------------------------------------------------
 # one run
 # ---------------------------------------------------------------------------------------------------
@@ -290,6 +326,11 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
     if citations:
         lines += ["", "Data: " + "; ".join(citations)]
     lines += ["", "## Summary", "", format_markdown_table(report.summary), ""]
+    nine = format_heading_table(report.rows, markdown_table=True)
+    if nine:
+        lines += ["## Heading (9D runs: estimators that used the magnetometer)", "",
+                  "Heading and total error as BROAD defines them (error quaternion in the earth frame); the heading "
+                  "of a 9D estimate is absolute (magnetic north), so it is scored as it is.", "", nine, ""]
     if report.tuning:
         lines += ["## Tuning (grid search on these sequences)", ""]
         for t in report.tuning:

@@ -52,6 +52,7 @@ from riann_ros.evaluation.sources import (
     summarise,
 )
 from riann_ros.evaluation.specs import EstimatorSpec
+from riann_ros.mag import MagConfig
 from riann_ros.recording import Recording
 from riann_ros.stream import EstimatorStream, GateConfig
 
@@ -69,7 +70,8 @@ class EvalSettings:
     seed: int = 0
     rates: list[float | None] = field(default_factory=lambda: [None])  # None = the recording's own rate
     conditions: list[Condition] = field(default_factory=lambda: [Condition()])  # perturbations; () = none
-    with_heading: bool = False
+    with_heading: bool = False  # heading and total error also for 6D runs (heading drift); 9D runs always have them
+    use_mag: str = "auto"  # as the nodes' use_mag: auto/true = 9D where the recording has a magnetometer
     series_for: str | None = None  # sequence whose series are plotted: a name, "*" (the first) or "all"
     series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
     keep_estimates: bool = False  # return the estimates of the first scenario (for --write-estimates)
@@ -92,6 +94,7 @@ class RunStats:
     rejected: dict[str, int] = field(default_factory=dict)  # input-gate rejections per reason
     resets: dict[str, int] = field(default_factory=dict)  # estimator restarts per cause
     live: dict[str, int] | None = None  # live replays: published, received, lost, unexpected
+    mag_samples: int = 0  # samples the estimator got with a magnetic field (> 0: a 9D run)
 
 
 @dataclass
@@ -109,6 +112,7 @@ class ResultRow:
     estimator_name: str
     mode: str
     score: Score
+    sensors: str = "6D"  # 9D: the estimator used the magnetometer (its heading is scored as absolute)
     perturbation: str = NONE  # the condition's label
     stats: RunStats = field(default_factory=RunStats)
 
@@ -122,7 +126,7 @@ class ResultRow:
         d: dict[str, Any] = {
             k: getattr(self, k)
             for k in ("sequence", "dataset", "source", "scenario", "perturbation", "rate", "rate_hz", "resampled",
-                      "estimator", "estimator_name", "mode")
+                      "estimator", "estimator_name", "mode", "sensors")
         }
         d["seconds"] = self.stats.seconds
         d.update((k, v) for k, v in asdict(self.score).items() if v is not None)
@@ -153,7 +157,8 @@ class ResultRow:
                    scenario=str(d["scenario"]), rate=rate if rate == NATIVE else float(rate),
                    rate_hz=num(d["rate_hz"]), resampled=bool(d["resampled"]), estimator=str(d["estimator"]),
                    estimator_name=str(d.get("estimator_name", d["estimator"])), mode=str(d.get("mode", "")),
-                   score=score, perturbation=str(d.get("perturbation", NONE)), stats=stats)
+                   score=score, perturbation=str(d.get("perturbation", NONE)), stats=stats,
+                   sensors=str(d.get("sensors", "6D")))
 
 
 @dataclass
@@ -197,21 +202,21 @@ _ESTIMATORS: dict[tuple[EstimatorSpec, int], AttitudeEstimator] = {}  # reused a
 
 
 class _OfflineRun:
-    def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> None:
+    def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int, use_mag: str = "auto") -> None:
         self.streams = []
         for spec in specs:
             est = _ESTIMATORS.get((spec, slot))
             if est is None:
                 est = _ESTIMATORS[(spec, slot)] = spec.create()
             est.reset()
-            self.streams.append(EstimatorStream(est, gate))
+            self.streams.append(EstimatorStream(est, gate, MagConfig(use_mag=use_mag)))
         self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
 
     def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
         out = []
         for stream, stats in zip(self.streams, self.stats, strict=True):
             t, cpu = time.perf_counter(), time.process_time()
-            q, _accepted = stream.process_batch(rec.stamps_ns, rec.acc, rec.gyr)
+            q, _accepted = stream.process_batch(rec.stamps_ns, rec.acc, rec.gyr, rec.mag)
             stats.seconds += time.perf_counter() - t
             stats.cpu_seconds += time.process_time() - cpu
             out.append(q)
@@ -221,6 +226,7 @@ class _OfflineRun:
         for stream, stats in zip(self.streams, self.stats, strict=True):
             stats.rejected = {k: int(v) for k, v in stream.gate.rejected.items()}
             stats.resets = {k: int(v) for k, v in stream.gate.resets.items()}
+            stats.mag_samples = stream.mag.samples_with_field
         return self.stats
 
 
@@ -230,8 +236,11 @@ class OfflineRunner:
     mode = "offline"
     interleaved = True
 
+    def __init__(self, use_mag: str = "auto") -> None:
+        self.use_mag = use_mag
+
     def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
-        return _OfflineRun(specs, gate, slot)
+        return _OfflineRun(specs, gate, slot, self.use_mag)
 
 
 def recorded_spec(topic: str) -> EstimatorSpec:
@@ -357,13 +366,14 @@ class _ScenarioRun:
             ResultRow(sequence=res.name, dataset=res.dataset, source=res.source, scenario=self.plan.scenario,
                       rate=NATIVE if rate is None else float(rate), rate_hz=rate_hz, resampled=rate is not None,
                       estimator=spec.label, estimator_name=spec.name, mode=RECORDED if spec.name == RECORDED else mode,
-                      score=self._score(spec, acc), stats=st, perturbation=label)
+                      score=self._score(spec, acc, st.mag_samples > 0), stats=st, perturbation=label,
+                      sensors="9D" if st.mag_samples > 0 else "6D")
             for spec, acc, st in zip(self.specs, self.acc, stats, strict=True)
         ]
 
-    def _score(self, spec: EstimatorSpec, acc: Accumulator) -> Score:
+    def _score(self, spec: EstimatorSpec, acc: Accumulator, nine_d: bool) -> Score:
         try:
-            return acc.result()
+            return acc.result(acc.with_heading or nine_d)
         except EvalError as exc:
             if spec.name != RECORDED or acc.n_scored:
                 raise
@@ -466,7 +476,7 @@ def evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runn
     """
     t0, c0 = time.perf_counter(), time.process_time()
     res = SequenceResult(source=str(source))
-    runner = runner or OfflineRunner()
+    runner = runner or OfflineRunner(settings.use_mag)
     try:
         base = recording
         whole = Path(source).suffix.lower() in BROAD_SUFFIXES or any(r is not None for r in settings.rates)

@@ -59,11 +59,12 @@ class Accumulator:
             e = quat.inclination_error(qt, qe)
             self.sq += float(np.sum(e**2))
             self.max_e = max(self.max_e, float(e.max()))
-            if self.with_heading:
-                self.sq_heading += float(np.sum(quat.heading_error(qt, qe) ** 2))
-                self.sq_total += float(np.sum(quat.total_error(qt, qe) ** 2))
+            self.sq_heading += float(np.sum(quat.heading_error(qt, qe) ** 2))  # reported for 9D runs, --heading
+            self.sq_total += float(np.sum(quat.total_error(qt, qe) ** 2))
 
-    def result(self) -> Score:
+    def result(self, with_heading: bool | None = None) -> Score:
+        """The scores; heading and total error when ``with_heading`` (default: as constructed)."""
+        heading = self.with_heading if with_heading is None else with_heading
         if self.n_base == 0:
             raise EvalError("no scored samples (score mask ∩ reference present is empty)")
         if self.n_scored == 0:
@@ -78,8 +79,8 @@ class Accumulator:
             n_unestimated=self.n_unest,
             rmse_deg=rms(self.sq),
             max_err_deg=float(np.degrees(self.max_e)),
-            heading_rmse_deg=rms(self.sq_heading) if self.with_heading else None,
-            total_rmse_deg=rms(self.sq_total) if self.with_heading else None,
+            heading_rmse_deg=rms(self.sq_heading) if heading else None,
+            total_rmse_deg=rms(self.sq_total) if heading else None,
         )
 
 

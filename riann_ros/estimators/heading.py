@@ -1,0 +1,202 @@
+"""RIANN's absolute heading from the magnetometer (ROS-free): a heading-only correction with disturbance rejection.
+
+RIANN estimates inclination only. Its output is ``q = Rz(ψ) ⊗ q_c``: ``q_c`` the (carried) network attitude,
+which fixes roll and pitch, and ``ψ`` a heading angle about the world vertical. Without a field, ``ψ``
+follows the bias-corrected gyro (:meth:`RiannEstimator._compose`). With a field, each sample also does
+
+1. **latency compensation** (``mag_delay``): a field read ``D`` seconds behind the gyro is rotated into the
+   sensor frame of the sample's stamp with the gyro increments of the last ``D`` seconds, ``m ← R(r)ᵀ m``;
+2. **tilt compensation**: ``m_w = R(q) m``; the heading error is ``e = atan2(m_w,x, m_w,y)`` (zero when the
+   horizontal field points along +y: magnetic north in ENU) and the dip is ``−asin(m_w,z / |m|)``;
+3. **disturbance test** (as VQF, Laidig & Seel 2023, with VQF's default constants): the low-passed norm and
+   dip are compared with a reference learned online; a field off by more than 10 % in norm or 10° in dip is
+   disturbed — the heading then follows the gyro only (for at most 60 s, after which the correction runs at
+   half gain, so a permanently changed field is accepted again); a new field that stays stable for 20 s of
+   motion becomes the reference;
+4. **correction**: ``ψ ← ψ + k e`` with ``k = dt / tau_mag`` (during the first ``tau_mag`` seconds at least
+   ``1/n``: the running mean of the magnetic heading, so the start converges at once). The first usable field
+   sets the heading outright.
+
+The correction is a rotation about the world vertical, so the sensor-frame vertical — RIANN's inclination —
+is never changed by the magnetometer (tested: 9D inclination = 6D inclination). The vertical gyro bias is
+left to the gyro-bias front end in front of the network.
+"""
+
+from __future__ import annotations
+
+import math
+
+DEG = math.pi / 180.0
+# VQF's defaults (vqf 2.1.2 VQFParams): magnetic disturbance rejection
+NORM_TH = 0.1  # relative deviation of |m| from the reference
+DIP_TH = 10.0 * DEG  # deviation of the dip angle from the reference
+CURRENT_TAU = 0.05  # s, low-pass of |m| and dip before the test
+REF_TAU = 20.0  # s, the reference follows the undisturbed field with this time constant
+MIN_UNDISTURBED = 0.5  # s in the band before the field is trusted again
+MAX_REJECT = 60.0  # s of full rejection, then the gain is divided by REJECT_FACTOR
+REJECT_FACTOR = 2.0
+NEW_TIME = 20.0  # s of a stable new field (while moving) before it becomes the reference
+NEW_MIN_GYR = 20.0 * DEG  # rad/s, only motion faster than this counts toward NEW_TIME
+GYR_LP_TAU = 0.5  # s, low-pass of |ω| for NEW_MIN_GYR
+
+Quat = tuple[float, float, float, float]
+
+
+def _qmul(p: Quat, q: Quat) -> Quat:
+    pw, px, py, pz = p
+    qw, qx, qy, qz = q
+    return (pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw)
+
+
+def _rotate(q: Quat, v: tuple[float, float, float]) -> tuple[float, float, float]:
+    """R(q) v for a unit quaternion q."""
+    w, x, y, z = q
+    vx, vy, vz = v
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx))
+
+
+def _rotvec(q: Quat) -> tuple[float, float, float]:
+    """Rotation vector of a unit quaternion (small angles fine)."""
+    w, x, y, z = q
+    s = math.sqrt(x * x + y * y + z * z)
+    if s < 1e-12:
+        return (2.0 * x, 2.0 * y, 2.0 * z)
+    a = 2.0 * math.atan2(s, w) / s
+    return (a * x, a * y, a * z)
+
+
+def _from_rotvec(x: float, y: float, z: float) -> Quat:
+    a = math.sqrt(x * x + y * y + z * z)
+    if a < 1e-12:
+        return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
+    k = math.sin(0.5 * a) / a
+    return (math.cos(0.5 * a), x * k, y * k, z * k)
+
+
+class MagHeading:
+    """The heading correction state (see the module docstring); :meth:`step` per sample."""
+
+    def __init__(self, tau_mag: float, mag_delay: float, reject: bool) -> None:
+        self.tau_mag = tau_mag
+        self.mag_delay = mag_delay
+        self.reject = reject
+        self.reset()
+
+    def reset(self) -> None:
+        self.started = False  # the heading has been set from a field
+        self.t = 0.0  # s since the first field
+        self.n = 0  # fields used in the start phase
+        self.norm_lp = self.dip_lp = 0.0
+        self.ref_norm = self.ref_dip = 0.0
+        self.cand_norm = self.cand_dip = 0.0
+        self.cand_t = self.undist_t = self.reject_t = 0.0
+        self.disturbed = False
+        self.gyr_lp = 0.0
+        self.hist: list[tuple[float, float, float, float]] = []  # (dt, rotation vector of the increment)
+        self.observed = False  # the last sample's heading was corrected by the field
+
+    def _delay_rotation(self, delta: Quat, dt: float) -> Quat:
+        """Sensor-frame rotation over the last ``mag_delay`` s from the gyro increments (oldest partial)."""
+        rx, ry, rz = _rotvec(delta)
+        self.hist.append((dt, rx, ry, rz))
+        r: Quat = (1.0, 0.0, 0.0, 0.0)
+        rem = self.mag_delay
+        keep = 0
+        for h_dt, hx, hy, hz in reversed(self.hist):
+            if rem <= 0.0:
+                break
+            keep += 1
+            f = min(h_dt, rem) / h_dt if h_dt > 0.0 else 0.0
+            rem -= h_dt
+            r = _qmul(_from_rotvec(hx * f, hy * f, hz * f), r)
+        del self.hist[: len(self.hist) - max(keep, 1)]
+        return r
+
+    def step(self, q: Quat, delta: Quat, dt: float, mag: tuple[float, float, float] | None) -> float:
+        """The heading correction (rad, about world z) for the output ``q`` of this sample before correction;
+        ``delta`` is the sample's bias-corrected gyro increment (sensor frame), ``mag`` its field or None."""
+        self.observed = False
+        w = _rotvec(delta)
+        rate = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / dt if dt > 0.0 else 0.0
+        self.gyr_lp += dt / (GYR_LP_TAU + dt) * (rate - self.gyr_lp)
+        if self.mag_delay > 0.0:
+            r = self._delay_rotation(delta, dt)
+            if mag is not None:
+                mag = _rotate((r[0], -r[1], -r[2], -r[3]), mag)
+        if mag is None:
+            return 0.0
+        mn = math.sqrt(mag[0] * mag[0] + mag[1] * mag[1] + mag[2] * mag[2])
+        mw = _rotate(q, mag)
+        if mw[0] * mw[0] + mw[1] * mw[1] <= 0.0:
+            return 0.0  # the field is vertical: no heading information
+        err = math.atan2(mw[0], mw[1])
+        dip = -math.asin(max(-1.0, min(1.0, mw[2] / mn)))
+        if not self.started:
+            self.started = True
+            self.t, self.n = 0.0, 1
+            self.norm_lp = self.ref_norm = self.cand_norm = mn
+            self.dip_lp = self.ref_dip = self.cand_dip = dip
+            self.observed = True
+            return err
+        self.t += dt
+        k = dt / self.tau_mag
+        start = self.t < self.tau_mag
+        if start:
+            self.n += 1
+            k = max(k, 1.0 / self.n)
+        if self.reject:
+            k = self._disturbance(mn, dip, dt, k, start)
+        self.observed = k > 0.0
+        return k * err
+
+    def _disturbance(self, n: float, dip: float, dt: float, k: float, start: bool) -> float:
+        """VQF-style magnetic disturbance detection; the gain to use for this sample."""
+        c = dt / (CURRENT_TAU + dt)
+        self.norm_lp += c * (n - self.norm_lp)
+        self.dip_lp += c * (dip - self.dip_lp)
+        n, dip = self.norm_lp, self.dip_lp
+        k_ref = dt / REF_TAU
+        if start:  # the reference is the running mean of the start (assumed undisturbed)
+            kr = max(k_ref, 1.0 / self.n)
+            self.ref_norm += kr * (n - self.ref_norm)
+            self.ref_dip += kr * (dip - self.ref_dip)
+            self.cand_norm, self.cand_dip = self.ref_norm, self.ref_dip
+            return k
+        if abs(n - self.ref_norm) < NORM_TH * self.ref_norm and abs(dip - self.ref_dip) < DIP_TH:
+            self.undist_t += dt
+            if self.undist_t >= MIN_UNDISTURBED:
+                self.disturbed = False
+                self.ref_norm += k_ref * (n - self.ref_norm)
+                self.ref_dip += k_ref * (dip - self.ref_dip)
+        else:
+            self.undist_t = 0.0
+            self.disturbed = True
+        self._new_field(n, dip, dt, k_ref)
+        if self.disturbed:
+            if self.reject_t <= MAX_REJECT:
+                self.reject_t += dt
+                return 0.0
+            return k / REJECT_FACTOR
+        self.reject_t = max(self.reject_t - REJECT_FACTOR * dt, 0.0)
+        return k
+
+    def _new_field(self, n: float, dip: float, dt: float, k_ref: float) -> None:
+        """A new stable field (norm and dip steady while moving for NEW_TIME) becomes the reference."""
+        if abs(n - self.cand_norm) < NORM_TH * self.cand_norm and abs(dip - self.cand_dip) < DIP_TH:
+            if self.gyr_lp >= NEW_MIN_GYR:
+                self.cand_t += dt
+            self.cand_norm += k_ref * (n - self.cand_norm)
+            self.cand_dip += k_ref * (dip - self.cand_dip)
+            if self.disturbed and self.cand_t >= NEW_TIME:
+                self.ref_norm, self.ref_dip = self.cand_norm, self.cand_dip
+                self.disturbed = False
+                self.undist_t = MIN_UNDISTURBED
+        else:
+            self.cand_t = 0.0
+            self.cand_norm, self.cand_dip = n, dip

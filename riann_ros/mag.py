@@ -1,0 +1,199 @@
+"""The magnetometer input: pairing with IMU samples, calibration, plausibility and ``use_mag`` (ROS-free).
+
+Shared by the node base (which receives ``sensor_msgs/MagneticField`` on its own topic) and the offline
+path (bag reader, evaluator), so both give an estimator the same field for the same IMU sample:
+
+* **pairing** (:class:`MagPairing` per message, :func:`pair_fields` for whole arrays): an IMU sample gets
+  the newest field reading stamped at or before its own stamp, if that reading is at most
+  ``mag_timeout`` older; otherwise none. Never waits for a reading: a slower or late magnetometer
+  only means samples without a field.
+* **calibration** (:class:`MagInput`): ``m = S (m_raw − h)`` with the hard-iron offset ``h`` (tesla,
+  sensor frame) and the soft-iron matrix ``S`` (row-major 3×3), as calibration tools report them.
+* **plausibility**: a reading that is not finite, zero, or whose norm is outside
+  [:data:`MAG_MIN_T`, :data:`MAG_MAX_T`] (a dead or saturated sensor; Earth's field is 25–65 µT) is not
+  used; the estimator then runs 6D for that sample (its heading follows the gyro).
+* ``use_mag``: ``auto`` (default) uses the field whenever a fresh, plausible one is paired; ``true``
+  does the same and reports a missing field as a warning; ``false`` never passes a field.
+* **declination** (deg, east positive): 9D estimators reference their heading to magnetic north; once a
+  field has been used the output is rotated by ``Rz(−declination)`` so that the ENU y axis is true north.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from riann_ros.params import ParamSpec, defaults
+
+MAG_MIN_T = 1e-6  # T; below: a dead sensor or a field in the wrong unit
+MAG_MAX_T = 1e-3  # T; above: saturated, or a magnet next to the sensor
+USE_MAG_CHOICES = ("auto", "true", "false")
+IDENTITY_9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+
+# state of the field for the last sample (diagnostics)
+FIELD_USED = "9D: field used"
+FIELD_OFF = "6D: use_mag is false"
+FIELD_NONE = "6D: no field received"
+FIELD_STALE = "6D: no fresh field"
+FIELD_BAD = "6D: implausible field"
+
+MAG_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec("use_mag", "auto", "Magnetometer on imu/mag: auto = use it while fresh field samples arrive (9D), "
+              "gyro-held heading otherwise (6D); true = the same, a missing field is a warning; false = ignore it.",
+              choices=USE_MAG_CHOICES),
+    ParamSpec("mag_timeout", 0.5, "s; a field reading older than this (relative to the IMU stamp) is stale: "
+              "the sample is processed without a field.", min=0.001, max=60.0, runtime=True),
+    ParamSpec("mag_hard_iron", (0.0, 0.0, 0.0), "T; hard-iron offset subtracted from the field (sensor frame).",
+              min=-1.0, max=1.0, runtime=True),
+    ParamSpec("mag_soft_iron", IDENTITY_9, "Soft-iron matrix S (row-major 3x3) applied after the offset: "
+              "m = S (m_raw - hard_iron).", min=-1.0e3, max=1.0e3, runtime=True),
+    ParamSpec("declination", 0.0, "deg, east positive; magnetic declination at the site, so that the heading "
+              "of a 9D estimate is relative to true north.", min=-180.0, max=180.0, runtime=True),
+)
+_MAG_DEFAULTS = defaults(MAG_PARAMS)
+
+
+@dataclass
+class MagConfig:
+    """The magnetometer parameters (see :data:`MAG_PARAMS`)."""
+
+    use_mag: str = _MAG_DEFAULTS["use_mag"]
+    mag_timeout: float = _MAG_DEFAULTS["mag_timeout"]
+    mag_hard_iron: tuple[float, ...] = _MAG_DEFAULTS["mag_hard_iron"]
+    mag_soft_iron: tuple[float, ...] = _MAG_DEFAULTS["mag_soft_iron"]
+    declination: float = _MAG_DEFAULTS["declination"]
+
+    def __post_init__(self) -> None:
+        for spec in MAG_PARAMS:
+            setattr(self, spec.name, spec.validate(getattr(self, spec.name)))
+
+    @property
+    def timeout_ns(self) -> int:
+        return round(self.mag_timeout * 1e9)
+
+
+class MagPairing:
+    """Field readings as they arrive (node side); :meth:`at` pairs one with an IMU stamp."""
+
+    KEEP = 64  # readings kept: enough for a field stamped ahead of the IMU by a few of its periods
+
+    def __init__(self) -> None:
+        self._readings: deque[tuple[int, tuple[float, float, float]]] = deque(maxlen=self.KEEP)
+        self.received = 0
+
+    def clear(self) -> None:
+        self._readings.clear()
+
+    def push(self, stamp_ns: int, field: ArrayLike) -> None:
+        x, y, z = (float(v) for v in np.asarray(field, dtype=float).reshape(3))
+        if self._readings and stamp_ns < self._readings[-1][0]:
+            self._readings.clear()  # the magnetometer's clock went back: start over
+        self._readings.append((int(stamp_ns), (x, y, z)))
+        self.received += 1
+
+    def at(self, stamp_ns: int, timeout_ns: int) -> tuple[tuple[float, float, float] | None, int | None]:
+        """(the newest reading at or before ``stamp_ns`` not older than ``timeout_ns`` or None, its age in ns or
+        None when no reading at or before the stamp exists)."""
+        for t, v in reversed(self._readings):
+            if t <= stamp_ns:
+                age = stamp_ns - t
+                return (v if age <= timeout_ns else None), age
+        return None, None
+
+
+def pair_fields(imu_stamps: ArrayLike, mag_stamps: ArrayLike, mag: ArrayLike, timeout_ns: int) -> NDArray[np.float64]:
+    """:class:`MagPairing` over whole arrays: (N, 3) fields for the IMU stamps, NaN rows where none is fresh.
+    ``mag_stamps`` must be sorted."""
+    ts = np.asarray(imu_stamps, dtype=np.int64)
+    ms = np.asarray(mag_stamps, dtype=np.int64)
+    vals = np.asarray(mag, dtype=float).reshape(-1, 3)
+    out = np.full((len(ts), 3), np.nan)
+    if len(ms) == 0:
+        return out
+    k = np.searchsorted(ms, ts, side="right") - 1
+    ok = k >= 0
+    ok[ok] = (ts[ok] - ms[k[ok]]) <= timeout_ns
+    out[ok] = vals[k[ok]]
+    return out
+
+
+def plausible(field: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Rows (N, 3) that are finite with a norm within [MAG_MIN_T, MAG_MAX_T]."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        n = np.linalg.norm(field, axis=-1)
+    return np.isfinite(n) & (n >= MAG_MIN_T) & (n <= MAG_MAX_T)
+
+
+def rot_z(angle_rad: float) -> NDArray[np.float64]:
+    return np.array([math.cos(0.5 * angle_rad), 0.0, 0.0, math.sin(0.5 * angle_rad)])
+
+
+class MagInput:
+    """What the stream does with the paired field before and after the estimator (see the module docstring).
+
+    :meth:`prepare` gives the calibrated field for the estimator (or None) and records why not;
+    :meth:`finish` applies the declination once a field has been used since the last reset.
+    """
+
+    def __init__(self, config: MagConfig | None = None) -> None:
+        self.config = config or MagConfig()
+        self.samples_with_field = 0  # samples that went to the estimator with a field (never reset)
+        self.reset()
+
+    def reset(self) -> None:
+        self.seen = False  # a field was passed to the estimator since the last reset
+        self.state = FIELD_NONE if self.config.use_mag != "false" else FIELD_OFF
+
+    def _calibrate(self, m: NDArray[np.float64]) -> NDArray[np.float64]:
+        c = self.config
+        if c.mag_hard_iron == (0.0, 0.0, 0.0) and c.mag_soft_iron == IDENTITY_9:
+            return m
+        s = np.asarray(c.mag_soft_iron).reshape(3, 3)
+        return (m - np.asarray(c.mag_hard_iron)) @ s.T
+
+    def prepare_batch(self, mag: ArrayLike | None) -> NDArray[np.float64] | None:
+        """Fields (N, 3) for the estimator, NaN rows = none; None when no field at all is passed."""
+        if mag is None or self.config.use_mag == "false":
+            self.state = FIELD_OFF if self.config.use_mag == "false" else self._missing()
+            return None
+        m = self._calibrate(np.asarray(mag, dtype=float).reshape(-1, 3))
+        ok = plausible(m)
+        had = np.isfinite(np.asarray(mag, dtype=float).reshape(-1, 3)).all(axis=1)
+        m = np.where(ok[:, None], m, np.nan)
+        if len(m):
+            self.state = FIELD_USED if ok[-1] else (FIELD_BAD if had[-1] else self._missing())
+        return m
+
+    def _missing(self) -> str:
+        return FIELD_STALE if self.seen else FIELD_NONE
+
+    def prepare(self, mag: ArrayLike | None) -> NDArray[np.float64] | None:
+        """One sample's field for the estimator, or None (the node's hot path: no arrays when there is none)."""
+        if mag is None or self.config.use_mag == "false":
+            self.state = FIELD_OFF if self.config.use_mag == "false" else self._missing()
+            return None
+        m = self.prepare_batch(np.reshape(np.asarray(mag, dtype=float), (1, 3)))
+        return None if m is None or not np.isfinite(m[0]).all() else m[0]
+
+    def used(self, ok: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """Per row: a field has been used at or before it since the last reset (updates :attr:`seen`)."""
+        out = np.logical_or.accumulate(ok) | self.seen if len(ok) else ok
+        self.samples_with_field += int(np.count_nonzero(ok))
+        if len(out):
+            self.seen = bool(out[-1])
+        return out
+
+    def declination_applied(self, q: NDArray[np.float64], seen: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Rotate the rows seen with a field by Rz(−declination) (ENU: y becomes true north)."""
+        d = self.config.declination
+        if d == 0.0 or not seen.any():
+            return q
+        from riann_ros import quaternion as quat
+
+        out = q.copy()
+        out[seen] = quat.multiply(rot_z(-math.radians(d)), q[seen])
+        return np.where(out[:, :1] < 0.0, -out, out)
