@@ -79,7 +79,7 @@ class MagConfig:
 class MagPairing:
     """Field readings as they arrive (node side); :meth:`at` pairs one with an IMU stamp."""
 
-    KEEP = 64  # readings kept: enough for a field stamped ahead of the IMU by a few of its periods
+    KEEP = 100_000  # at most this many readings ahead of the IMU are kept (a stalled IMU stream)
 
     def __init__(self) -> None:
         self._readings: deque[tuple[int, tuple[float, float, float]]] = deque(maxlen=self.KEEP)
@@ -89,6 +89,7 @@ class MagPairing:
         self._readings.clear()
 
     def push(self, stamp_ns: int, field: ArrayLike) -> None:
+        """A reading as it arrives (any time before or after the IMU samples it belongs to)."""
         x, y, z = (float(v) for v in np.asarray(field, dtype=float).reshape(3))
         if self._readings and stamp_ns < self._readings[-1][0]:
             self._readings.clear()  # the magnetometer's clock went back: start over
@@ -98,10 +99,14 @@ class MagPairing:
     def at(self, stamp_ns: int, timeout_ns: int) -> tuple[tuple[float, float, float] | None, int | None]:
         """(the newest reading at or before ``stamp_ns`` not older than ``timeout_ns`` or None, its age in ns or
         None when no reading at or before the stamp exists)."""
-        for t, v in reversed(self._readings):
-            if t <= stamp_ns:
-                age = stamp_ns - t
-                return (v if age <= timeout_ns else None), age
+        r = self._readings
+        # IMU stamps increase: readings older than the newest one at or before this stamp are never needed again
+        while len(r) > 1 and r[1][0] <= stamp_ns:
+            r.popleft()
+        if r and r[0][0] <= stamp_ns:
+            t, v = r[0]
+            age = stamp_ns - t
+            return (v if age <= timeout_ns else None), age
         return None, None
 
 
@@ -165,7 +170,8 @@ class MagInput:
         had = np.isfinite(np.asarray(mag, dtype=float).reshape(-1, 3)).all(axis=1)
         m = np.where(ok[:, None], m, np.nan)
         if len(m):
-            self.state = FIELD_USED if ok[-1] else (FIELD_BAD if had[-1] else self._missing())
+            missing = FIELD_STALE if self.seen or ok.any() else FIELD_NONE
+            self.state = FIELD_USED if ok[-1] else (FIELD_BAD if had[-1] else missing)
         return m
 
     def _missing(self) -> str:

@@ -315,6 +315,7 @@ class EstimatorStream:
         acc = np.asarray(acc, dtype=float)
         gyr = np.asarray(gyr, dtype=float)
         self._fields = self.mag.prepare_batch(mag) if self.estimator.USES_MAG else None
+        state = self.mag.state  # of the last sample (a restart inside the sequence must not clear it)
         out = np.full((len(stamps), 4), np.nan)
         accepted, dts, starts = self._gate_batch(stamps, acc, gyr)
         idx = np.flatnonzero(accepted)
@@ -328,6 +329,7 @@ class EstimatorStream:
             if len(seg) and int(seg[0]) in starts:
                 self._restart(starts[int(seg[0])])
             self._run_segment(seg, acc, gyr, dts, out, accepted)
+        self.mag.state = state
         return out, accepted
 
     def _gate_batch(

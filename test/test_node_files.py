@@ -36,7 +36,8 @@ TABLE_END = "<!-- node-params:end -->"
 def test_riann_yaml_lists_every_node_and_estimator_parameter_with_its_default():
     yaml = pytest.importorskip("yaml")
     params = yaml.safe_load((ROOT / "config" / "riann.yaml").read_text())["/**"]["ros__parameters"]
-    expected = {p.name: p.default for p in (*NODE_PARAMS, *estimator_class("riann").PARAMS)}
+    expected = {p.name: list(p.default) if isinstance(p.default, tuple) else p.default
+                for p in (*NODE_PARAMS, *estimator_class("riann").PARAMS)}
     assert params == expected
     assert all(type(params[k]) is type(v) for k, v in expected.items())  # 100.0 stays a float in the file
 

@@ -471,7 +471,8 @@ class RiannEstimator(AttitudeEstimator):
             psi += t
             c, s = math.cos(0.5 * psi), math.sin(0.5 * psi)
             qo = (c * q[0] - s * q[3], c * q[1] - s * q[2], c * q[2] + s * q[1], c * q[3] + s * q[0])
-            psi += step(qo, delta[i], h, None if m[0] != m[0] or m[1] != m[1] or m[2] != m[2] else (m[0], m[1], m[2]))
+            ok = math.isfinite(m[0]) and math.isfinite(m[1]) and math.isfinite(m[2])
+            psi += step(qo, delta[i], h, (m[0], m[1], m[2]) if ok else None)
             out[i] = psi
         return out
 
@@ -519,7 +520,7 @@ class RiannEstimator(AttitudeEstimator):
         m = None
         if mag is not None:
             m0, m1, m2 = (float(v) for v in mag)  # type: ignore[union-attr, arg-type]
-            m = (m0, m1, m2) if math.isfinite(m0 + m1 + m2) else None
+            m = (m0, m1, m2) if math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2) else None
         return self._compose_one(self._q_net, plan.rot[0], plan.delta[0], _step_dt(float(dt)), m)
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:

@@ -29,15 +29,17 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, MagneticField
 from std_srvs.srv import Trigger
 
 from riann_ros import frames, stamps
+from riann_ros import mag as mg
 from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
 from riann_ros.params import ParamSpec
 
 INPUT_TOPIC = "imu/data_raw"
+MAG_TOPIC = "imu/mag"
 QOS_CHOICES = ("sensor_data", "reliable", "best_effort")
 THROTTLE_S = 5.0  # at most one warning per rejection reason in this many seconds
 
@@ -53,7 +55,10 @@ NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("roll_pitch_stddev_deg", 2.0, "deg; standard deviation written to the roll and pitch entries of the "
               "orientation covariance of imu/data.", min=0.0, max=180.0, runtime=True),
     ParamSpec("yaw_stddev_deg", 180.0, "deg; standard deviation written to the yaw entry of the orientation "
-              "covariance (yaw is unobservable without a magnetometer).", min=0.0, max=1.0e6, runtime=True),
+              "covariance while the heading is not tied to a magnetometer (it is unobservable: gyro drift only).",
+              min=0.0, max=1.0e6, runtime=True),
+    ParamSpec("mag_yaw_stddev_deg", 5.0, "deg; standard deviation of the yaw entry while the heading is corrected "
+              "by an undisturbed magnetometer field (9D).", min=0.0, max=1.0e6, runtime=True),
     ParamSpec("diagnostics_period", 1.0, "s; period of /diagnostics messages.", min=0.05, max=3600.0),
     ParamSpec("world_frame", frames.ENU, "World frame of the published orientation (imu/attitude, imu/data, imu/rpy, "
               "TF): enu (x east, y north, z up; REP-103), ned (x north, y east, z down) or nwu (x north, y west, "
@@ -66,7 +71,8 @@ NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("publish_rpy", False, "Publish roll, pitch, yaw in degrees (ZYX, in world_frame) as "
               "geometry_msgs/Vector3Stamped on imu/rpy (x = roll, y = pitch, z = yaw), for plotting."),
 )
-NODE_PARAMS: tuple[ParamSpec, ...] = (*st.GATE_PARAMS, *NODE_ONLY_PARAMS)
+NODE_PARAMS: tuple[ParamSpec, ...] = (*st.GATE_PARAMS, *mg.MAG_PARAMS, *NODE_ONLY_PARAMS)
+COVARIANCE_PARAMS = ("roll_pitch_stddev_deg", "yaw_stddev_deg", "mag_yaw_stddev_deg")
 
 
 RATE_CHECK_SAMPLES = 100  # accepted samples (restarts excluded) whose median dt gives the measured stamp rate
@@ -78,7 +84,7 @@ TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=Reli
 
 def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
     d = ParameterDescriptor(description=spec.description, read_only=not spec.runtime)
-    if spec.min is not None and spec.max is not None and not isinstance(spec.default, bool):
+    if spec.min is not None and spec.max is not None and not isinstance(spec.default, bool | tuple):
         if isinstance(spec.default, int):
             d.integer_range = [IntegerRange(from_value=int(spec.min), to_value=int(spec.max), step=1)]
         elif isinstance(spec.default, float):
@@ -172,7 +178,7 @@ class EstimatorNode(Node):
         cls = estimator_class(self.ESTIMATOR)
         self._specs: dict[str, ParamSpec] = {p.name: p for p in cls.PARAMS}
         self._node_specs = {p.name: p for p in NODE_PARAMS}
-        self._float_params = {s.name for s in (*NODE_PARAMS, *cls.PARAMS) if isinstance(s.default, float)}
+        self._float_params = {s.name for s in (*NODE_PARAMS, *cls.PARAMS) if isinstance(s.default, float | tuple)}
         for spec in (*NODE_PARAMS, *cls.PARAMS):
             self._declare(spec)
         p = {name: self.get_parameter(name).value for name in [*self._node_specs, *self._specs]}
@@ -181,8 +187,8 @@ class EstimatorNode(Node):
         if not p["fixed_frame"].strip("/ "):
             raise ValueError("fixed_frame must not be empty")
         self.stream = st.EstimatorStream(create(self.ESTIMATOR, **{k: p[k] for k in self._specs}),
-                                         self._gate_config(p))
-        self._covariance = self._orientation_covariance(p["roll_pitch_stddev_deg"], p["yaw_stddev_deg"])
+                                         self._gate_config(p), self._mag_config(p))
+        self._covariances = self._orientation_covariances(p)
         self._world = frames.check_world_frame(p["world_frame"])
         self._fixed_frame = str(p["fixed_frame"])
         self.add_pre_set_parameters_callback(self._int_to_float)
@@ -196,6 +202,11 @@ class EstimatorNode(Node):
             if p["publish_rpy"] else None
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(Imu, INPUT_TOPIC, self._on_imu, input_qos(p["input_qos"], int(p["input_depth"])))
+        self._mag = mg.MagPairing()
+        self._mag_state = ""  # the field state last logged
+        if p["use_mag"] != "false" and self.stream.estimator.USES_MAG:
+            self.create_subscription(MagneticField, MAG_TOPIC, self._on_mag,
+                                     input_qos(p["input_qos"], int(p["input_depth"])))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(float(p["diagnostics_period"]), self._publish_diagnostics)
 
@@ -211,12 +222,15 @@ class EstimatorNode(Node):
         self._est_us: list[float] = []
         self._frame_id = ""
         self._rate = StampRateCheck()
+        mag_text = (f"; magnetometer on '{self.resolve_topic_name(MAG_TOPIC)}' (use_mag={p['use_mag']})"
+                    if p["use_mag"] != "false" and self.stream.estimator.USES_MAG else "; magnetometer not used")
         outputs = [self.ATTITUDE_TOPIC, self.IMU_TOPIC, *([rpy_topic(self.ATTITUDE_TOPIC)] if p["publish_rpy"] else [])]
         self.get_logger().info(
             f"{self.ESTIMATOR} estimator on '{self.resolve_topic_name(INPUT_TOPIC)}' -> "
             + ", ".join(f"'{self.resolve_topic_name(t)}'" for t in outputs)
             + f"; orientation in {self._world.upper()} (world_frame), imu/attitude in frame '{self._fixed_frame}'"
-            "; parameters: " + ", ".join(f"{k}={v}" for k, v in p.items())
+            + mag_text
+            + "; parameters: " + ", ".join(f"{k}={v}" for k, v in p.items())
         )
         self._pub_tf, self._tf_type = self._tf_publisher(bool(p["publish_tf"]))
 
@@ -226,32 +240,46 @@ class EstimatorNode(Node):
         ``nominal_rate: 200`` in a params file): the start-up value is read through a dynamically typed probe,
         converted and checked by the spec (clear errors for wrong types and ranges), and the parameter is then
         declared as a double holding that value."""
-        if not isinstance(spec.default, float):
+        if not isinstance(spec.default, float | tuple):
             self.declare_parameter(spec.name, spec.default, _descriptor(spec))
             return
-        raw = self.declare_parameter(spec.name, spec.default, ParameterDescriptor(dynamic_typing=True)).value
+        default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
+        raw = self.declare_parameter(spec.name, default, ParameterDescriptor(dynamic_typing=True)).value
         self.undeclare_parameter(spec.name)
-        self.declare_parameter(spec.name, spec.validate(raw), _descriptor(spec), ignore_override=True)
+        value = spec.validate(list(raw) if isinstance(spec.default, tuple) else raw)
+        self.declare_parameter(spec.name, list(value) if isinstance(value, tuple) else value, _descriptor(spec),
+                               ignore_override=True)
 
     def _int_to_float(self, params: list[Parameter]) -> list[Parameter]:
         """Run-time sets: an integer for a float parameter becomes a double (its range is then checked)."""
-        return [Parameter(prm.name, Parameter.Type.DOUBLE, float(prm.value))
-                if prm.name in self._float_params and prm.type_ == Parameter.Type.INTEGER else prm
-                for prm in params]
+        out = []
+        for prm in params:
+            if prm.name in self._float_params and prm.type_ == Parameter.Type.INTEGER:
+                prm = Parameter(prm.name, Parameter.Type.DOUBLE, float(prm.value))
+            elif prm.name in self._float_params and prm.type_ == Parameter.Type.INTEGER_ARRAY:
+                prm = Parameter(prm.name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in prm.value])
+            out.append(prm)
+        return out
 
     @staticmethod
     def _gate_config(p: dict[str, Any]) -> st.GateConfig:
         return st.GateConfig(**{spec.name: p[spec.name] for spec in st.GATE_PARAMS})
 
     @staticmethod
-    def _orientation_covariance(rp_deg: float, yaw_deg: float) -> np.ndarray:
-        rp = math.radians(rp_deg) ** 2
-        yaw = math.radians(yaw_deg) ** 2
-        return np.array([rp, 0.0, 0.0, 0.0, rp, 0.0, 0.0, 0.0, yaw])
+    def _mag_config(p: dict[str, Any]) -> mg.MagConfig:
+        return mg.MagConfig(**{spec.name: p[spec.name] for spec in mg.MAG_PARAMS})
+
+    @staticmethod
+    def _orientation_covariances(p: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+        """(covariance while the heading follows the gyro only, while a magnetometer field corrects it)."""
+        rp = math.radians(p["roll_pitch_stddev_deg"]) ** 2
+        return tuple(np.array([rp, 0.0, 0.0, 0.0, rp, 0.0, 0.0, 0.0, math.radians(p[k]) ** 2])  # type: ignore[return-value]
+                     for k in ("yaw_stddev_deg", "mag_yaw_stddev_deg"))
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         est_changes: dict[str, Any] = {}
         gate = dict(self.stream.gate.config.__dict__)
+        mag = dict(self.stream.mag.config.__dict__)
         cov = None
         try:
             for prm in params:
@@ -262,18 +290,22 @@ class EstimatorNode(Node):
                     est_changes[prm.name] = spec.validate(prm.value)
                 elif prm.name in gate:
                     gate[prm.name] = prm.value
-                elif prm.name in ("roll_pitch_stddev_deg", "yaw_stddev_deg"):
-                    cur = {n: self.get_parameter(n).value for n in ("roll_pitch_stddev_deg", "yaw_stddev_deg")}
+                elif prm.name in mag:
+                    mag[prm.name] = tuple(prm.value) if isinstance(mag[prm.name], tuple) else prm.value
+                elif prm.name in COVARIANCE_PARAMS:
+                    cur = {n: self.get_parameter(n).value for n in COVARIANCE_PARAMS}
                     cur[prm.name] = self._node_specs[prm.name].validate(prm.value)
-                    cov = self._orientation_covariance(cur["roll_pitch_stddev_deg"], cur["yaw_stddev_deg"])
+                    cov = self._orientation_covariances(cur)
             new_gate = st.GateConfig(**gate)
+            new_mag = mg.MagConfig(**mag)
             if est_changes:
                 self.stream.estimator.set_params(**est_changes)
         except (ValueError, TypeError) as e:
             return SetParametersResult(successful=False, reason=str(e))
         self.stream.gate.config = new_gate
+        self.stream.mag.config = new_mag
         if cov is not None:
-            self._covariance = cov
+            self._covariances = cov
         self.get_logger().info("parameters changed: " + ", ".join(f"{p.name}={p.value}" for p in params))
         return SetParametersResult(successful=True)
 
@@ -308,8 +340,11 @@ class EstimatorNode(Node):
         receive_ns = self.get_clock().now().nanoseconds if stamp_ns == 0 else None
         self._period_in += 1
         t1 = time.perf_counter_ns()
-        q, r = self.stream.process(stamp_ns, acc, gyr, receive_ns)
+        field = self._mag.at(stamp_ns, self.stream.mag.config.timeout_ns)[0] if self._mag.received else None
+        q, r = self.stream.process(stamp_ns, acc, gyr, receive_ns, field)
         self._est_us.append((time.perf_counter_ns() - t1) * 1e-3)
+        if self._mag_state != self.stream.mag.state:
+            self._log_mag_state()
         self._log_gate_result(r)
         if q is None:
             self._period_rejected[r.reason or "?"] += 1
@@ -322,6 +357,22 @@ class EstimatorNode(Node):
         self._frame_id = msg.header.frame_id
         self._publish(msg, frames.to_world_scalar(float(q[0]), float(q[1]), float(q[2]), float(q[3]), self._world))
         self._proc_us.append((time.perf_counter_ns() - t0) * 1e-3)
+
+    def _on_mag(self, msg: MagneticField) -> None:
+        f = msg.magnetic_field
+        self._mag.push(stamps.to_ns(msg.header.stamp), (f.x, f.y, f.z))
+
+    def _log_mag_state(self) -> None:
+        """Log the switches between 9D and 6D (auto: as they happen; the reason is in /diagnostics too)."""
+        old, new = self._mag_state, self.stream.mag.state
+        self._mag_state = new
+        if new == mg.FIELD_NONE and old in ("", mg.FIELD_NONE):
+            return  # no magnetometer so far: nothing to say (the start-up line names the topic)
+        text = f"magnetometer: {new}" + ("" if new == mg.FIELD_USED else " (heading held by the gyro)")
+        if new == mg.FIELD_USED or self.stream.mag.config.use_mag == "auto":
+            self.get_logger().info(text)
+        else:
+            self.get_logger().warning(text)
 
     def _log_gate_result(self, r: st.GateResult) -> None:
         for w in r.warnings:
@@ -349,7 +400,7 @@ class EstimatorNode(Node):
             self._publish_tf(msg.header.stamp, msg.header.frame_id, q)
         if self._pub_imu.get_subscription_count():
             msg.orientation = o
-            msg.orientation_covariance = self._covariance
+            msg.orientation_covariance = self._covariances[self.stream.estimator.heading_observed()]
             self._pub_imu.publish(msg)
 
     def _check_rate(self) -> None:
@@ -365,6 +416,7 @@ class EstimatorNode(Node):
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.stream.reset()
+        self._mag.clear()
         self.get_logger().info("reset requested: estimator state cleared")
         response.success = True
         response.message = f"{self.ESTIMATOR} estimator reset; re-initialising from the next sample"
@@ -382,6 +434,9 @@ class EstimatorNode(Node):
         if self._rate.mismatch(nominal) is not None:
             problems.append(f"nominal_rate {nominal:.1f} Hz differs from the measured stamp rate "
                             f"{self._rate.measured_hz:.1f} Hz: set nominal_rate")
+        mag = self.stream.mag
+        if mag.config.use_mag == "true" and self.stream.estimator.USES_MAG and mag.state != mg.FIELD_USED:
+            problems.append(f"use_mag is true but {mag.state[4:]} on {self.resolve_topic_name(MAG_TOPIC)}")
         if problems:
             return DiagnosticStatus.WARN, "; ".join(problems)
         return DiagnosticStatus.OK, "ok"
@@ -414,6 +469,9 @@ class EstimatorNode(Node):
             "processing time p99 (us)": f"{np.percentile(proc, 99):.1f}" if len(proc) else "nan",
             "processing time max (us)": f"{proc.max():.1f}" if len(proc) else "nan",
             "world frame": self._world,
+            "magnetometer": self.stream.mag.state if self.stream.estimator.USES_MAG else "not used by this estimator",
+            "field readings received (total)": str(self._mag.received),
+            "heading": "magnetic (9D)" if self.stream.estimator.heading_observed() else "gyro only",
         }
         values.update(self.stream.estimator.diagnostics())
         for reason in st.REJECT_REASONS:
