@@ -43,7 +43,8 @@ DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")
 def run(argv: list[str], out: Path) -> list[dict]:
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        rc = eval_main([*argv, "--out", str(out), "--no-plots", "-q", "--force"])
+        # the issue-11 tables are 6D: the BROAD files carry a magnetometer, which --use-mag auto would use
+        rc = eval_main([*argv, "--use-mag", "false", "--out", str(out), "--no-plots", "-q", "--force"])
     if rc:
         print(buf.getvalue(), file=sys.stderr)
         raise SystemExit(f"riann-bag-eval exited {rc}")
@@ -110,8 +111,8 @@ def main() -> int:
     labels = list(dict.fromkeys(r["estimator"] for r in perturbed)) or ests
     print(f"## Accuracy under perturbations: {len(inputs)} BROAD trials, seed {args.seed}\n")
     print(f"- commands: `riann-bag-eval <trials> -e {args.estimators} -s as-recorded,realistic "
-          + " ".join(f"-p {c}" for c in CONDITIONS) + f" --seed {args.seed}` and `riann-bag-eval <trials> -e "
-          f"{args.estimators} -s as-recorded --rates {RATES}`")
+          + " ".join(f"-p {c}" for c in CONDITIONS) + f" --seed {args.seed} --use-mag false` and `riann-bag-eval "
+          f"<trials> -e {args.estimators} -s as-recorded --rates {RATES} --use-mag false`")
     print(f"- {wall:.0f} s wall on {os.cpu_count()} CPUs ({platform.machine()}), --jobs {args.jobs}\n")
     print("### as-recorded (from the first sample, turn-on bias kept): mean / worst RMSE °\n")
     print(table(perturbed, labels, "as-recorded"))
