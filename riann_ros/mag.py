@@ -10,7 +10,7 @@ path (bag reader, evaluator), so both give an estimator the same field for the s
 * **calibration** (:class:`MagInput`): ``m = S (m_raw − h)`` with the hard-iron offset ``h`` (tesla,
   sensor frame) and the soft-iron matrix ``S`` (row-major 3×3), as calibration tools report them.
 * **plausibility**: a reading that is not finite, zero, or whose norm is outside
-  [:data:`MAG_MIN_T`, :data:`MAG_MAX_T`] (a dead or saturated sensor; Earth's field is 25–65 µT) is not
+  [:data:`USABLE_MIN_T`, :data:`USABLE_MAX_T`] (a dead or saturated sensor; Earth's field is 25–65 µT) is not
   used; the estimator then runs 6D for that sample (its heading follows the gyro).
 * ``use_mag``: ``auto`` (default) uses the field whenever a fresh, plausible one is paired; ``true``
   does the same and reports a missing field as a warning; ``false`` never passes a field.
@@ -29,8 +29,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from riann_ros.params import ParamSpec, defaults
 
-MAG_MIN_T = 1e-6  # T; below: a dead sensor or a field in the wrong unit
-MAG_MAX_T = 1e-3  # T; above: saturated, or a magnet next to the sensor
+USABLE_MIN_T = 1e-6  # T; below: a dead sensor or a field in the wrong unit
+USABLE_MAX_T = 1e-3  # T; above: saturated, or a magnet next to the sensor
 USE_MAG_CHOICES = ("auto", "true", "false")
 IDENTITY_9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 
@@ -127,10 +127,10 @@ def pair_fields(imu_stamps: ArrayLike, mag_stamps: ArrayLike, mag: ArrayLike, ti
 
 
 def plausible(field: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Rows (N, 3) that are finite with a norm within [MAG_MIN_T, MAG_MAX_T]."""
+    """Rows (N, 3) that are finite with a norm within [USABLE_MIN_T, USABLE_MAX_T]."""
     with np.errstate(invalid="ignore", over="ignore"):
         n = np.linalg.norm(field, axis=-1)
-    return np.isfinite(n) & (n >= MAG_MIN_T) & (n <= MAG_MAX_T)
+    return np.isfinite(n) & (n >= USABLE_MIN_T) & (n <= USABLE_MAX_T)
 
 
 def rot_z(angle_rad: float) -> NDArray[np.float64]:
@@ -140,8 +140,9 @@ def rot_z(angle_rad: float) -> NDArray[np.float64]:
 class MagInput:
     """What the stream does with the paired field before and after the estimator (see the module docstring).
 
-    :meth:`prepare` gives the calibrated field for the estimator (or None) and records why not;
-    :meth:`finish` applies the declination once a field has been used since the last reset.
+    :meth:`prepare` / :meth:`prepare_batch` give the calibrated field for the estimator (or none) and record
+    why not; :meth:`note` / :meth:`used` track whether a field has been used since the last reset, and
+    :meth:`declination_applied` rotates the outputs from then on.
     """
 
     def __init__(self, config: MagConfig | None = None) -> None:
@@ -177,13 +178,34 @@ class MagInput:
     def _missing(self) -> str:
         return FIELD_STALE if self.seen else FIELD_NONE
 
-    def prepare(self, mag: ArrayLike | None) -> NDArray[np.float64] | None:
-        """One sample's field for the estimator, or None (the node's hot path: no arrays when there is none)."""
-        if mag is None or self.config.use_mag == "false":
-            self.state = FIELD_OFF if self.config.use_mag == "false" else self._missing()
+    def prepare(self, mag: ArrayLike | None) -> tuple[float, float, float] | None:
+        """:meth:`prepare_batch` for one sample, in plain floats (the node's hot path): the field or None."""
+        c = self.config
+        if mag is None or c.use_mag == "false":
+            self.state = FIELD_OFF if c.use_mag == "false" else self._missing()
             return None
-        m = self.prepare_batch(np.reshape(np.asarray(mag, dtype=float), (1, 3)))
-        return None if m is None or not np.isfinite(m[0]).all() else m[0]
+        x, y, z = (float(v) for v in mag)  # type: ignore[union-attr, arg-type]
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+            self.state = self._missing()
+            return None
+        if c.mag_hard_iron != (0.0, 0.0, 0.0) or c.mag_soft_iron != IDENTITY_9:
+            h, s = c.mag_hard_iron, c.mag_soft_iron
+            dx, dy, dz = x - h[0], y - h[1], z - h[2]
+            x, y, z = (s[0] * dx + s[1] * dy + s[2] * dz, s[3] * dx + s[4] * dy + s[5] * dz,
+                       s[6] * dx + s[7] * dy + s[8] * dz)
+        n = math.sqrt(x * x + y * y + z * z)
+        if not USABLE_MIN_T <= n <= USABLE_MAX_T:
+            self.state = FIELD_BAD
+            return None
+        self.state = FIELD_USED
+        return x, y, z
+
+    def note(self, used: bool) -> bool:
+        """:meth:`used` for one sample: whether a field has been used since the last reset."""
+        if used:
+            self.samples_with_field += 1
+            self.seen = True
+        return self.seen
 
     def used(self, ok: NDArray[np.bool_]) -> NDArray[np.bool_]:
         """Per row: a field has been used at or before it since the last reset (updates :attr:`seen`)."""

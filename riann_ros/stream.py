@@ -281,9 +281,8 @@ class EstimatorStream:
         q = self.estimator.update(acc, gyr, r.dt, field)
         if not _is_unit(q):
             return None, self._fault(r)
-        if field is not None or self.mag.seen:
-            seen = self.mag.used(np.array([field is not None]))
-            q = self.mag.declination_applied(q[None, :], seen)[0]
+        if self.mag.note(field is not None) and self.mag.config.declination != 0.0:
+            q = self.mag.declination_applied(q[None, :], np.ones(1, dtype=bool))[0]
         return q, r
 
     def _restart(self, cause: str) -> None:

@@ -21,8 +21,8 @@ from riann_ros.mag import (
     FIELD_OFF,
     FIELD_STALE,
     FIELD_USED,
-    MAG_MAX_T,
-    MAG_MIN_T,
+    USABLE_MAX_T,
+    USABLE_MIN_T,
     MagConfig,
     MagInput,
     MagPairing,
@@ -260,11 +260,11 @@ def test_implausible_field_not_passed(what: str) -> None:
 
 def test_plausibility_limits_after_calibration() -> None:
     mi = MagInput()
-    for norm in (MAG_MIN_T, MAG_MAX_T, 25e-6, 65e-6):
+    for norm in (USABLE_MIN_T, USABLE_MAX_T, 25e-6, 65e-6):
         m = np.array([0.0, 0.0, norm])
         np.testing.assert_array_equal(mi.prepare(m), m)  # the limits themselves are plausible
-    assert mi.prepare([0.0, 0.0, MAG_MIN_T * 0.999]) is None
-    assert mi.prepare([0.0, 0.0, MAG_MAX_T * 1.001]) is None
+    assert mi.prepare([0.0, 0.0, USABLE_MIN_T * 0.999]) is None
+    assert mi.prepare([0.0, 0.0, USABLE_MAX_T * 1.001]) is None
     # plausibility is judged on the calibrated field: a raw field equal to the hard iron is zero after it
     cal = MagInput(MagConfig(mag_hard_iron=(10e-6, 20e-6, -40e-6)))
     assert cal.prepare([10e-6, 20e-6, -40e-6]) is None
@@ -355,8 +355,8 @@ def test_stream_process_equals_batch_with_field(name: str) -> None:
     assert ok_b.all() and ok_s.all()
     assert batch_stream.gate.resets == one_stream.gate.resets == {"start": 1, "gap": 1, "clock_jump": 1}
     np.testing.assert_allclose(sign_aligned(qb, qs), qb, rtol=0, atol=tol)
-    usable = np.isfinite(mag).all(axis=1) & (np.linalg.norm(mag, axis=1) > MAG_MIN_T)
-    usable &= np.linalg.norm(mag, axis=1) < MAG_MAX_T
+    usable = np.isfinite(mag).all(axis=1) & (np.linalg.norm(mag, axis=1) > USABLE_MIN_T)
+    usable &= np.linalg.norm(mag, axis=1) < USABLE_MAX_T
     assert batch_stream.mag.samples_with_field == one_stream.mag.samples_with_field == int(usable.sum())
 
     # in pieces (the evaluator's chunks), continuing across the calls

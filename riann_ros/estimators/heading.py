@@ -42,7 +42,8 @@ GYR_LP_TAU = 0.5  # s, low-pass of |ω| for NEW_MIN_GYR
 Quat = tuple[float, float, float, float]
 
 
-def _qmul(p: Quat, q: Quat) -> Quat:
+def qmul(p: Quat, q: Quat) -> Quat:
+    """Quaternion product p ⊗ q in plain floats (shared with :mod:`~riann_ros.estimators.riann`)."""
     pw, px, py, pz = p
     qw, qx, qy, qz = q
     return (pw * qw - px * qx - py * qy - pz * qz,
@@ -71,7 +72,8 @@ def _rotvec(q: Quat) -> tuple[float, float, float]:
     return (a * x, a * y, a * z)
 
 
-def _from_rotvec(x: float, y: float, z: float) -> Quat:
+def from_rotvec(x: float, y: float, z: float) -> Quat:
+    """Unit quaternion of a rotation vector, plain floats (shared with :mod:`~riann_ros.estimators.riann`)."""
     a = math.sqrt(x * x + y * y + z * z)
     if a < 1e-12:
         return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
@@ -114,7 +116,7 @@ class MagHeading:
             keep += 1
             f = min(h_dt, rem) / h_dt if h_dt > 0.0 else 0.0
             rem -= h_dt
-            r = _qmul(_from_rotvec(hx * f, hy * f, hz * f), r)
+            r = qmul(from_rotvec(hx * f, hy * f, hz * f), r)
         del self.hist[: len(self.hist) - max(keep, 1)]
         return r
 

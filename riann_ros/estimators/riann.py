@@ -59,6 +59,8 @@ from riann_ros.estimators.bias import GyroBiasFrontEnd, front_end_params
 from riann_ros.estimators.common import BIAS_KEY, bias_text
 from riann_ros.estimators.grid import DT_MIN, REL_EPS, RateTracker, SignalHistory
 from riann_ros.estimators.heading import MagHeading
+from riann_ros.estimators.heading import from_rotvec as _rotvec
+from riann_ros.estimators.heading import qmul as _qmul
 
 HIDDEN_SHAPE = (2, 1, 1, 200)
 BATCH_CHUNK = 200_000  # network rows per ONNX Runtime call in batch mode
@@ -72,25 +74,6 @@ Row = tuple[float, ...]
 IDENTITY_T: Quat = (1.0, 0.0, 0.0, 0.0)
 FORK: Row = (1.0,)  # row marker: a fresh network starts beside the running one
 JOIN: Row = (2.0,)  # row marker: the fresh network's state replaces the running one
-
-
-def _qmul(p: Quat, q: Quat) -> Quat:
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return (
-        pw * qw - px * qx - py * qy - pz * qz,
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-    )
-
-
-def _rotvec(x: float, y: float, z: float) -> Quat:
-    angle = math.sqrt(x * x + y * y + z * z)
-    if angle < 1e-12:
-        return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
-    k = math.sin(0.5 * angle) / angle
-    return (math.cos(0.5 * angle), x * k, y * k, z * k)
 
 
 def _twist(q: Quat) -> float:
