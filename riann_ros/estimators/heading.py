@@ -4,8 +4,9 @@ RIANN estimates inclination only. Its output is ``q = Rz(ψ) ⊗ q_c``: ``q_c`` 
 which fixes roll and pitch, and ``ψ`` a heading angle about the world vertical. Without a field, ``ψ``
 follows the bias-corrected gyro (:meth:`RiannEstimator._compose`). With a field, each sample also does
 
-1. **latency compensation** (``mag_delay``): a field read ``D`` seconds behind the gyro is rotated into the
-   sensor frame of the sample's stamp with the gyro increments of the last ``D`` seconds, ``m ← R(r)ᵀ m``;
+1. **latency compensation**: a field read ``D`` seconds behind the gyro is rotated into the sensor frame of
+   the sample's stamp with the gyro increments of the last ``D`` seconds, ``m ← R(r)ᵀ m``. ``D`` is estimated
+   online (:class:`LatencyEstimator`, starting from ``mag_delay``) or fixed at ``mag_delay``;
 2. **tilt compensation**: ``m_w = R(q) m``; the heading error is ``e = atan2(m_w,x, m_w,y)`` (zero when the
    horizontal field points along +y: magnetic north in ENU) and the dip is ``−asin(m_w,z / |m|)``;
 3. **disturbance test** (as VQF, Laidig & Seel 2023, with VQF's default constants): the low-passed norm and
@@ -38,6 +39,12 @@ REJECT_FACTOR = 2.0
 NEW_TIME = 20.0  # s of a stable new field (while moving) before it becomes the reference
 NEW_MIN_GYR = 20.0 * DEG  # rad/s, only motion faster than this counts toward NEW_TIME
 GYR_LP_TAU = 0.5  # s, low-pass of |ω| for NEW_MIN_GYR
+# online latency fit (LatencyEstimator)
+WINDOW = 0.1  # s; the field's rotation is compared with the gyro's over windows this long
+MAX_WINDOW = 0.2  # s; a longer window (no field, a gap) is dropped
+DELAY_TAU = 30.0  # s of windows; older windows are forgotten with this time constant
+DELAY_PRIOR = 1.0  # (rad/s)²; the starting value weighs as much as one window with a 1 rad/s change of rate
+MAX_DELAY = 0.1  # s; the largest latency compensated
 
 Quat = tuple[float, float, float, float]
 
@@ -81,14 +88,87 @@ def from_rotvec(x: float, y: float, z: float) -> Quat:
     return (math.cos(0.5 * a), x * k, y * k, z * k)
 
 
+class LatencyEstimator:
+    """Online, reference-free estimate of the magnetometer's latency ``D`` behind the gyro.
+
+    A constant world field seen by a rotating sensor obeys ``m(t₁) = R(ρ)ᵀ m(t₀)``, ``ρ`` the gyro's rotation
+    from ``t₀`` to ``t₁``. A field read ``D`` late rotates as the gyro did ``D`` earlier; to first order the
+    prediction error over a window is ``e = m₁ − R(ρ)ᵀ m₀ ≈ D g`` with ``g = ω₁ × R(ρ)ᵀ m₀ − R(ρ)ᵀ (ω₀ × m₀)``
+    (``ω₀``, ``ω₁`` the rates at the window's ends). ``D`` is the least-squares fit of ``e`` on ``g`` over
+    windows of :data:`WINDOW` s with exponential forgetting (:data:`DELAY_TAU`), both normalised by ``|m|²``
+    and started from a prior (the ``mag_delay`` parameter, weight :data:`DELAY_PRIOR`). Windows carry
+    information only while the rate changes, so at rest the estimate holds. Noise in the field enters ``e``
+    and ``g`` in ways that cancel in ``e·g`` (``n · (ω × n) = 0``), so the fit is unbiased by it; a constant
+    hard-iron residual adds a term uncorrelated with ``g`` on average. Windows with a disturbed field are not
+    used (the model needs a constant world field).
+    """
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.m0: tuple[float, float, float] | None = None  # field at the window's start
+        self.w0 = self.w = (0.0, 0.0, 0.0)  # rate at the window's start, newest rate (rad/s)
+        self.rho: Quat = (1.0, 0.0, 0.0, 0.0)  # gyro rotation since the window's start
+        self.t = 0.0  # s since the window's start
+        self.num = self.den = 0.0  # Σ e·g, Σ g·g (normalised, forgotten)
+        self.windows = 0
+
+    def delay(self, start: float) -> float:
+        """The latency to compensate (s): the fit with ``start`` as its prior, within [0, MAX_DELAY]."""
+        d = (DELAY_PRIOR * start + self.num) / (DELAY_PRIOR + self.den)
+        return min(max(d, 0.0), MAX_DELAY)
+
+    def add(self, delta: Quat, rv: tuple[float, float, float], dt: float,
+            mag: tuple[float, float, float] | None) -> None:
+        """One sample: its gyro increment (quaternion and rotation vector) and its undisturbed field or None."""
+        if dt > 0.0:
+            self.w = (rv[0] / dt, rv[1] / dt, rv[2] / dt)
+        if self.m0 is not None:
+            self.rho = qmul(self.rho, delta)
+            self.t += dt
+            if self.t < WINDOW:
+                return
+            if mag is not None and self.t <= MAX_WINDOW:
+                self._fit(mag)
+        if mag is not None:
+            self.m0, self.w0, self.rho, self.t = mag, self.w, (1.0, 0.0, 0.0, 0.0), 0.0
+        else:
+            self.m0 = None
+
+    def _fit(self, m1: tuple[float, float, float]) -> None:
+        m0 = self.m0
+        assert m0 is not None
+        rc = (self.rho[0], -self.rho[1], -self.rho[2], -self.rho[3])
+        p = _rotate(rc, m0)
+        w0, w1 = self.w0, self.w
+        c0 = _rotate(rc, (w0[1] * m0[2] - w0[2] * m0[1], w0[2] * m0[0] - w0[0] * m0[2], w0[0] * m0[1] - w0[1] * m0[0]))
+        g = (w1[1] * p[2] - w1[2] * p[1] - c0[0], w1[2] * p[0] - w1[0] * p[2] - c0[1],
+             w1[0] * p[1] - w1[1] * p[0] - c0[2])
+        n2 = m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2]
+        if n2 <= 0.0:
+            return
+        f = math.exp(-self.t / DELAY_TAU)
+        self.num = f * self.num + ((m1[0] - p[0]) * g[0] + (m1[1] - p[1]) * g[1] + (m1[2] - p[2]) * g[2]) / n2
+        self.den = f * self.den + (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]) / n2
+        self.windows += 1
+
+
 class MagHeading:
     """The heading correction state (see the module docstring); :meth:`step` per sample."""
 
-    def __init__(self, tau_mag: float, mag_delay: float, reject: bool) -> None:
+    def __init__(self, tau_mag: float, mag_delay: float, reject: bool, estimate_delay: bool = True) -> None:
         self.tau_mag = tau_mag
-        self.mag_delay = mag_delay
+        self.mag_delay = mag_delay  # fixed latency, or the estimate's starting value
         self.reject = reject
+        self.estimate_delay = estimate_delay
+        self.latency = LatencyEstimator()
         self.reset()
+
+    @property
+    def delay(self) -> float:
+        """The latency compensated now (s)."""
+        return self.latency.delay(self.mag_delay) if self.estimate_delay else self.mag_delay
 
     def reset(self) -> None:
         self.started = False  # the heading has been set from a field
@@ -102,13 +182,14 @@ class MagHeading:
         self.gyr_lp = 0.0
         self.hist: list[tuple[float, float, float, float]] = []  # (dt, rotation vector of the increment)
         self.observed = False  # the last sample's heading was corrected by the field
+        self.latency.reset()
 
     def _delay_rotation(self, delta: Quat, dt: float) -> Quat:
         """Sensor-frame rotation over the last ``mag_delay`` s from the gyro increments (oldest partial)."""
         rx, ry, rz = _rotvec(delta)
         self.hist.append((dt, rx, ry, rz))
         r: Quat = (1.0, 0.0, 0.0, 0.0)
-        rem = self.mag_delay
+        rem = self.delay
         keep = 0
         for h_dt, hx, hy, hz in reversed(self.hist):
             if rem <= 0.0:
@@ -127,7 +208,9 @@ class MagHeading:
         w = _rotvec(delta)
         rate = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / dt if dt > 0.0 else 0.0
         self.gyr_lp += dt / (GYR_LP_TAU + dt) * (rate - self.gyr_lp)
-        if self.mag_delay > 0.0:
+        if self.estimate_delay:
+            self.latency.add(delta, w, dt, None if self.disturbed else mag)
+        if self.estimate_delay or self.mag_delay > 0.0:
             r = self._delay_rotation(delta, dt)
             if mag is not None:
                 mag = _rotate((r[0], -r[1], -r[2], -r[3]), mag)

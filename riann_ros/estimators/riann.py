@@ -148,8 +148,11 @@ class RiannEstimator(AttitudeEstimator):
         ParamSpec("tau_mag", 9.0, "s; time constant of the heading correction toward the magnetometer (9D only; "
                   "the default is VQF's tauMag).", min=0.01, max=1000.0, runtime=True),
         ParamSpec("mag_delay", 0.0, "s; latency of the magnetometer behind the gyro, compensated by rotating the "
-                  "field with the gyro (9D only; docs/magnetometer.md shows how to measure it).",
+                  "field with the gyro; with estimate_mag_delay the starting value of the estimate (9D only).",
                   min=0.0, max=0.5, runtime=True),
+        ParamSpec("estimate_mag_delay", True, "Estimate the magnetometer's latency online from the field's "
+                  "rotation against the gyro's during motion (no reference needed) and compensate it (9D only).",
+                  runtime=True),
         ParamSpec("mag_dist_rejection", True, "Detect magnetic disturbances (field norm and dip against a learned "
                   "reference) and hold the heading with the gyro while disturbed (9D only).", runtime=True),
     )
@@ -168,14 +171,15 @@ class RiannEstimator(AttitudeEstimator):
         self.holes = 0
         self.samples = 0  # input samples taken since reset
         self.rows = 0  # network steps run since reset (compute per sample = rows / samples)
-        self._heading = MagHeading(self.params["tau_mag"], self.params["mag_delay"], self.params["mag_dist_rejection"])
+        p = self.params
+        self._heading = MagHeading(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"], p["estimate_mag_delay"])
         self.restart()
         self._qc_prev = None
 
     def _on_params_changed(self) -> None:
-        h = self._heading
-        h.tau_mag, h.mag_delay, h.reject = (self.params["tau_mag"], self.params["mag_delay"],
-                                            self.params["mag_dist_rejection"])
+        h, p = self._heading, self.params
+        h.tau_mag, h.mag_delay, h.reject, h.estimate_delay = (p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"],
+                                                              p["estimate_mag_delay"])
 
     def heading_observed(self) -> bool:
         return self._heading.observed
@@ -209,6 +213,8 @@ class RiannEstimator(AttitudeEstimator):
         out["network restarts after holes"] = str(self.holes)
         if self._heading.started:
             out["magnetic disturbance"] = "detected" if self._heading.disturbed else "none"
+            kind = "estimated" if self._heading.estimate_delay else "fixed"
+            out["magnetometer latency (ms)"] = f"{1e3 * self._heading.delay:.1f} ({kind})"
         return out
 
     def _bias_now(self) -> tuple[float, float, float]:
