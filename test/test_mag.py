@@ -635,6 +635,38 @@ def test_riann_compensates_estimated_latency() -> None:
     assert errs[True] < 0.5 * errs[False]
 
 
+def test_riann_heading_reacquires_the_field_after_a_hole() -> None:
+    """The sensor turns 90° about the vertical during a 0.3 s hole in the input (no samples, so no gyro):
+    the heading re-acquires the field at once (as at the start), instead of creeping over ``tau_mag``."""
+    q_a = quat.from_rotvec(np.radians([10.0, 5.0, 0.0]))
+    q_b = quat.multiply(rot_z(math.radians(90.0)), q_a)
+    a, b = static(q_a, 1000, seed=1), static(q_b, 300, seed=2)
+    assert a.mag is not None and b.mag is not None
+    est = create("riann")
+    est.update_batch(a.acc, a.gyr, a.dt, a.mag)
+    holes = est.holes
+    q = est.update_batch(b.acc, b.gyr, np.concatenate([[0.3], b.dt[1:]]), b.mag)
+    assert est.holes == holes + 1
+    err = np.degrees(quat.heading_error(q_b, q))
+    assert err[100:].max() < 2.0  # within 1 s of the hole
+    est = create("riann")  # a sample at a time (the node's path) re-acquires as well
+    est.update_batch(a.acc, a.gyr, a.dt, a.mag)
+    for i in range(100):
+        qi = est.update(b.acc[i], b.gyr[i], 0.3 if i == 0 else float(b.dt[i]), b.mag[i])
+    assert np.degrees(quat.heading_error(q_b, qi[None, :]))[0] < 2.0
+
+
+def test_riann_batch_without_field_after_a_field() -> None:
+    """A batch without ``mag`` after one with a field runs 6D with the heading held (it raised before)."""
+    rec = static(quat.IDENTITY, 200)
+    assert rec.mag is not None
+    est = create("riann")
+    q9 = est.update_batch(rec.acc[:100], rec.gyr[:100], rec.dt[:100], rec.mag[:100])
+    q = est.update_batch(rec.acc[100:], rec.gyr[100:], rec.dt[100:])
+    assert not est.heading_observed()
+    assert np.degrees(quat.heading_error(q9[-1:], q)).max() < 0.5
+
+
 # ---------------------------------------------------------------------------------------------------
 # 6. VQF 9D
 # ---------------------------------------------------------------------------------------------------

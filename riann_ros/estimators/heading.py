@@ -16,7 +16,8 @@ follows the bias-corrected gyro (:meth:`RiannEstimator._compose`). With a field,
    motion becomes the reference;
 4. **correction**: ``ψ ← ψ + k e`` with ``k = dt / tau_mag`` (during the first ``tau_mag`` seconds at least
    ``1/n``: the running mean of the magnetic heading, so the start converges at once). The first usable field
-   sets the heading outright.
+   sets the heading outright. After a hole in the input (:meth:`MagHeading.reacquire`) the heading re-converges
+   the same way, since the rotation during the hole is unknown.
 
 The correction is a rotation about the world vertical, so the sensor-frame vertical — RIANN's inclination —
 is never changed by the magnetometer (tested: 9D inclination = 6D inclination). The vertical gyro bias is
@@ -182,7 +183,15 @@ class MagHeading:
         self.gyr_lp = 0.0
         self.hist: list[tuple[float, float, float, float]] = []  # (dt, rotation vector of the increment)
         self.observed = False  # the last sample's heading was corrected by the field
+        self.reacq = False  # re-acquiring the heading after a hole (start phase without reference learning)
         self.latency.reset()
+
+    def reacquire(self) -> None:
+        """A hole in the input: the rotation during it is unknown, so the heading re-converges to the field as
+        at the start (running mean of the magnetic heading for ``tau_mag`` s; the first undisturbed field
+        sets it), keeping the learned field reference and the latency estimate."""
+        if self.started:
+            self.t, self.n, self.reacq = 0.0, 0, True
 
     def _delay_rotation(self, delta: Quat, dt: float) -> Quat:
         """Sensor-frame rotation over the last ``mag_delay`` s from the gyro increments (oldest partial)."""
@@ -232,11 +241,16 @@ class MagHeading:
         self.t += dt
         k = dt / self.tau_mag
         start = self.t < self.tau_mag
-        if start:
+        self.reacq = self.reacq and start
+        initial = start and not self.reacq  # the first start: the field reference is learned too
+        if initial:
             self.n += 1
             k = max(k, 1.0 / self.n)
         if self.reject:
-            k = self._disturbance(mn, dip, dt, k, start)
+            k = self._disturbance(mn, dip, dt, k, initial)
+        if self.reacq and k > 0.0 and not self.disturbed:  # (not the half gain after a long rejection)
+            self.n += 1
+            k = max(k, 1.0 / self.n)
         self.observed = k > 0.0
         return k * err
 

@@ -33,7 +33,8 @@ a second network starts after it from a fresh state; after ``restart_warmup`` (d
 its state replaces the old one, which would otherwise take several seconds to shed the error the hole
 left. Steps longer than the stream's ``max_dt`` (the input gate's ``gap``) start a fresh network
 without the bridge (:meth:`RiannEstimator.on_gap`); the bias estimate, the rate estimate and the
-heading carry on across both. A clock jump, a fault or ``~/reset`` reset everything.
+heading carry on across both (with a field, the heading re-acquires it: :meth:`MagHeading.reacquire`).
+A clock jump, a fault or ``~/reset`` reset everything.
 
 ``rate_adaptation=false`` is the direct path: every sample is one network row with its own dt
 (stages 1 and 4 still apply).
@@ -115,6 +116,7 @@ class _Plan:
         self.idx: list[int] = []
         self.rot: list[Quat] = []
         self.delta: list[Quat] = []
+        self.holes: list[int] = []  # samples that end a hole (the heading re-acquires the field there)
 
     def add(self, idx: int, rot: Quat, delta: Quat) -> None:
         self.idx.append(idx)
@@ -186,8 +188,10 @@ class RiannEstimator(AttitudeEstimator):
 
     def on_gap(self) -> None:
         """A stamp gap longer than the gate's ``max_dt``: the sensor is the same, so its bias, rate and
-        the heading carry on; the network starts afresh (no bridge over such a gap)."""
+        the heading carry on (re-acquiring the field, if any); the network starts afresh (no bridge over such
+        a gap)."""
         self.restart()
+        self._heading.reacquire()
 
     def restart(self) -> None:
         """Start the network afresh at the next sample; keep the bias and rate estimates and the heading."""
@@ -263,6 +267,7 @@ class RiannEstimator(AttitudeEstimator):
             gap = self.params["restart_gap"]
             if gap > 0.0 and dt > gap and dt > HOLE_STEPS * rate.median:
                 self._fork_pending = True
+                plan.holes.append(len(plan.idx))
             elif rate.push(dt) if switched is None else switched:
                 self._anchor = self._t_net
                 self._m = 0
@@ -433,9 +438,10 @@ class RiannEstimator(AttitudeEstimator):
         first = self._first_heading_row(mag, n)
         psi = self._psi + np.cumsum(tw)
         if first < n:
-            assert mag is not None
+            if mag is None:  # the heading started in an earlier call: this batch has no field
+                mag = np.full((n, 3), np.nan)
             psi[first:] = self._mag_psi(float(psi[first - 1]) if first else self._psi, tw[first:], qc[first:],
-                                        plan.delta[first:], dt[first:], mag[first:])
+                                        plan.delta[first:], dt[first:], mag[first:], [h - first for h in plan.holes])
         self._psi = math.remainder(float(psi[-1]), 2.0 * math.pi)
         self._qc_prev = tuple(qc[-1].tolist())
         rz = np.column_stack([np.cos(0.5 * psi), np.zeros(n), np.zeros(n), np.sin(0.5 * psi)])
@@ -452,11 +458,16 @@ class RiannEstimator(AttitudeEstimator):
         has = np.isfinite(mag).all(axis=1)
         return int(np.argmax(has)) if has.any() else n
 
-    def _mag_psi(self, psi: float, tw: Array, qc: Array, delta: list[Quat], dt: Array, mag: Array) -> Array:
-        """Heading angles of the rows after the first field: gyro increment plus the magnetic correction."""
+    def _mag_psi(self, psi: float, tw: Array, qc: Array, delta: list[Quat], dt: Array, mag: Array,
+                 holes: list[int]) -> Array:
+        """Heading angles of the rows after the first field: gyro increment plus the magnetic correction
+        (``holes``: rows that end a hole)."""
         out = np.empty(len(tw))
         step = self._heading.step
+        hole = set(holes)
         for i, (t, q, m, h) in enumerate(zip(tw.tolist(), qc.tolist(), mag.tolist(), dt.tolist(), strict=True)):
+            if i in hole:
+                self._heading.reacquire()
             psi += t
             c, s = math.cos(0.5 * psi), math.sin(0.5 * psi)
             qo = (c * q[0] - s * q[3], c * q[1] - s * q[2], c * q[2] + s * q[1], c * q[3] + s * q[0])
@@ -510,6 +521,8 @@ class RiannEstimator(AttitudeEstimator):
         if mag is not None:
             m0, m1, m2 = (float(v) for v in mag)  # type: ignore[union-attr, arg-type]
             m = (m0, m1, m2) if math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2) else None
+        if plan.holes:
+            self._heading.reacquire()
         return self._compose_one(self._q_net, plan.rot[0], plan.delta[0], _step_dt(float(dt)), m)
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
