@@ -194,7 +194,7 @@ class MagHeading:
             self.t, self.n, self.reacq = 0.0, 0, True
 
     def _delay_rotation(self, delta: Quat, dt: float) -> Quat:
-        """Sensor-frame rotation over the last ``mag_delay`` s from the gyro increments (oldest partial)."""
+        """Sensor-frame rotation over the last :attr:`delay` s from the gyro increments (oldest partial)."""
         rx, ry, rz = _rotvec(delta)
         self.hist.append((dt, rx, ry, rz))
         r: Quat = (1.0, 0.0, 0.0, 0.0)
