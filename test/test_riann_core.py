@@ -90,6 +90,17 @@ def test_rate_tracker_reads_widely_spread_steps_as_interval_means():
     assert not r.irregular
 
 
+def test_rate_tracker_signal_model_can_be_set():
+    means = RateTracker(0.020, means=True)
+    points = RateTracker(0.020, means=False)
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        means.push(0.020)
+        points.push(float(rng.choice([0.010, 0.020, 0.030])))
+    assert means.irregular and not points.irregular
+    assert means.box_width() == 0.0  # up-sampled interval means: the held sample itself
+
+
 # -- causal resampling ------------------------------------------------------------------------------
 def _history(means: bool = False) -> SignalHistory:
     h = SignalHistory()
@@ -315,3 +326,48 @@ def test_a_gap_longer_than_max_dt_keeps_the_bias_estimate_a_clock_jump_forgets_i
     q, r = s.process(int(stamps[-1]) - 10_000_000_000, acc[0], gyr[0])
     assert r.reset == "clock_jump" and q is not None
     assert np.abs(np.degrees(s.estimator._bias_now())).max() < 0.5
+
+
+# -- input model ------------------------------------------------------------------------------------
+def _swing(rate_hz: float, means: bool, seconds: float = 20.0) -> tuple[np.ndarray, ...]:
+    """A 1 Hz, 60° roll swing sampled at ``rate_hz``: point samples at the stamps, or interval means over
+    the preceding step (the gyro's mean is exact; the accelerometer's is averaged on a fine grid)."""
+    a, w = math.radians(60.0), 2 * math.pi * 1.0
+    d = 1.0 / rate_hz
+    t = d * np.arange(1, int(seconds * rate_hz) + 1)
+
+    def roll(tt: np.ndarray) -> np.ndarray:
+        return a * np.sin(w * tt)
+
+    if means:
+        gx = (roll(t) - roll(t - d)) / d
+        fine = t[:, None] - d * (np.arange(64) + 0.5)[None, :] / 64
+        acc = np.stack([np.zeros_like(t), (G * np.sin(roll(fine))).mean(1), (G * np.cos(roll(fine))).mean(1)], 1)
+    else:
+        gx = a * w * np.cos(w * t)
+        acc = np.stack([np.zeros_like(t), G * np.sin(roll(t)), G * np.cos(roll(t))], 1)
+    gyr = np.stack([gx, np.zeros_like(t), np.zeros_like(t)], 1)
+    return acc, gyr, np.full(len(t), d), roll(t)
+
+
+def _roll_rmse_deg(model: str, data_means: bool) -> float:
+    acc, gyr, dt, truth = _swing(50.0, data_means)
+    q = RiannEstimator(input_model=model, gyro_bias_estimation=False).update_batch(acc, gyr, dt)
+    r = np.arctan2(2 * (q[:, 0] * q[:, 1] + q[:, 2] * q[:, 3]), 1 - 2 * (q[:, 1] ** 2 + q[:, 2] ** 2))
+    e = np.remainder(r - truth + np.pi, 2 * np.pi) - np.pi
+    return float(np.degrees(np.sqrt(np.mean(e[len(e) // 4:] ** 2))))
+
+
+def test_input_model_matches_what_a_sample_is():
+    """A regular 50 Hz stream: read as point samples by default; interval means stamped at the end of their
+    interval lag by half a step when read as points, and point samples lead when read as means."""
+    points_on_points = _roll_rmse_deg("auto", data_means=False)
+    assert _roll_rmse_deg("points", data_means=False) == pytest.approx(points_on_points, abs=1e-9)
+    means_on_points = _roll_rmse_deg("means", data_means=False)
+    means_on_means = _roll_rmse_deg("means", data_means=True)
+    points_on_means = _roll_rmse_deg("auto", data_means=True)
+    assert points_on_points < 0.7 * means_on_points
+    assert means_on_means < 0.7 * points_on_means
+    est = RiannEstimator(input_model="means")
+    est.update_batch(*_swing(50.0, True, seconds=1.0)[:3])
+    assert est.diagnostics()["input model"] == "interval means (set)"

@@ -63,13 +63,15 @@ def choose_step(d: float, step_up: float = STEP_UP, step_fast: float = STEP_FAST
 class RateTracker:
     """Running-median input step, grid step with hysteresis, and the signal model (see module doc)."""
 
-    def __init__(self, first_dt: float, window: int = RATE_WINDOW, hysteresis: float = HYSTERESIS) -> None:
+    def __init__(self, first_dt: float, window: int = RATE_WINDOW, hysteresis: float = HYSTERESIS,
+                 means: bool | None = None) -> None:
         self.window = window
+        self.forced = means  # None: decide the signal model from the stamps' spread
         self.hysteresis = hysteresis
         self._dts: deque[float] = deque(maxlen=window)
         self.median = first_dt
         self.step = choose_step(first_dt)
-        self.irregular = False
+        self.irregular = bool(means)
         self.switches = 0
         self._pending = 0
 
@@ -83,7 +85,9 @@ class RateTracker:
         if n < min(MIN_STEPS, self.window):
             return False
         spread = (s[(9 * n) // 10] - s[n // 10]) / self.median
-        if spread > IRREGULAR_ON:
+        if self.forced is not None:
+            self.irregular = self.forced
+        elif spread > IRREGULAR_ON:
             self.irregular = True
         elif spread < IRREGULAR_OFF:
             self.irregular = False

@@ -140,6 +140,9 @@ class RiannEstimator(AttitudeEstimator):
             "Run the network on its own constant-rate grid (2-5.5 ms) resampled causally from the input, "
             "whatever its rate, jitter or dropouts. Off: every sample goes straight into the network.",
         ),
+        ParamSpec("input_model", "auto", "What an input sample is when the grid resamples it: 'points' (the "
+                  "signal at the stamp), 'means' (the mean since the previous sample), 'auto' (means when the "
+                  "stamps jitter, else points).", choices=("auto", "points", "means")),
         *front_end_params(True, "the network"),
         ParamSpec("restart_gap", 0.1,
                   "s; after a stamp step longer than this (and than 4 input steps) a fresh network takes "
@@ -213,7 +216,8 @@ class RiannEstimator(AttitudeEstimator):
             out[BIAS_KEY] = bias_text(self._bias.bias)
         if self._rate is not None and self.params["rate_adaptation"]:
             out["network rate (Hz)"] = f"{1.0 / self._rate.step:.1f}"
-            out["input model"] = "interval means" if self._rate.irregular else "point samples"
+            model = "interval means" if self._rate.irregular else "point samples"
+            out["input model"] = model if self._rate.forced is None else model + " (set)"
         out["network restarts after holes"] = str(self.holes)
         if self._heading.started:
             out["magnetic disturbance"] = "detected" if self._heading.disturbed else "none"
@@ -229,7 +233,8 @@ class RiannEstimator(AttitudeEstimator):
         """First sample after reset/restart: set up the rate tracker and the bias front end."""
         d = dt if DT_MIN * 0.01 < dt < 10.0 else DEFAULT_DT
         if self._rate is None:
-            self._rate = RateTracker(d)
+            model = self.params["input_model"]
+            self._rate = RateTracker(d, means=None if model == "auto" else model == "means")
         if self._bias is None and self.params["gyro_bias_estimation"]:
             ts = self._rate.step if self.params["rate_adaptation"] else d
             self._bias = GyroBiasFrontEnd(ts, self.params["bias_clip"], self.params["bias_sigma_init"])
