@@ -166,9 +166,10 @@ def test_level_sensor_at_rest_in_each_world_frame_on_all_four_nodes(ros, start_n
             == {fixed}, name
         assert [stamp_ns(m) for m in rpy[name].messages] == stamps.tolist(), name
         np.testing.assert_allclose(r, frames.rpy_deg(q), atol=1e-9, err_msg=name)
-        if name == "riann":  # heading is whatever the network gives; inclination is level
+        if name == "riann":  # the network's inclination (level within its error); heading 0 in ENU = NED yaw 90°
             r_abs = np.abs(r[-1])
             assert r_abs[0] == pytest.approx(180.0, abs=2.0) and r_abs[1] == pytest.approx(0.0, abs=2.0), r[-1]
+            np.testing.assert_allclose(r[:, 2], 90.0, atol=1.0, err_msg=name)
             q_core, _ = EstimatorStream(create("riann"), GateConfig(nominal_rate=200.0)).process_batch(
                 stamps, acc, gyr)
             np.testing.assert_allclose(q, frames.to_world(q_core, world), atol=1e-4)

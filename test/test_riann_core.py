@@ -255,6 +255,21 @@ def test_heading_starts_at_zero_and_follows_the_gyro():
     assert np.abs(err).max() < math.radians(0.5)
 
 
+@pytest.mark.parametrize("roll_deg", [20.0, 120.0, -75.0])
+def test_tilted_sensor_at_rest_gets_the_network_roll_and_heading_zero(roll_deg):
+    """Issue 12: a sensor at rest, rolled, gave a quaternion with heading near 180°; the output's heading
+    (ZYX yaw) starts at 0 and stays there, its roll is the tilt."""
+    n = 400
+    r = math.radians(roll_deg)
+    acc = np.tile([0.0, G * math.sin(r), G * math.cos(r)], (n, 1))
+    q = RiannEstimator().update_batch(acc, np.zeros((n, 3)), np.full(n, 0.005))
+    w, x, y, z = q.T
+    yaw = np.degrees(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+    roll = np.degrees(np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)))
+    assert np.abs(yaw).max() < 1.0
+    assert abs(roll[-1] - roll_deg) < 2.0
+
+
 # -- dropouts ---------------------------------------------------------------------------------------
 def _hole_stream(restart_gap: float) -> tuple[RiannEstimator, np.ndarray, np.ndarray]:
     """Level rest at 200 Hz, a 0.4 s hole during which the sensor was tilted by 40°, tilted rest after."""
