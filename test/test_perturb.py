@@ -40,7 +40,9 @@ def test_parse_conditions_and_errors():
     assert pt.parse_perturbation("bias:random:2") == pt.Bias(sigma=2.0)
     assert pt.parse_perturbation("bias:-1,0.5,0").text() == "bias:-1,0.5,0"
     assert pt.parse_perturbation("dropout:0.1-0.6s@10s") == pt.Dropout(0.1, 0.6, 10.0)
-    for bad in ("jitter:0ms", "jitter:30-10ms", "rate:-5", "bias:1,2", "dropout:0.6-0.1s@10s", "noise:1"):
+    assert pt.parse_perturbation("latency:0-20ms") == pt.Latency(0.0, 0.02)
+    for bad in ("jitter:0ms", "jitter:30-10ms", "rate:-5", "bias:1,2", "dropout:0.6-0.1s@10s", "noise:1",
+                "latency:20-10ms", "latency:5ms"):
         with pytest.raises(ValueError, match="bad perturbation"):
             pt.parse_perturbation(bad)
 
@@ -86,7 +88,7 @@ def test_rate_gives_exact_ns_stamps():
 
 
 @pytest.mark.parametrize("text", ["jitter:10/20/30ms", "jitter:3-7ms", "rate:77", "dropout:0.1-0.6s@2s",
-                                  "bias:random:2"])
+                                  "bias:random:2", "latency:0-20ms"])
 def test_chunked_equals_whole(text):
     rec = linear(n=5000)
     whole, info_w = run(pt.parse_perturbation(text), rec, seed=5)
@@ -97,6 +99,19 @@ def test_chunked_equals_whole(text):
     np.testing.assert_allclose(chunked.quat_ref, whole.quat_ref, atol=1e-9)
     np.testing.assert_array_equal(chunked.score_mask, whole.score_mask)
     assert info_c == info_w
+
+
+def test_latency_moves_only_the_stamps_later_and_keeps_them_in_order():
+    rec = linear(n=4000, rate=200.0)
+    out, info = run(pt.parse_perturbation("latency:0-20ms"), rec, seed=4)
+    delay = (out.stamps_ns - rec.stamps_ns) * 1e-9
+    assert delay.min() >= 0.0 and delay.max() <= 0.020 + 4e-6
+    assert np.diff(out.stamps_ns).min() >= 1000  # in order, never repeated
+    assert np.diff(out.stamps_ns).std() * 1e-9 > 0.005  # the steps jitter (5 ms regular underneath)
+    assert abs(delay.mean() - 0.010) < 0.002  # mostly the drawn delay (order rarely pushes a stamp)
+    for name in ("acc", "gyr", "quat_ref", "score_mask"):
+        np.testing.assert_array_equal(getattr(out, name), getattr(rec, name))
+    assert info == {"samples": len(rec)}
 
 
 def test_bias_constant_and_random_per_seed():

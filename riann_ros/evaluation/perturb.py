@@ -12,6 +12,11 @@ sequence, after the scenario and before the estimators:
 ``rate:50``
     A regular stream at 50 Hz made the same way (``jitter`` with one interval): causal resampling,
     chunk by chunk. (``--rates`` resamples the whole recording with the FFT, as in the paper.)
+``latency:0-20ms``
+    Receive-time stamps: each sample keeps its values and its reference, but its stamp is the
+    measurement time plus a delivery delay drawn uniformly from the range (stamps kept in order, at
+    least 1 µs apart) — what a driver that stamps on arrival over USB, Bluetooth or a busy host
+    gives. The samples underneath stay regular; only the stamps jitter.
 ``bias:3,3,0`` / ``bias:random:2``
     A constant gyroscope bias (°/s per axis) from the first sample of the sequence, or one drawn per
     sequence from N(0, (2 °/s)²) per axis.
@@ -47,6 +52,8 @@ DEFINITIONS = {
     "jitter": "jitter:10/20/30ms (set) or jitter:8-32ms (range): each next sample an interval later drawn uniformly; "
     "acc/gyr = means of the piecewise-linear signal over the interval; reference slerped at the sample",
     "rate": "rate:HZ: a regular stream at HZ made like jitter (interval means), causal, chunk by chunk",
+    "latency": "latency:LO-HIms: each stamp = the measurement time + a delay drawn uniformly from LO-HI (kept in "
+    "order); samples and reference unchanged",
     "bias": "bias:X,Y,Z (deg/s) or bias:random:SIGMA (deg/s per axis, drawn per sequence): added to the gyro "
     "from the first sample of the sequence",
     "dropout": "dropout:LO-HIs@Ts: holes of LO-HI s (uniform) about every T s (exponential spacing), starting at "
@@ -344,6 +351,51 @@ def _interval_means(buf: Recording, edges: NDArray[np.int64]) -> Recording:
 
 
 # ---------------------------------------------------------------------------------------------------
+# latency: receive-time stamps
+# ---------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Latency(Perturbation):
+    """Stamps later than the measurement by a delay drawn uniformly from ``lo``–``hi`` s, kept in order."""
+
+    lo: float = 0.0
+    hi: float = 0.02
+    kind = "latency"
+
+    def text(self) -> str:
+        return f"latency:{self.lo * 1e3:g}-{self.hi * 1e3:g}ms"
+
+    def start(self, rng: np.random.Generator) -> Transform:
+        return _Latency(self, rng)
+
+
+class _Latency(Transform):
+    MIN_STEP_NS = 1000
+
+    def __init__(self, p: Latency, rng: np.random.Generator) -> None:
+        self.p = p
+        self.rng = rng
+        self.last: int | None = None  # the previous output stamp (ns)
+        self.samples = 0
+
+    def __call__(self, rec: Recording) -> Recording:
+        n = len(rec)
+        if n == 0:
+            return rec
+        delay = np.round(self.rng.uniform(self.p.lo, self.p.hi, n) * 1e9).astype(np.int64)
+        want = rec.stamps_ns + delay
+        # in order, at least MIN_STEP_NS apart: t'_k = max(want_k, t'_{k-1} + step)
+        k = np.arange(n, dtype=np.int64) * self.MIN_STEP_NS
+        start = np.iinfo(np.int64).min // 2 if self.last is None else self.last + self.MIN_STEP_NS
+        out = np.maximum.accumulate(np.maximum(want - k, start)) + k
+        self.last = int(out[-1])
+        self.samples += n
+        return _with(rec, stamps_ns=out)
+
+    def info(self) -> dict[str, Any]:
+        return {"samples": self.samples}
+
+
+# ---------------------------------------------------------------------------------------------------
 # dropouts
 # ---------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -454,6 +506,14 @@ def _bias(args: str) -> Perturbation | None:
     return Bias(dps=(float(m.group(1)), float(m.group(2)), float(m.group(3)))) if m else None
 
 
+def _latency(args: str) -> Perturbation | None:
+    m = re.fullmatch(rf"({_NUM})-({_NUM})(ms|s)", args)
+    if not m:
+        return None
+    lo, hi = _seconds(m.group(1), m.group(3)), _seconds(m.group(2), m.group(3))
+    return Latency(lo, hi) if 0 <= lo <= hi else None
+
+
 def _dropout(args: str) -> Perturbation | None:
     m = re.fullmatch(rf"({_NUM})-({_NUM})s@({_NUM})s", args)
     if not m:
@@ -473,7 +533,7 @@ def _magnetic(args: str) -> Perturbation | None:
     return Magnetic(strength=strength, t0=t0, t1=t1) if t0 < t1 else None
 
 
-_PARSERS = {"jitter": _jitter, "rate": _rate, "bias": _bias, "dropout": _dropout, "magnetic": _magnetic}
+_PARSERS = {"jitter": _jitter, "rate": _rate, "latency": _latency, "bias": _bias, "dropout": _dropout, "magnetic": _magnetic}
 
 
 def parse_perturbation(text: str) -> Perturbation:
@@ -483,8 +543,9 @@ def parse_perturbation(text: str) -> Perturbation:
     p = parser(args) if parser else None
     if p is None:
         raise ValueError(
-            f"bad perturbation {text!r}; accepted: jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, "
-            "bias:random:2 (deg/s), dropout:0.1-0.6s@10s, magnetic:offset:20,0,-10 (µT), magnetic:disturb:40@10-20s"
+            f"bad perturbation {text!r}; accepted: jitter:10/20/30ms, jitter:8-32ms, rate:50, latency:0-20ms, "
+            "bias:3,3,0, bias:random:2 (deg/s), dropout:0.1-0.6s@10s, magnetic:offset:20,0,-10 (µT), "
+            "magnetic:disturb:40@10-20s"
         )
     return p
 
