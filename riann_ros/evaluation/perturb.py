@@ -533,7 +533,8 @@ def _magnetic(args: str) -> Perturbation | None:
     return Magnetic(strength=strength, t0=t0, t1=t1) if t0 < t1 else None
 
 
-_PARSERS = {"jitter": _jitter, "rate": _rate, "latency": _latency, "bias": _bias, "dropout": _dropout, "magnetic": _magnetic}
+_PARSERS = {"jitter": _jitter, "rate": _rate, "latency": _latency, "bias": _bias, "dropout": _dropout,
+            "magnetic": _magnetic}
 
 
 def parse_perturbation(text: str) -> Perturbation:
