@@ -101,6 +101,34 @@ def test_rate_tracker_signal_model_can_be_set():
     assert means.box_width() == 0.0  # up-sampled interval means: the held sample itself
 
 
+def _receive_stamps(n: int, period: float, max_delay: float, seed: int = 0) -> np.ndarray:
+    """Stamps (s) of samples taken every ``period`` and stamped on arrival, a uniform 0..max_delay later
+    (kept in order, at least 1 µs apart)."""
+    rng = np.random.default_rng(seed)
+    t = period * np.arange(1, n + 1) + rng.uniform(0.0, max_delay, n)
+    k = 1e-6 * np.arange(n)
+    return np.maximum.accumulate(t - k) + k
+
+
+def test_rate_tracker_tells_a_jittered_clock_from_random_sample_times():
+    """A regular sample clock stamped after random delivery delays: neighbouring steps anti-correlated
+    (lag-1 ~ -0.5), the clock's period is the mean step. Random sample times (independent intervals):
+    lag-1 ~ 0, interval means."""
+    clock = RateTracker(0.0035)
+    for d in np.diff(_receive_stamps(3000, 0.0035, 0.010)):
+        clock.push(float(d))
+    assert clock.clocked and not clock.means
+    assert clock.lag1() < -0.3
+    assert clock.mean_step == pytest.approx(0.0035, rel=0.01)
+    assert clock.step == pytest.approx(0.0035, rel=0.01)  # not the median step (~3 ms) nor blocks
+    renewal = RateTracker(0.020)
+    rng = np.random.default_rng(2)
+    for d in rng.choice([0.010, 0.020, 0.030], 3000):
+        renewal.push(float(d))
+    assert not renewal.clocked and renewal.means
+    assert abs(renewal.lag1()) < 0.1
+
+
 # -- causal resampling ------------------------------------------------------------------------------
 def _history(means: bool = False) -> SignalHistory:
     h = SignalHistory()
@@ -174,12 +202,17 @@ def test_a_clean_stream_at_the_grid_step_is_fed_straight_in():
     [
         (4, (0.0005, 0.003, 0.010, 0.020, 0.030, 0.15)),  # jitter, with holes
         (1, (0.001, 0.0015, 0.005, 0.01, 0.04, 0.1)),  # mixed rates: blocks, up-sampling, switches
+        (2, ()),  # a 200 Hz clock stamped on arrival (0-10 ms late), with two holes
     ],
 )
 def test_jittery_streaming_equals_batch_and_gives_unit_quaternions(seed, steps):
     rng = np.random.default_rng(seed)
-    n = 600
-    dt = rng.choice(steps, size=n)
+    n = 1500 if not steps else 600
+    if steps:
+        dt = rng.choice(steps, size=n)
+    else:
+        dt = np.diff(_receive_stamps(n + 1, 0.005, 0.010, seed))
+        dt[[700, 1100]] = (0.2, 0.35)
     acc = np.array([0.0, 0.0, G]) + rng.normal(0, 0.5, (n, 3))
     gyr = rng.normal(0, 0.3, (n, 3))
     est = RiannEstimator()
@@ -386,3 +419,27 @@ def test_input_model_matches_what_a_sample_is():
     est = RiannEstimator(input_model="means")
     est.update_batch(*_swing(50.0, True, seconds=1.0)[:3])
     assert est.diagnostics()["input model"] == "interval means (set)"
+
+
+# -- stamps on arrival ------------------------------------------------------------------------------
+def test_a_clock_stamped_on_arrival_is_integrated_on_its_own_period():
+    """Samples taken every 5 ms but stamped 0-10 ms late: the stamp steps (0-15 ms) are not the sample
+    intervals. Fed as they are, each gyro sample is weighted by a wrong interval; the de-jittered
+    timeline gives nearly the error of the true stamps."""
+    acc, gyr, dt, truth = _swing(200.0, means=False)
+    stamps = _receive_stamps(len(dt), 0.005, 0.010, seed=3)
+    dt_rx = np.diff(np.concatenate([[0.0], stamps]))
+
+    def rmse(est: RiannEstimator, steps: np.ndarray) -> float:
+        q = est.update_batch(acc, gyr, steps)
+        r = np.arctan2(2 * (q[:, 0] * q[:, 1] + q[:, 2] * q[:, 3]), 1 - 2 * (q[:, 1] ** 2 + q[:, 2] ** 2))
+        e = np.remainder(r - truth + np.pi, 2 * np.pi) - np.pi
+        return float(np.degrees(np.sqrt(np.mean(e[len(e) // 4:] ** 2))))
+
+    clean = rmse(RiannEstimator(gyro_bias_estimation=False), dt)
+    est = RiannEstimator(gyro_bias_estimation=False)
+    received = rmse(est, dt_rx)
+    as_stamped = rmse(RiannEstimator(gyro_bias_estimation=False, rate_adaptation=False), dt_rx)
+    assert received < 1.3 * clean + 0.1
+    assert as_stamped > 2.0 * received
+    assert est.diagnostics()["input stamps"] == "regular clock + delivery jitter"

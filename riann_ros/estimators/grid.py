@@ -18,6 +18,13 @@ uniform time grid ``tau_m = anchor + m·T`` and never sees the input stamps dire
   *interval means* (each sample the average since the previous one: what a polled, integrating or
   decimating sensor delivers); a regular stream as *point samples* (hysteresis down to
   ``IRREGULAR_OFF``).
+* It also tells *receive-time stamps* from *sample times*: a sensor sampling on its own regular clock,
+  stamped on arrival after a random delivery delay (USB, Bluetooth, a busy host), gives steps whose
+  neighbours are anti-correlated (a late stamp makes one step long and the next short: lag-1
+  autocorrelation −0.5 for independent delays), whereas samples taken at random times (independent
+  intervals) give 0. Below ``CLOCK_ON`` the stream is ``clocked``: its samples are regular point
+  samples, its period the mean of the last ``CLOCK_WINDOW`` steps, and the estimator integrates them on
+  a de-jittered timeline instead of the stamps.
 * :class:`SignalHistory` holds the recent samples as a signal over time — piecewise linear through
   point samples, or piecewise constant over ``(t_{k-1}, t_k]`` for interval means — and gives its
   value or mean over a window. A grid point is computed as soon as a sample at or after it has
@@ -44,6 +51,10 @@ HYSTERESIS = 0.1  # relative change of the grid step needed (for window // 2 sam
 MIN_STEPS = 16  # steps seen before the tracker may switch or judge regularity
 IRREGULAR_ON = 0.3  # (p90 - p10) / median of the steps above which samples are interval means
 IRREGULAR_OFF = 0.15  # ... and below which they are point samples again
+CLOCK_ON = -0.25  # lag-1 autocorrelation of the steps below which the stamps are a regular clock + delivery jitter
+CLOCK_OFF = -0.15  # ... and above which they are the sample times again
+CLOCK_MIN_SPREAD = 0.02  # (p90 - p10) / median of the steps below which the question does not matter
+CLOCK_WINDOW = 1024  # steps whose mean is the clock period of a clocked stream
 
 Sample = Sequence[float]
 
@@ -72,26 +83,65 @@ class RateTracker:
         self.median = first_dt
         self.step = choose_step(first_dt)
         self.irregular = bool(means)
+        self.clocked = False  # stamps = a regular sample clock + random delivery delays (see lag1)
         self.switches = 0
         self._pending = 0
+        self._long: deque[float] = deque(maxlen=CLOCK_WINDOW)
+        self._long_sum = 0.0  # running sums over _long: steps, squares, products of neighbours
+        self._long_sq = 0.0
+        self._long_lag = 0.0
+
+    @property
+    def means(self) -> bool:
+        """Read the samples as interval means (else as point samples)."""
+        return self.irregular and not self.clocked
+
+    @property
+    def mean_step(self) -> float:
+        """Mean of the last ``CLOCK_WINDOW`` steps (s): the sample clock's period when ``clocked``."""
+        return self._long_sum / len(self._long) if self._long else self.median
+
+    def lag1(self) -> float:
+        """Lag-1 autocorrelation of the last ``CLOCK_WINDOW`` steps. Samples taken at random times (a
+        renewal process: each interval drawn on its own) give ~0; samples taken on a regular clock and
+        stamped after a random delivery delay give ~-0.5 (a late stamp makes one step long and the next
+        short)."""
+        n = len(self._long)
+        if n < 3:
+            return 0.0
+        m = self._long_sum / n
+        var = self._long_sq / n - m * m
+        if var <= 1e-12 * m * m:
+            return 0.0
+        return (self._long_lag / (n - 1) - m * m) / var
+
+    def _push_long(self, dt: float) -> None:
+        long = self._long
+        if len(long) == CLOCK_WINDOW:
+            old = long.popleft()
+            self._long_sum -= old
+            self._long_sq -= old * old
+            self._long_lag -= old * long[0]
+        if long:
+            self._long_lag += long[-1] * dt
+        long.append(dt)
+        self._long_sum += dt
+        self._long_sq += dt * dt
 
     def push(self, dt: float) -> bool:
         """Take one input step (s); return True when the grid step switched."""
         dts = self._dts
         dts.append(dt)
+        self._push_long(dt)
         n = len(dts)
         s = sorted(dts)
         self.median = s[n // 2]
         if n < min(MIN_STEPS, self.window):
             return False
         spread = (s[(9 * n) // 10] - s[n // 10]) / self.median
-        if self.forced is not None:
-            self.irregular = self.forced
-        elif spread > IRREGULAR_ON:
-            self.irregular = True
-        elif spread < IRREGULAR_OFF:
-            self.irregular = False
-        d = self.median
+        self._judge_model(spread)
+        self._judge_clock(spread)
+        d = self.mean_step if self.clocked else self.median
         # the current ratio of grid step to input step, kept while it still fits: a rate drifting
         # across a factor boundary (10 ms ± 1 %) must not flip between 2 and 3 rows per sample
         same = d * round(self.step / d) if self.step >= d else d / round(d / self.step)
@@ -107,6 +157,24 @@ class RateTracker:
         self.switches += 1
         return True
 
+    def _judge_model(self, spread: float) -> None:
+        if self.forced is not None:
+            self.irregular = self.forced
+        elif spread > IRREGULAR_ON:
+            self.irregular = True
+        elif spread < IRREGULAR_OFF:
+            self.irregular = False
+
+    def _judge_clock(self, spread: float) -> None:
+        if spread < CLOCK_MIN_SPREAD:
+            self.clocked = False
+            return
+        r = self.lag1()
+        if r < CLOCK_ON:
+            self.clocked = True
+        elif r > CLOCK_OFF:
+            self.clocked = False
+
     def box_width(self) -> float:
         """Averaging window (s) of a grid value: 0 = the signal at the grid point, else its mean over
         that much time before it. Point samples: up-sampled (T < d), the mean over the grid cell
@@ -114,11 +182,12 @@ class RateTracker:
         would, instead of carrying the kinks of the linear interpolation; blocks (T = k·d), the mean
         over ``T − d`` (the k samples of the block); T = d, the sample itself. Interval means: the
         whole cell when T spans several samples, else the sample covering the grid point."""
-        if self.irregular:
-            return self.step if self.step > self.median * (1.0 + REL_EPS) else 0.0
-        if self.step < self.median * (1.0 - REL_EPS):
+        d = self.mean_step if self.clocked else self.median
+        if self.means:
+            return self.step if self.step > d * (1.0 + REL_EPS) else 0.0
+        if self.step < d * (1.0 - REL_EPS):
             return self.step
-        return self.step - self.median if self.step > self.median else 0.0
+        return self.step - d if self.step > d else 0.0
 
 
 class SignalHistory:

@@ -15,7 +15,9 @@ stages around it, each causal, with one output per input sample at that sample's
    ``T`` chosen from a running median of the input steps with hysteresis (2–5.5 ms: the samples go
    straight in; slower inputs are up-sampled to ≤ 5.5 ms, faster ones averaged in blocks of ~5 ms);
    each grid value is resampled causally from the samples up to that stamp (linear interpolation of
-   point samples; irregular streams are read as interval means).
+   point samples; irregular streams are read as interval means, ``input_model``). Stamps that are a
+   regular sample clock plus random delivery delays (a driver stamping on arrival: neighbouring steps
+   anti-correlated) are replaced by a de-jittered timeline at the clock's mean period.
 3. **Carry-forward**: a sample's attitude is the latest network output (at a grid point at or before
    the sample) rotated on by the bias-corrected gyro integral up to the sample's stamp. No latency
    is added; the network's own correction lags by less than one grid step ``T``.
@@ -69,6 +71,7 @@ DEFAULT_DT = 0.01  # s, first step when the stream gives none
 TIME_EPS_NS = 1000.0  # a grid point this close after the newest stamp counts as reached (1 µs)
 RESTART_WARMUP = 0.0  # s a fresh network runs beside the old one after a hole before it takes over
 HOLE_STEPS = 4.0  # a hole is also longer than this many median input steps
+CLOCK_GAIN = 1.0 / 256.0  # per sample: how fast the de-jittered timeline of a clocked stream follows its stamps
 
 Quat = tuple[float, float, float, float]
 Row = tuple[float, ...]
@@ -204,6 +207,7 @@ class RiannEstimator(AttitudeEstimator):
         self._q_net: Quat | None = None  # last network output
         self._hist = SignalHistory()
         self._t = 0.0  # ns of the newest sample, relative to the first one after (re)start
+        self._raw = 0.0  # ns: the newest stamp on the same scale (self._t differs from it for a clocked stream)
         self._anchor = 0.0  # ns; grid point m is at anchor + m * T
         self._m = 0
         self._t_net = 0.0  # ns of the last grid point run
@@ -216,8 +220,9 @@ class RiannEstimator(AttitudeEstimator):
             out[BIAS_KEY] = bias_text(self._bias.bias)
         if self._rate is not None and self.params["rate_adaptation"]:
             out["network rate (Hz)"] = f"{1.0 / self._rate.step:.1f}"
-            model = "interval means" if self._rate.irregular else "point samples"
+            model = "interval means" if self._rate.means else "point samples"
             out["input model"] = model if self._rate.forced is None else model + " (set)"
+            out["input stamps"] = "regular clock + delivery jitter" if self._rate.clocked else "sample times"
         out["network restarts after holes"] = str(self.holes)
         if self._heading.started:
             out["magnetic disturbance"] = "detected" if self._heading.disturbed else "none"
@@ -268,7 +273,7 @@ class RiannEstimator(AttitudeEstimator):
             t_prev = 0.0
         else:
             assert rate is not None
-            self._t += float(round(dt * 1e9))
+            step = float(round(dt * 1e9))
             gap = self.params["restart_gap"]
             if gap > 0.0 and dt > gap and dt > HOLE_STEPS * rate.median:
                 self._fork_pending = True
@@ -278,19 +283,31 @@ class RiannEstimator(AttitudeEstimator):
                 self._m = 0
                 if self._bias is not None:
                     self._bias.set_ts(rate.step)
+            self._raw += step
+            if rate.clocked and not self._fork_pending:
+                step = self._clock_step(rate.mean_step * 1e9)
+            self._t += step
         assert rate is not None
         self._hist.append(self._t, x)
         bias = self._bias_now()
-        delta = self._gyro_rotation(t_prev, bias, rate.irregular)
+        delta = self._gyro_rotation(t_prev, bias, rate.means)
         last = self._emit_rows(rows, rate)
         if self._fork_pending:
             self._fork_pending = False
             self.holes += 1
             rows.append(FORK)
             self._warm = max(1, math.ceil(self.params["restart_warmup"] / rate.step))
-        rot = self._gyro_rotation(self._t_net, bias, rate.irregular, TIME_EPS_NS)
+        rot = self._gyro_rotation(self._t_net, bias, rate.means, TIME_EPS_NS)
         self._hist.trim(self._t_net - max(rate.box_width() * 1e9, rate.step * 1e9) - 1.0)
         plan.add(last, rot, delta)
+
+    def _clock_step(self, period: float) -> float:
+        """The step (ns) of a clocked stream's sample on the de-jittered timeline: one clock period, plus a
+        small pull toward the stamps (so the timeline follows the stamps' long-term rate and drift but not
+        their delivery jitter)."""
+        pred = self._t + period
+        step = period + CLOCK_GAIN * (self._raw - pred)
+        return min(max(step, 0.5 * period), 1.5 * period)
 
     def _gyro_rotation(self, t0: float, bias: tuple[float, float, float], means: bool, eps: float = 0.0) -> Quat:
         """Rotation by the bias-corrected gyro from ``t0`` (ns) to the newest sample; identity when ``t0``
@@ -308,7 +325,7 @@ class RiannEstimator(AttitudeEstimator):
         T = rate.step
         T_ns = T * 1e9
         w_ns = rate.box_width() * 1e9
-        means = rate.irregular
+        means = rate.means
         hist = self._hist
         fe = self._bias
         while True:
@@ -333,8 +350,9 @@ class RiannEstimator(AttitudeEstimator):
         """End of the run of samples from ``i`` that land exactly on the grid (a clean stream at the
         grid step): those can be planned vectorised. ``i`` itself when none."""
         rate = self._rate
-        if (rate is None or not self._started or rate.irregular or self._warm > 0 or self._h_cand is not None
-                or abs(self._t - self._t_net) > TIME_EPS_NS or abs(rate.median / rate.step - 1.0) > REL_EPS):
+        if (rate is None or not self._started or rate.irregular or rate.clocked or self._warm > 0
+                or self._h_cand is not None or abs(self._t - self._t_net) > TIME_EPS_NS
+                or abs(rate.median / rate.step - 1.0) > REL_EPS):
             return i
         bad = np.abs(dt[i:] / rate.step - 1.0) > REL_EPS
         return i + int(np.argmax(bad)) if bad.any() else len(dt)
@@ -350,7 +368,7 @@ class RiannEstimator(AttitudeEstimator):
         stop: tuple[int, bool] | None = None
         for k, d in enumerate(dt.tolist()):
             switched = rate.push(d)
-            if switched or rate.irregular:
+            if switched or rate.irregular or rate.clocked:
                 stop = (k, switched)
                 break
         n = len(dt) if stop is None else stop[0]
@@ -380,6 +398,7 @@ class RiannEstimator(AttitudeEstimator):
         plan.rot.extend([IDENTITY_T] * n)
         plan.delta.extend(map(tuple, delta.tolist()))
         self._m += n
+        self._raw += float(t_ns[-1]) - self._t  # whole ns: exact in float64, as the per-sample sum
         self._t = float(t_ns[-1])
         self._t_net = self._anchor + self._m * T * 1e9
         hist = self._hist
