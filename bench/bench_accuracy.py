@@ -35,7 +35,8 @@ from riann_ros.cli.evaluate import main as eval_main
 from riann_ros.datasets.broad import broad_files, find_broad_dir
 
 ESTIMATORS = "riann,vqf,madgwick,mahony"
-CONDITIONS = ("none", "jitter:10/20/30ms", "rate:50", "bias:3,3,0", "bias:random:2", "dropout:0.1-0.6s@10s")
+CONDITIONS = ("none", "jitter:10/20/30ms", "latency:0-10ms", "rate:50", "bias:3,3,0", "bias:random:2",
+              "dropout:0.1-0.6s@10s")
 RATES = "25,50,100,200,500,1000"
 DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")
 

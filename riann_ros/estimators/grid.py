@@ -55,6 +55,7 @@ CLOCK_ON = -0.25  # lag-1 autocorrelation of the steps below which the stamps ar
 CLOCK_OFF = -0.15  # ... and above which they are the sample times again
 CLOCK_MIN_SPREAD = 0.02  # (p90 - p10) / median of the steps below which the question does not matter
 CLOCK_WINDOW = 1024  # steps whose mean is the clock period of a clocked stream
+CLOCK_MIN_STEPS = 256  # steps seen before judging: the lag-1 estimate's spread is ~1/sqrt(n) (0.06 here)
 
 Sample = Sequence[float]
 
@@ -93,7 +94,9 @@ class RateTracker:
 
     @property
     def means(self) -> bool:
-        """Read the samples as interval means (else as point samples)."""
+        """Read the samples as interval means (else as point samples); a set model holds regardless."""
+        if self.forced is not None:
+            return self.forced
         return self.irregular and not self.clocked
 
     @property
@@ -166,6 +169,8 @@ class RateTracker:
             self.irregular = False
 
     def _judge_clock(self, spread: float) -> None:
+        if len(self._long) < CLOCK_MIN_STEPS:
+            return
         if spread < CLOCK_MIN_SPREAD:
             self.clocked = False
             return
