@@ -104,6 +104,11 @@ class RateTracker:
         """Mean of the last ``CLOCK_WINDOW`` steps (s): the sample clock's period when ``clocked``."""
         return self._long_sum / len(self._long) if self._long else self.median
 
+    @property
+    def input_step(self) -> float:
+        """The input step the grid is chosen for (s): the clock's period when ``clocked``, else the median."""
+        return self.mean_step if self.clocked else self.median
+
     def lag1(self) -> float:
         """Lag-1 autocorrelation of the last ``CLOCK_WINDOW`` steps. Samples taken at random times (a
         renewal process: each interval drawn on its own) give ~0; samples taken on a regular clock and
@@ -144,7 +149,7 @@ class RateTracker:
         spread = (s[(9 * n) // 10] - s[n // 10]) / self.median
         self._judge_model(spread)
         self._judge_clock(spread)
-        d = self.mean_step if self.clocked else self.median
+        d = self.input_step
         # the current ratio of grid step to input step, kept while it still fits: a rate drifting
         # across a factor boundary (10 ms ± 1 %) must not flip between 2 and 3 rows per sample
         same = d * round(self.step / d) if self.step >= d else d / round(d / self.step)
@@ -187,7 +192,7 @@ class RateTracker:
         would, instead of carrying the kinks of the linear interpolation; blocks (T = k·d), the mean
         over ``T − d`` (the k samples of the block); T = d, the sample itself. Interval means: the
         whole cell when T spans several samples, else the sample covering the grid point."""
-        d = self.mean_step if self.clocked else self.median
+        d = self.input_step
         if self.means:
             return self.step if self.step > d * (1.0 + REL_EPS) else 0.0
         if self.step < d * (1.0 - REL_EPS):
