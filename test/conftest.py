@@ -109,6 +109,21 @@ def wait_for(cond, timeout: float, what: str, period: float = 0.01) -> None:
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
+# How long a match seen on this side waits for the other side to see it too. DDS discovery is two-way: our
+# writer lists the node's reader as matched when *we* have processed its announcement, but the node's reader
+# accepts our samples only once *it* has processed ours, and a loaded machine can lag there by a second.
+# Samples sent in between are lost to a volatile reader (a CI run lost the first of 150 that way).
+MATCH_GRACE_S = 1.0
+
+
+def wait_matched(writers, collectors, what: str, n_subs: int = 1, timeout: float = 40.0) -> None:
+    """Wait until each of our ``writers`` has ``n_subs`` matched readers and each collector a matched writer,
+    then :data:`MATCH_GRACE_S` more for the node side of the same matches."""
+    wait_for(lambda: all(w.get_subscription_count() >= n_subs for w in writers)
+             and all(c.sub.get_publisher_count() > 0 for c in collectors), timeout, what)
+    time.sleep(MATCH_GRACE_S)
+
+
 class RosHarness:
     """The test side of the ROS graph: one rclpy node spun in a background thread."""
 

@@ -10,7 +10,7 @@ import pytest
 from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu
 
-from conftest import BIN, ROOT, wait_for
+from conftest import BIN, ROOT, wait_for, wait_matched
 from helpers_ros import imu_msg
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -54,8 +54,7 @@ def test_installed_riann_node_runs_after_sourcing_setup_bash(workspace, ros, sta
     node = start_node("riann_node", "--params-file", str(params), "-p", "input_qos:=reliable", cmd=cmd)
     pub = ros.publisher(Imu, "imu/data_raw")
     att = ros.collect(QuaternionStamped, "imu/attitude")
-    wait_for(lambda: pub.get_subscription_count() > 0 and att.sub.get_publisher_count() > 0, 30,
-             f"the installed node to connect (log: {node.output()})")
+    wait_matched([pub], [att], f"the installed node to connect (log: {node.output()})")
     for i in range(20):
         pub.publish(imu_msg(1_000_000_000 + i * 5_000_000, (0.0, 0.0, 9.81), (0.0, 0.0, 0.0)))
     wait_for(lambda: len(att.messages) >= 20, 10, "outputs from the installed node")

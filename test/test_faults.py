@@ -21,7 +21,7 @@ import pytest
 from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu
 
-from conftest import ROOT, executable, wait_for
+from conftest import ROOT, executable, wait_for, wait_matched
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
 from riann_ros import bagio
 from riann_ros.datasets.synthetic import generate
@@ -51,8 +51,7 @@ def expected(stamps, acc, gyr, rate: float = 200.0, name: str = "riann", max_dt:
 def connect(ros_h, node, topic: str = "imu/attitude", reliable_in: bool = True):
     pub = ros_h.publisher(Imu, "imu/data_raw", reliable=reliable_in)
     att = ros_h.collect(QuaternionStamped, topic)
-    wait_for(lambda: pub.get_subscription_count() > 0 and att.sub.get_publisher_count() > 0, 20,
-             f"node to connect (log: {node.output()})")
+    wait_matched([pub], [att], f"node to connect (log: {node.output()})")
     return pub, att
 
 
@@ -84,7 +83,7 @@ pub = node.create_publisher(Imu, "imu/data_raw", QoSProfile(depth=10000, history
 end = time.monotonic() + 20
 while pub.get_subscription_count() == 0 and time.monotonic() < end:
     time.sleep(0.01)
-time.sleep(0.3)
+time.sleep(1.0)  # the node's side of the match (conftest.MATCH_GRACE_S)
 for s, a, g in zip(d["stamps"], d["acc"], d["gyr"]):
     m = Imu()
     stamps.set_ns(m.header.stamp, s)
@@ -120,7 +119,7 @@ def settle(att, n_expected: int, timeout: float = 20.0) -> None:
 def test_driver_restarts_node_resumes_and_restarts_where_stamps_say(ros, start_node, tmp_path):
     node = start_node("riann_node", "-p", "input_qos:=reliable", "-p", "nominal_rate:=200.0", "-p", "max_dt:=0.5")
     att = ros.collect(QuaternionStamped, "imu/attitude")
-    wait_for(lambda: att.sub.get_publisher_count() > 0, 20, f"node (log: {node.output()})")
+    wait_matched([], [att], f"node (log: {node.output()})")
     s, a, g = motion(800)
     # driver 1: samples 0..199; driver 2 (new process, after a pause): stamps continue, 200..399;
     # driver 3: restarts its clock 3 s back (> max_dt: restart); driver 4: resumes 0.1 s before
@@ -165,7 +164,7 @@ def test_bag_loop_with_sim_time_second_pass_equals_first(ros, start_node):
                       "-p", "nominal_rate:=100.0")
     pub, att = connect(ros, node)
     clock = ros.publisher(Clock, "/clock", reliable=True, depth=10)
-    wait_for(lambda: clock.get_subscription_count() > 0, 20, "node's /clock subscription")
+    wait_matched([clock], [], "node's /clock subscription")
     msgs = [imu_msg(x, y, z) for x, y, z in zip(stamps, acc, gyr, strict=True)]
     n = len(msgs)
     for p in range(2):  # what `ros2 bag play --loop --clock` does: the clock goes back with every loop
@@ -252,10 +251,7 @@ def test_best_effort_and_reliable_publishers_at_once(ros, start_node):
     pub_rel = ros.publisher(Imu, "imu/data_raw", reliable=True)
     att = ros.collect(QuaternionStamped, "imu/attitude")
     imu_out = ros.collect(Imu, "imu/data")  # keeps the input's frame_id (imu/attitude carries fixed_frame)
-    wait_for(lambda: pub_be.get_subscription_count() > 0 and pub_rel.get_subscription_count() > 0
-             and att.sub.get_publisher_count() > 0 and imu_out.sub.get_publisher_count() > 0, 20,
-             f"both publishers to connect (log: {node.output()})")
-    time.sleep(0.3)
+    wait_matched([pub_be, pub_rel], [att, imu_out], f"both publishers to connect (log: {node.output()})")
     s, a, g = motion(200)
     for k in range(4):  # alternate blocks of 50: best effort, reliable, best effort, reliable
         pub, frame = (pub_be, "driver_be") if k % 2 == 0 else (pub_rel, "driver_rel")

@@ -12,7 +12,7 @@ from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
-from conftest import ROOT, rmse, wait_for
+from conftest import ROOT, rmse, wait_for, wait_matched
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
 from riann_ros.estimators import create
 from riann_ros.nodes.live import call_service
@@ -24,8 +24,7 @@ pytestmark = pytest.mark.ros
 def connect(ros, node, att_topic="imu/attitude", reliable_in=True):
     pub = ros.publisher(Imu, "imu/data_raw", reliable=reliable_in)
     att = ros.collect(QuaternionStamped, att_topic)
-    wait_for(lambda: pub.get_subscription_count() > 0 and att.sub.get_publisher_count() > 0, 20,
-             f"node to connect (log: {node.output()})")
+    wait_matched([pub], [att], f"node to connect (log: {node.output()})")
     return pub, att
 
 
@@ -125,7 +124,7 @@ def test_imu_data_carries_input_with_orientation_and_covariance(ros, start_node)
     node = start_node("riann_node", "-p", "input_qos:=reliable", "-p", "yaw_stddev_deg:=90.0")
     pub, att = connect(ros, node)
     imu_out = ros.collect(Imu, "imu/data")
-    wait_for(lambda: imu_out.sub.get_publisher_count() > 0, 10, "imu/data")
+    wait_matched([], [imu_out], "imu/data")
     stamps, acc, gyr = synthetic(50)
     send_slowly(pub, [imu_msg(s, a, g, frame_id="my_imu") for s, a, g in zip(stamps, acc, gyr, strict=True)])
     wait_for(lambda: len(imu_out.messages) >= 50 and len(att.messages) >= 50, 10, "outputs")

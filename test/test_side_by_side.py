@@ -12,7 +12,7 @@ import pytest
 from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu
 
-from conftest import ROOT, rmse, wait_for
+from conftest import ROOT, rmse, wait_matched
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
 from riann_ros.estimators import create
 from riann_ros.evaluation import REALISTIC, scenario_recording
@@ -50,9 +50,8 @@ def start_four(ros, start_node, *ros_args: str, per_node: dict[str, tuple[str, .
     pub = ros.publisher(Imu, "imu/data_raw")
     att = {name: ros.collect(QuaternionStamped, TOPICS[name][0]) for name in TOPICS}
     imu = {name: ros.collect(Imu, TOPICS[name][1]) for name in TOPICS} if imu_topics else {}
-    wait_for(lambda: pub.get_subscription_count() >= 4
-             and all(c.sub.get_publisher_count() > 0 for c in [*att.values(), *imu.values()]), 40,
-             "the four nodes to connect (logs: " + " | ".join(n.output() for n in nodes.values()) + ")")
+    wait_matched([pub], [*att.values(), *imu.values()],
+                 "the four nodes to connect (logs: " + " | ".join(n.output() for n in nodes.values()) + ")", n_subs=4)
     return nodes, pub, att, imu
 
 
