@@ -7,7 +7,8 @@ Usage::
 Runs ``riann-bag-eval`` twice on the BROAD trial files (``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``):
 
 1. scenarios ``as-recorded`` (the recording as it is, from its first sample) and ``realistic`` (from the motion
-   onset) under the conditions ``none``, ``jitter:10/20/30ms``, ``rate:50`` (stamps exactly 20 ms apart),
+   onset) under the conditions ``none``, ``jitter:10/20/30ms``, ``latency:0-10ms``, ``fifo:20ms``, ``rate:50``
+   (stamps exactly 20 ms apart),
    ``bias:3,3,0``, ``bias:random:2`` and ``dropout:0.1-0.6s@10s``;
 2. the as-recorded scenario FFT-resampled to 25, 50, 100, 200, 500 and 1000 Hz (``--rates``).
 
@@ -35,8 +36,8 @@ from riann_ros.cli.evaluate import main as eval_main
 from riann_ros.datasets.broad import broad_files, find_broad_dir
 
 ESTIMATORS = "riann,vqf,madgwick,mahony"
-CONDITIONS = ("none", "jitter:10/20/30ms", "latency:0-10ms", "rate:50", "bias:3,3,0", "bias:random:2",
-              "dropout:0.1-0.6s@10s")
+CONDITIONS = ("none", "jitter:10/20/30ms", "latency:0-10ms", "fifo:20ms", "rate:50", "bias:3,3,0",
+              "bias:random:2", "dropout:0.1-0.6s@10s")
 RATES = "25,50,100,200,500,1000"
 DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")
 

@@ -41,8 +41,9 @@ def test_parse_conditions_and_errors():
     assert pt.parse_perturbation("bias:-1,0.5,0").text() == "bias:-1,0.5,0"
     assert pt.parse_perturbation("dropout:0.1-0.6s@10s") == pt.Dropout(0.1, 0.6, 10.0)
     assert pt.parse_perturbation("latency:0-20ms") == pt.Latency(0.0, 0.02)
+    assert pt.parse_perturbation("fifo:20ms") == pt.Fifo(0.02) and pt.Fifo(0.02).text() == "fifo:20ms"
     for bad in ("jitter:0ms", "jitter:30-10ms", "rate:-5", "bias:1,2", "dropout:0.6-0.1s@10s", "noise:1",
-                "latency:20-10ms", "latency:5ms"):
+                "latency:20-10ms", "latency:5ms", "fifo:0ms", "fifo:1-2ms"):
         with pytest.raises(ValueError, match="bad perturbation"):
             pt.parse_perturbation(bad)
 
@@ -88,7 +89,7 @@ def test_rate_gives_exact_ns_stamps():
 
 
 @pytest.mark.parametrize("text", ["jitter:10/20/30ms", "jitter:3-7ms", "rate:77", "dropout:0.1-0.6s@2s",
-                                  "bias:random:2", "latency:0-20ms"])
+                                  "bias:random:2", "latency:0-20ms", "fifo:23ms"])
 def test_chunked_equals_whole(text):
     rec = linear(n=5000)
     whole, info_w = run(pt.parse_perturbation(text), rec, seed=5)
@@ -112,6 +113,20 @@ def test_latency_moves_only_the_stamps_later_and_keeps_them_in_order():
     for name in ("acc", "gyr", "quat_ref", "score_mask"):
         np.testing.assert_array_equal(getattr(out, name), getattr(rec, name))
     assert info == {"samples": len(rec)}
+
+
+def test_fifo_stamps_each_sample_at_the_first_read_at_or_after_it():
+    rec = linear(n=4000, rate=200.0)
+    out, info = run(pt.parse_perturbation("fifo:23ms"), rec)
+    delay = (out.stamps_ns - rec.stamps_ns) * 1e-9
+    assert delay.min() >= 0.0 and delay.max() < 0.023 + 6 * 1e-5  # at most one read period (+ 10 µs per message)
+    steps = np.diff(out.stamps_ns)
+    assert steps.min() == 10_000  # messages of one read 10 µs apart
+    big = steps[steps > 1_000_000]  # one step per read: 23 ms apart (less the messages' 10 µs spacing)
+    assert np.all(np.abs(big - 23_000_000) <= 60_000)
+    assert info == {"samples": len(rec), "reads": len(big) + 1}
+    for name in ("acc", "gyr", "quat_ref", "score_mask"):
+        np.testing.assert_array_equal(getattr(out, name), getattr(rec, name))
 
 
 def test_bias_constant_and_random_per_seed():

@@ -111,15 +111,23 @@ def _receive_stamps(n: int, period: float, max_delay: float, seed: int = 0) -> n
     return np.maximum.accumulate(t - k) + k
 
 
+def _fifo_stamps(n: int, period: float, batch: int) -> np.ndarray:
+    """Stamps (s) of samples taken every ``period`` and read out of a FIFO ``batch`` at a time, each batch
+    stamped on arrival (when its last sample is taken), its messages 10 µs apart."""
+    i = np.arange(n)
+    last = np.minimum((i // batch + 1) * batch - 1, n - 1)
+    return period * (last + 1) + 1e-5 * (i - last)
+
+
 def test_rate_tracker_tells_a_jittered_clock_from_random_sample_times():
-    """A regular sample clock stamped after random delivery delays: neighbouring steps anti-correlated
-    (lag-1 ~ -0.5), the clock's period is the mean step. Random sample times (independent intervals):
-    lag-1 ~ 0, interval means."""
+    """A regular sample clock stamped after random delivery delays: the time spanned by 16 steps varies
+    only by the two end delays (variance ratio ~1/16), the clock's period is the mean step. Random sample
+    times (independent intervals): variance ratio ~1, interval means."""
     clock = RateTracker(0.0035)
     for d in np.diff(_receive_stamps(3000, 0.0035, 0.010)):
         clock.push(float(d))
     assert clock.clocked and not clock.means
-    assert clock.lag1() < -0.3
+    assert clock.variance_ratio() < 0.1
     assert clock.mean_step == pytest.approx(0.0035, rel=0.01)
     assert clock.step == pytest.approx(0.0035, rel=0.01)  # not the median step (~3 ms) nor blocks
     renewal = RateTracker(0.020)
@@ -127,7 +135,13 @@ def test_rate_tracker_tells_a_jittered_clock_from_random_sample_times():
     for d in rng.choice([0.010, 0.020, 0.030], 3000):
         renewal.push(float(d))
     assert not renewal.clocked and renewal.means
-    assert abs(renewal.lag1()) < 0.1
+    assert 0.7 < renewal.variance_ratio() < 1.3
+    # a FIFO read 12 at a time: 11 steps of 10 µs, one of 12 periods (median and p10-p90 all 10 µs)
+    fifo = RateTracker(0.0035)
+    for d in np.diff(_fifo_stamps(3000, 0.0035, 12)):
+        fifo.push(float(d))
+    assert fifo.clocked and fifo.variance_ratio() < 0.25
+    assert fifo.mean_step == pytest.approx(0.0035, rel=0.01) and fifo.step == pytest.approx(0.0035, rel=0.01)
 
 
 # -- causal resampling ------------------------------------------------------------------------------
@@ -136,6 +150,17 @@ def _history(means: bool = False) -> SignalHistory:
     for t, v in [(0.0, 0.0), (10.0, 10.0), (30.0, 50.0)]:
         h.append(t, (v, 0.0, 0.0, 2 * v, 0.0, 0.0))
     return h
+
+
+def test_an_empty_window_gives_the_value_not_a_division_by_zero():
+    """A grid cell whose width rounds away next to a ns stamp (a clock period equal to the grid step up to
+    1e-17 s: a FIFO read 4 at a time crashed the estimator this way) is read as the value at its end."""
+    h = _history()
+    assert h.mean(1e18, 1e18, means=False) == h.value(1e18, means=False)
+    assert h.mean(20.0, 20.0, means=False, lo=3, hi=6) == pytest.approx([60.0, 0.0, 0.0])
+    r = RateTracker(0.0035)
+    r.step = 0.0035 * (1.0 + 1e-15)  # the step chosen for a clock period that has since moved by rounding
+    assert r.box_width() == 0.0
 
 
 def test_signal_history_interpolates_point_samples_and_holds_interval_means():
@@ -204,12 +229,15 @@ def test_a_clean_stream_at_the_grid_step_is_fed_straight_in():
         (4, (0.0005, 0.003, 0.010, 0.020, 0.030, 0.15)),  # jitter, with holes
         (1, (0.001, 0.0015, 0.005, 0.01, 0.04, 0.1)),  # mixed rates: blocks, up-sampling, switches
         (2, ()),  # a 200 Hz clock stamped on arrival (0-10 ms late), with two holes
+        (3, "fifo"),  # a 285.7 Hz FIFO read 4 at a time (the grid step equals the clock period up to rounding)
     ],
 )
 def test_jittery_streaming_equals_batch_and_gives_unit_quaternions(seed, steps):
     rng = np.random.default_rng(seed)
     n = 1500 if not steps else 600
-    if steps:
+    if steps == "fifo":
+        dt = np.diff(_fifo_stamps(n + 1, 0.0035, 4))
+    elif steps:
         dt = rng.choice(steps, size=n)
     else:
         dt = np.diff(_receive_stamps(n + 1, 0.005, 0.010, seed))
@@ -426,12 +454,16 @@ def test_input_model_matches_what_a_sample_is():
 
 
 # -- stamps on arrival ------------------------------------------------------------------------------
-def test_a_clock_stamped_on_arrival_is_integrated_on_its_own_period():
-    """Samples taken every 5 ms but stamped 0-10 ms late: the stamp steps (0-15 ms) are not the sample
-    intervals. Fed as they are, each gyro sample is weighted by a wrong interval; the de-jittered
-    timeline gives nearly the error of the true stamps."""
+@pytest.mark.parametrize("delivery", ["delays", "fifo"])
+def test_a_clock_stamped_on_arrival_is_integrated_on_its_own_period(delivery):
+    """Samples taken every 5 ms but stamped on arrival, 0-10 ms late or read out of a FIFO 12 at a time: the
+    stamp steps are not the sample intervals. Fed as they are, each gyro sample is weighted by a wrong
+    interval; the de-jittered timeline gives nearly the error of the true stamps."""
     acc, gyr, dt, truth = _swing(200.0, means=False)
-    stamps = _receive_stamps(len(dt), 0.005, 0.010, seed=3)
+    if delivery == "delays":
+        stamps = _receive_stamps(len(dt), 0.005, 0.010, seed=3)
+    else:
+        stamps = _fifo_stamps(len(dt), 0.005, 12)
     dt_rx = np.diff(np.concatenate([[0.0], stamps]))
 
     clean = _roll_rmse(RiannEstimator(gyro_bias_estimation=False), acc, gyr, dt, truth)

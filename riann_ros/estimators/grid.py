@@ -18,13 +18,16 @@ uniform time grid ``tau_m = anchor + m·T`` and never sees the input stamps dire
   *interval means* (each sample the average since the previous one: what a polled, integrating or
   decimating sensor delivers); a regular stream as *point samples* (hysteresis down to
   ``IRREGULAR_OFF``).
-* It also tells *receive-time stamps* from *sample times*: a sensor sampling on its own regular clock,
-  stamped on arrival after a random delivery delay (USB, Bluetooth, a busy host), gives steps whose
-  neighbours are anti-correlated (a late stamp makes one step long and the next short: lag-1
-  autocorrelation −0.5 for independent delays), whereas samples taken at random times (independent
-  intervals) give 0. Below ``CLOCK_ON`` the stream is ``clocked``: its samples are regular point
-  samples, its period the mean of the last ``CLOCK_WINDOW`` steps, and the estimator integrates them on
-  a de-jittered timeline instead of the stamps.
+* It also tells *receive-time stamps* from *sample times*. A sensor sampling on its own regular clock and
+  stamped on arrival (after a random delivery delay over USB, Bluetooth or a busy host, or read out of
+  its FIFO a batch at a time) gives stamps that stay within a bounded distance of a regular timeline:
+  the time spanned by ``VR_SPAN`` consecutive steps varies only by the delays at its two ends, however
+  long the span. Samples taken at random times (independent intervals) accumulate their variations
+  like a random walk. The *variance ratio* Var(sum of L steps) / (L · Var(step)) is therefore about
+  1 for random sample times and 2·Var(delay) / (L · 2·Var(delay)) = 1/L for a clock with independent
+  delays (~0 for FIFO batches of up to L samples). Below ``CLOCK_ON`` the stream is ``clocked``: its
+  samples are regular point samples, its period the mean of the last ``CLOCK_WINDOW`` steps, and the
+  estimator integrates them on a de-jittered timeline instead of the stamps.
 * :class:`SignalHistory` holds the recent samples as a signal over time — piecewise linear through
   point samples, or piecewise constant over ``(t_{k-1}, t_k]`` for interval means — and gives its
   value or mean over a window. A grid point is computed as soon as a sample at or after it has
@@ -51,11 +54,14 @@ HYSTERESIS = 0.1  # relative change of the grid step needed (for window // 2 sam
 MIN_STEPS = 16  # steps seen before the tracker may switch or judge regularity
 IRREGULAR_ON = 0.3  # (p90 - p10) / median of the steps above which samples are interval means
 IRREGULAR_OFF = 0.15  # ... and below which they are point samples again
-CLOCK_ON = -0.25  # lag-1 autocorrelation of the steps below which the stamps are a regular clock + delivery jitter
-CLOCK_OFF = -0.15  # ... and above which they are the sample times again
-CLOCK_MIN_SPREAD = 0.02  # (p90 - p10) / median of the steps below which the question does not matter
+VR_SPAN = 16  # steps summed in the variance ratio (FIFO batches up to this size are recognised as a clock)
+CLOCK_ON = 0.3  # variance ratio below which the stamps are a regular clock + delivery delays (clock: 1/16,
+# FIFO batches of up to 16: at most ~0.2)
+CLOCK_OFF = 0.5  # ... and above which they are the sample times again (random sample times: 1)
+CLOCK_MIN_SPREAD = 0.02  # std / mean of the steps below which the question does not matter (a FIFO batch of 16
+# has a p90 - p10 of 0: the spread is measured by the standard deviation)
 CLOCK_WINDOW = 1024  # steps whose mean is the clock period of a clocked stream
-CLOCK_MIN_STEPS = 256  # steps seen before judging: the lag-1 estimate's spread is ~1/sqrt(n) (0.06 here)
+CLOCK_MIN_STEPS = 256  # steps seen before judging: ~24 independent spans, P(ratio < 0.3 | random times) ~ 3e-4
 
 Sample = Sequence[float]
 
@@ -84,13 +90,17 @@ class RateTracker:
         self.median = first_dt
         self.step = choose_step(first_dt)
         self.irregular = bool(means)
-        self.clocked = False  # stamps = a regular sample clock + random delivery delays (see lag1)
+        self.clocked = False  # stamps = a regular sample clock + delivery delays (see variance_ratio)
         self.switches = 0
         self._pending = 0
         self._long: deque[float] = deque(maxlen=CLOCK_WINDOW)
-        self._long_sum = 0.0  # running sums over _long: steps, squares, products of neighbours
+        self._long_sum = 0.0  # running sums over _long: steps and their squares
         self._long_sq = 0.0
-        self._long_lag = 0.0
+        self._ends: deque[float] = deque(maxlen=VR_SPAN + 1)  # running time at the last VR_SPAN + 1 samples
+        self._time = 0.0
+        self._spans: deque[float] = deque(maxlen=CLOCK_WINDOW - VR_SPAN)  # time spanned by VR_SPAN steps
+        self._span_sum = 0.0
+        self._span_sq = 0.0
 
     @property
     def means(self) -> bool:
@@ -109,19 +119,20 @@ class RateTracker:
         """The input step the grid is chosen for (s): the clock's period when ``clocked``, else the median."""
         return self.mean_step if self.clocked else self.median
 
-    def lag1(self) -> float:
-        """Lag-1 autocorrelation of the last ``CLOCK_WINDOW`` steps. Samples taken at random times (a
-        renewal process: each interval drawn on its own) give ~0; samples taken on a regular clock and
-        stamped after a random delivery delay give ~-0.5 (a late stamp makes one step long and the next
-        short)."""
-        n = len(self._long)
-        if n < 3:
-            return 0.0
+    def variance_ratio(self) -> float:
+        """Var(time spanned by ``VR_SPAN`` steps) / (``VR_SPAN`` · Var(step)) over the last ``CLOCK_WINDOW``
+        steps: ~1 for samples taken at random times (a renewal process: each interval drawn on its own),
+        ~1/``VR_SPAN`` for a regular clock stamped after random delivery delays, ~0 for FIFO batches
+        (see the module docstring). 1 while it cannot be told (too few steps, steps all equal)."""
+        n, k = len(self._long), len(self._spans)
+        if n < 3 or k < 2:
+            return 1.0
         m = self._long_sum / n
         var = self._long_sq / n - m * m
         if var <= 1e-12 * m * m:
-            return 0.0
-        return (self._long_lag / (n - 1) - m * m) / var
+            return 1.0
+        ms = self._span_sum / k
+        return max(self._span_sq / k - ms * ms, 0.0) / (VR_SPAN * var)
 
     def _push_long(self, dt: float) -> None:
         long = self._long
@@ -129,12 +140,24 @@ class RateTracker:
             old = long.popleft()
             self._long_sum -= old
             self._long_sq -= old * old
-            self._long_lag -= old * long[0]
-        if long:
-            self._long_lag += long[-1] * dt
         long.append(dt)
         self._long_sum += dt
         self._long_sq += dt * dt
+        ends = self._ends
+        if not ends:
+            ends.append(self._time)
+        self._time += dt
+        ends.append(self._time)
+        if len(ends) == VR_SPAN + 1:
+            spans = self._spans
+            if len(spans) == spans.maxlen:
+                old = spans.popleft()
+                self._span_sum -= old
+                self._span_sq -= old * old
+            span = ends[-1] - ends[0]
+            spans.append(span)
+            self._span_sum += span
+            self._span_sq += span * span
 
     def push(self, dt: float) -> bool:
         """Take one input step (s); return True when the grid step switched."""
@@ -148,7 +171,7 @@ class RateTracker:
             return False
         spread = (s[(9 * n) // 10] - s[n // 10]) / self.median
         self._judge_model(spread)
-        self._judge_clock(spread)
+        self._judge_clock()
         d = self.input_step
         # the current ratio of grid step to input step, kept while it still fits: a rate drifting
         # across a factor boundary (10 ms ± 1 %) must not flip between 2 and 3 rows per sample
@@ -173,13 +196,15 @@ class RateTracker:
         elif spread < IRREGULAR_OFF:
             self.irregular = False
 
-    def _judge_clock(self, spread: float) -> None:
-        if len(self._long) < CLOCK_MIN_STEPS:
+    def _judge_clock(self) -> None:
+        n = len(self._long)
+        if n < CLOCK_MIN_STEPS:
             return
-        if spread < CLOCK_MIN_SPREAD:
+        m = self._long_sum / n
+        if self._long_sq / n - m * m < (CLOCK_MIN_SPREAD * m) ** 2:
             self.clocked = False
             return
-        r = self.lag1()
+        r = self.variance_ratio()
         if r < CLOCK_ON:
             self.clocked = True
         elif r > CLOCK_OFF:
@@ -197,7 +222,7 @@ class RateTracker:
             return self.step if self.step > d * (1.0 + REL_EPS) else 0.0
         if self.step < d * (1.0 - REL_EPS):
             return self.step
-        return self.step - d if self.step > d else 0.0
+        return self.step - d if self.step > d * (1.0 + REL_EPS) else 0.0
 
 
 class SignalHistory:
@@ -243,7 +268,10 @@ class SignalHistory:
         return [a + s * (b - a) for a, b in zip(x[k - 1], x[k], strict=True)]
 
     def mean(self, a: float, b: float, means: bool, lo: int = 0, hi: int = 6) -> list[float]:
-        """Mean of channels ``lo:hi`` over ``(a, b]`` (``b > a``)."""
+        """Mean of channels ``lo:hi`` over ``(a, b]``; the value at ``b`` when the window is empty (``b <= a``,
+        e.g. a width that rounds away next to a stamp in ns)."""
+        if not b > a:
+            return self.value(b, means)[lo:hi]
         t, x = self.t, self.x
         acc = [0.0] * (hi - lo)
         if a < t[0]:  # before the first sample: its value held

@@ -17,6 +17,10 @@ sequence, after the scenario and before the estimators:
     measurement time plus a delivery delay drawn uniformly from the range (stamps kept in order, at
     least 1 µs apart) — what a driver that stamps on arrival over USB, Bluetooth or a busy host
     gives. The samples underneath stay regular; only the stamps jitter.
+``fifo:20ms``
+    FIFO read-out: the host reads the sensor's FIFO every 20 ms (from the sequence's first stamp) and
+    stamps each message on arrival, at the read time, 10 µs apart in order — a driver that polls a
+    FIFO. Samples and reference unchanged; the stamps come in bursts.
 ``bias:3,3,0`` / ``bias:random:2``
     A constant gyroscope bias (°/s per axis) from the first sample of the sequence, or one drawn per
     sequence from N(0, (2 °/s)²) per axis.
@@ -54,6 +58,8 @@ DEFINITIONS = {
     "rate": "rate:HZ: a regular stream at HZ made like jitter (interval means), causal, chunk by chunk",
     "latency": "latency:LO-HIms: each stamp = the measurement time + a delay drawn uniformly from LO-HI (kept in "
     "order); samples and reference unchanged",
+    "fifo": "fifo:Pms: the FIFO read every P ms from the first stamp; each message stamped at its read time, "
+    "10 us apart in order; samples and reference unchanged",
     "bias": "bias:X,Y,Z (deg/s) or bias:random:SIGMA (deg/s per axis, drawn per sequence): added to the gyro "
     "from the first sample of the sequence",
     "dropout": "dropout:LO-HIs@Ts: holes of LO-HI s (uniform) about every T s (exponential spacing), starting at "
@@ -395,6 +401,53 @@ class _Latency(Transform):
         return {"samples": self.samples}
 
 
+@dataclass(frozen=True)
+class Fifo(Perturbation):
+    """Stamps of a FIFO read every ``period`` s: each sample stamped at the first read at or after it."""
+
+    period: float = 0.02
+    kind = "fifo"
+
+    def text(self) -> str:
+        return f"fifo:{self.period * 1e3:g}ms"
+
+    def start(self, rng: np.random.Generator) -> Transform:
+        return _Fifo(self)
+
+
+class _Fifo(Transform):
+    MIN_STEP_NS = 10_000
+
+    def __init__(self, p: Fifo) -> None:
+        self.period_ns = round(p.period * 1e9)
+        self.t0: int | None = None  # the first read (the sequence's first stamp)
+        self.last: int | None = None  # the previous output stamp (ns)
+        self.last_read: int | None = None
+        self.samples = 0
+        self.reads = 0
+
+    def __call__(self, rec: Recording) -> Recording:
+        n = len(rec)
+        if n == 0:
+            return rec
+        if self.t0 is None:
+            self.t0 = int(rec.stamps_ns[0])
+        p = self.period_ns
+        read = self.t0 + -((self.t0 - rec.stamps_ns) // p) * p  # ceil to the read grid
+        self.reads += len(np.unique(read)) - int(read[0] == self.last_read)  # a read split across chunks: once
+        self.last_read = int(read[-1])
+        # in order, at least MIN_STEP_NS apart: t'_k = max(read_k, t'_{k-1} + step)
+        k = np.arange(n, dtype=np.int64) * self.MIN_STEP_NS
+        start = np.iinfo(np.int64).min // 2 if self.last is None else self.last + self.MIN_STEP_NS
+        out = np.maximum.accumulate(np.maximum(read - k, start)) + k
+        self.last = int(out[-1])
+        self.samples += n
+        return _with(rec, stamps_ns=out)
+
+    def info(self) -> dict[str, Any]:
+        return {"samples": self.samples, "reads": self.reads}
+
+
 # ---------------------------------------------------------------------------------------------------
 # dropouts
 # ---------------------------------------------------------------------------------------------------
@@ -514,6 +567,14 @@ def _latency(args: str) -> Perturbation | None:
     return Latency(lo, hi) if 0 <= lo <= hi else None
 
 
+def _fifo(args: str) -> Perturbation | None:
+    m = re.fullmatch(rf"({_NUM})(ms|s)", args)
+    if not m:
+        return None
+    period = _seconds(m.group(1), m.group(2))
+    return Fifo(period) if period > 0 else None
+
+
 def _dropout(args: str) -> Perturbation | None:
     m = re.fullmatch(rf"({_NUM})-({_NUM})s@({_NUM})s", args)
     if not m:
@@ -533,8 +594,8 @@ def _magnetic(args: str) -> Perturbation | None:
     return Magnetic(strength=strength, t0=t0, t1=t1) if t0 < t1 else None
 
 
-_PARSERS = {"jitter": _jitter, "rate": _rate, "latency": _latency, "bias": _bias, "dropout": _dropout,
-            "magnetic": _magnetic}
+_PARSERS = {"jitter": _jitter, "rate": _rate, "latency": _latency, "fifo": _fifo, "bias": _bias,
+            "dropout": _dropout, "magnetic": _magnetic}
 
 
 def parse_perturbation(text: str) -> Perturbation:
@@ -545,7 +606,7 @@ def parse_perturbation(text: str) -> Perturbation:
     if p is None:
         raise ValueError(
             f"bad perturbation {text!r}; accepted: jitter:10/20/30ms, jitter:8-32ms, rate:50, latency:0-20ms, "
-            "bias:3,3,0, bias:random:2 (deg/s), dropout:0.1-0.6s@10s, magnetic:offset:20,0,-10 (µT), "
+            "fifo:20ms, bias:3,3,0, bias:random:2 (deg/s), dropout:0.1-0.6s@10s, magnetic:offset:20,0,-10 (µT), "
             "magnetic:disturb:40@10-20s"
         )
     return p
