@@ -152,6 +152,32 @@ def _history(means: bool = False) -> SignalHistory:
     return h
 
 
+def test_curved_point_samples_integrate_a_parabola_exactly_and_only_between_even_steps():
+    """Up-sampled point samples are read as the parabola through the newest three: the mean of x = t²
+    over a cell is exact (the line through two samples overestimates it); uneven steps (a hole, a rate
+    change) fall back to the line, and so does the first interval (no third sample yet)."""
+    h = SignalHistory()
+    for t in (0.0, 10.0, 20.0, 30.0):
+        h.append(t, (t * t, 0.0, 0.0, -t * t, 0.0, 0.0))
+    exact = (28.0**3 - 22.0**3) / 3.0 / 6.0  # mean of t² over (22, 28]
+    curved = h.mean(22.0, 28.0, means=False, curved=True)
+    assert curved[0] == pytest.approx(exact, rel=1e-12) and curved[3] == pytest.approx(-exact, rel=1e-12)
+    line = h.mean(22.0, 28.0, means=False)
+    assert line[0] == pytest.approx(400.0 + 0.5 * 500.0, rel=1e-12) and line[0] > exact + 5.0
+    exact2 = (25.0**3 - 15.0**3) / 3.0 / 10.0  # a window over two intervals, both curved
+    assert h.mean(15.0, 25.0, means=False, curved=True)[0] == pytest.approx(exact2, rel=1e-12)
+    assert h.mean(2.0, 8.0, means=False, curved=True)[0] == h.mean(2.0, 8.0, means=False)[0]  # first interval
+    uneven = SignalHistory()
+    for t in (0.0, 5.0, 20.0):  # steps 5 and 15: more than 2x apart
+        uneven.append(t, (t * t, 0.0, 0.0, 0.0, 0.0, 0.0))
+    assert uneven.mean(8.0, 12.0, means=False, curved=True) == uneven.mean(8.0, 12.0, means=False)
+    h.trim(15.0)
+    assert list(h.t) == [0.0, 10.0, 20.0, 30.0]  # the interval around 15, (10, 20], needs the sample at 0
+    h.trim(25.0)
+    assert list(h.t) == [10.0, 20.0, 30.0]
+    assert h.mean(22.0, 28.0, means=False, curved=True)[0] == pytest.approx(exact, rel=1e-12)
+
+
 def test_an_empty_window_gives_the_value_not_a_division_by_zero():
     """A grid cell whose width rounds away next to a ns stamp (a clock period equal to the grid step up to
     1e-17 s: a FIFO read 4 at a time crashed the estimator this way) is read as the value at its end."""

@@ -30,7 +30,9 @@ uniform time grid ``tau_m = anchor + m·T`` and never sees the input stamps dire
   estimator integrates them on a de-jittered timeline instead of the stamps.
 * :class:`SignalHistory` holds the recent samples as a signal over time — piecewise linear through
   point samples, or piecewise constant over ``(t_{k-1}, t_k]`` for interval means — and gives its
-  value or mean over a window. A grid point is computed as soon as a sample at or after it has
+  value or mean over a window. Up-sampled point samples are read *curved*: over ``(t_{k-1}, t_k]``
+  the parabola through samples k-2, k-1 and k (still causal), because at 25–50 Hz a line between
+  samples cuts the corners of fast rotations. A grid point is computed as soon as a sample at or after it has
   arrived, from samples up to that stamp only: the resampling is causal.
 
 Everything here is plain Python floats: it runs once per input sample, where numpy's per-call
@@ -62,6 +64,8 @@ CLOCK_MIN_SPREAD = 0.02  # std / mean of the steps below which the question does
 # has a p90 - p10 of 0: the spread is measured by the standard deviation)
 CLOCK_WINDOW = 1024  # steps whose mean is the clock period of a clocked stream
 CLOCK_MIN_STEPS = 256  # steps seen before judging: ~24 independent spans, P(ratio < 0.3 | random times) ~ 3e-4
+
+CURVE_MIN_RATIO = 0.5  # the curved signal model needs neighbouring sample steps within 2x of each other
 
 Sample = Sequence[float]
 
@@ -248,9 +252,10 @@ class SignalHistory:
         self.x.clear()
 
     def trim(self, before: float) -> None:
-        """Drop samples no window starting at ``before`` or later can need (keeps one before it)."""
+        """Drop samples no window starting at ``before`` or later can need (keeps two before it: the
+        curved model of the interval around ``before`` reads the sample before that interval)."""
         t = self.t
-        while len(t) > 2 and t[1] <= before:
+        while len(t) > 3 and t[2] <= before:
             t.popleft()
             self.x.popleft()
 
@@ -267,7 +272,7 @@ class SignalHistory:
         s = (tau - t0) / (t1 - t0)
         return [a + s * (b - a) for a, b in zip(x[k - 1], x[k], strict=True)]
 
-    def mean(self, a: float, b: float, means: bool, lo: int = 0, hi: int = 6) -> list[float]:
+    def mean(self, a: float, b: float, means: bool, lo: int = 0, hi: int = 6, curved: bool = False) -> list[float]:
         """Mean of channels ``lo:hi`` over ``(a, b]``; the value at ``b`` when the window is empty (``b <= a``,
         e.g. a width that rounds away next to a stamp in ns)."""
         if not b > a:
@@ -279,14 +284,17 @@ class SignalHistory:
         for k in range(len(t) - 1, 0, -1):
             if t[k] <= a:
                 break
-            self._add_interval(acc, k, a, b, means, lo)
+            self._add_interval(acc, k, a, b, means, lo, curved)
         if b > t[-1]:  # after the last sample: its value held
             _add(acc, x[-1], lo, b - max(a, t[-1]))
         w = b - a
         return [v / w for v in acc]
 
-    def _add_interval(self, acc: list[float], k: int, a: float, b: float, means: bool, lo: int) -> None:
-        """Add the integral over ``(a, b] ∩ (t_{k-1}, t_k]`` of the signal model to ``acc``."""
+    def _add_interval(self, acc: list[float], k: int, a: float, b: float, means: bool, lo: int,
+                      curved: bool = False) -> None:
+        """Add the integral over ``(a, b] ∩ (t_{k-1}, t_k]`` of the signal model to ``acc``. ``curved``: point
+        samples as the parabola through samples k-2, k-1, k (causal: k is the newest sample the interval
+        needs) instead of the line through k-1, k, where the three are about evenly spaced."""
         t0, t1 = self.t[k - 1], self.t[k]
         s0, s1 = max(a, t0), min(b, t1)
         if s1 <= s0:
@@ -296,9 +304,21 @@ class SignalHistory:
         if means:
             _add(acc, x1, lo, span)
             return
-        m = 0.5 * ((s0 - t0) + (s1 - t0)) / (t1 - t0)
+        h1 = t1 - t0
+        m = 0.5 * ((s0 - t0) + (s1 - t0)) / h1
         for j in range(len(acc)):
             acc[j] += (x0[lo + j] + m * (x1[lo + j] - x0[lo + j])) * span
+        if not curved or k < 2:
+            return
+        h0 = t0 - self.t[k - 2]
+        if not CURVE_MIN_RATIO * h1 <= h0 <= h1 / CURVE_MIN_RATIO:
+            return  # across a hole or a rate change: no curvature to read
+        # p(u) = line + c·u·(u − h1), u = t − t_{k-1}, c fixed by p(−h0) = x_{k-2}
+        u0, u1 = s0 - t0, s1 - t0
+        w = ((u1**3 - u0**3) / 3.0 - 0.5 * h1 * (u1**2 - u0**2)) / (h0 * (h0 + h1))
+        xm = self.x[k - 2]
+        for j in range(len(acc)):
+            acc[j] += w * (xm[lo + j] - x0[lo + j] + (x1[lo + j] - x0[lo + j]) * h0 / h1)
 
 
 def _add(acc: list[float], x: Sample, lo: int, span: float) -> None:

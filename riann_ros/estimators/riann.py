@@ -14,10 +14,12 @@ stages around it, each causal, with one output per input sample at that sample's
 2. **Constant-rate grid** (:mod:`~riann_ros.estimators.grid`): the network runs at a constant step
    ``T`` chosen from a running median of the input steps with hysteresis (2–5.5 ms: the samples go
    straight in; slower inputs are up-sampled to ≤ 5.5 ms, faster ones averaged in blocks of ~5 ms);
-   each grid value is resampled causally from the samples up to that stamp (linear interpolation of
-   point samples; irregular streams are read as interval means, ``input_model``). Stamps that are a
-   regular sample clock plus random delivery delays (a driver stamping on arrival: neighbouring steps
-   anti-correlated) are replaced by a de-jittered timeline at the clock's mean period.
+   each grid value is resampled causally from the samples up to that stamp (point samples: up-sampled
+   along the parabola through the newest three, which keeps the curvature of fast motion at 25–100 Hz;
+   irregular streams are read as interval means, ``input_model``). Stamps that are a regular sample
+   clock plus delivery delays (a driver stamping on arrival, or reading a FIFO in bursts: the time
+   spanned by 16 steps does not grow like a random walk) are replaced by a de-jittered timeline at the
+   clock's mean period.
 3. **Carry-forward**: a sample's attitude is the latest network output (at a grid point at or before
    the sample) rotated on by the bias-corrected gyro integral up to the sample's stamp. No latency
    is added; the network's own correction lags by less than one grid step ``T``.
@@ -326,13 +328,14 @@ class RiannEstimator(AttitudeEstimator):
         T_ns = T * 1e9
         w_ns = rate.box_width() * 1e9
         means = rate.means
+        curved = not means and T < rate.input_step * (1.0 - REL_EPS)  # up-sampled point samples: their curvature
         hist = self._hist
         fe = self._bias
         while True:
             tau = self._anchor + (self._m + 1) * T_ns
             if tau > self._t + TIME_EPS_NS:
                 break
-            v = hist.mean(tau - w_ns, tau, means) if w_ns > 0.0 else hist.value(tau, means)
+            v = hist.mean(tau - w_ns, tau, means, curved=curved) if w_ns > 0.0 else hist.value(tau, means)
             bx, by, bz = self._bias_now()
             rows.append((v[0], v[1], v[2], v[3] - bx, v[4] - by, v[5] - bz, T))
             if fe is not None:
