@@ -171,6 +171,10 @@ def test_curved_point_samples_integrate_a_parabola_exactly_and_only_between_even
     for t in (0.0, 5.0, 20.0):  # steps 5 and 15: more than 2x apart
         uneven.append(t, (t * t, 0.0, 0.0, 0.0, 0.0, 0.0))
     assert uneven.mean(8.0, 12.0, means=False, curved=True) == uneven.mean(8.0, 12.0, means=False)
+    double = SignalHistory()  # steps exactly 2x apart (jitter:10/20/30ms): the line, whatever the rounding
+    for t in (0.0, 10.0, 30.0):
+        double.append(t, (t * t, 0.0, 0.0, 0.0, 0.0, 0.0))
+    assert double.mean(12.0, 18.0, means=False, curved=True) == double.mean(12.0, 18.0, means=False)
     h.trim(15.0)
     assert list(h.t) == [0.0, 10.0, 20.0, 30.0]  # the interval around 15, (10, 20], needs the sample at 0
     h.trim(25.0)

@@ -65,7 +65,7 @@ CLOCK_MIN_SPREAD = 0.02  # std / mean of the steps below which the question does
 CLOCK_WINDOW = 1024  # steps whose mean is the clock period of a clocked stream
 CLOCK_MIN_STEPS = 256  # steps seen before judging: ~24 independent spans, P(ratio < 0.3 | random times) ~ 3e-4
 
-CURVE_MIN_RATIO = 0.5  # the curved signal model needs neighbouring sample steps within 2x of each other
+CURVE_MIN_RATIO = 0.5  # the curved signal model needs neighbouring sample steps less than 2x apart
 
 Sample = Sequence[float]
 
@@ -311,7 +311,8 @@ class SignalHistory:
         if not curved or k < 2:
             return
         h0 = t0 - self.t[k - 2]
-        if not CURVE_MIN_RATIO * h1 <= h0 <= h1 / CURVE_MIN_RATIO:
+        lo_ratio = CURVE_MIN_RATIO * (1.0 + REL_EPS)  # a margin: steps exactly 2x apart (10/20 ms) must not
+        if not lo_ratio * h1 < h0 < h1 / lo_ratio:  # flip with the rounding of a stamp sum (chunked = whole)
             return  # across a hole or a rate change: no curvature to read
         # p(u) = line + c·u·(u − h1), u = t − t_{k-1}, c fixed by p(−h0) = x_{k-2}
         u0, u1 = s0 - t0, s1 - t0
