@@ -131,12 +131,17 @@ class RateTracker:
         n, k = len(self._long), len(self._spans)
         if n < 3 or k < 2:
             return 1.0
-        m = self._long_sum / n
-        var = self._long_sq / n - m * m
+        m, var = self._step_moments()
         if var <= 1e-12 * m * m:
             return 1.0
         ms = self._span_sum / k
         return max(self._span_sq / k - ms * ms, 0.0) / (VR_SPAN * var)
+
+    def _step_moments(self) -> tuple[float, float]:
+        """Mean and variance of the last ``CLOCK_WINDOW`` steps (from the running sums; not empty)."""
+        n = len(self._long)
+        m = self._long_sum / n
+        return m, self._long_sq / n - m * m
 
     def _push_long(self, dt: float) -> None:
         long = self._long
@@ -201,11 +206,10 @@ class RateTracker:
             self.irregular = False
 
     def _judge_clock(self) -> None:
-        n = len(self._long)
-        if n < CLOCK_MIN_STEPS:
+        if len(self._long) < CLOCK_MIN_STEPS:
             return
-        m = self._long_sum / n
-        if self._long_sq / n - m * m < (CLOCK_MIN_SPREAD * m) ** 2:
+        m, var = self._step_moments()
+        if var < (CLOCK_MIN_SPREAD * m) ** 2:
             self.clocked = False
             return
         r = self.variance_ratio()

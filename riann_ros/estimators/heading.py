@@ -70,6 +70,10 @@ def _rotate(q: Quat, v: tuple[float, float, float]) -> tuple[float, float, float
     return (vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx))
 
 
+def _cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
 def _rotvec(q: Quat) -> tuple[float, float, float]:
     """Rotation vector of a unit quaternion (small angles fine)."""
     w, x, y, z = q
@@ -143,9 +147,9 @@ class LatencyEstimator:
         rc = (self.rho[0], -self.rho[1], -self.rho[2], -self.rho[3])
         p = _rotate(rc, m0)
         w0, w1 = self.w0, self.w
-        c0 = _rotate(rc, (w0[1] * m0[2] - w0[2] * m0[1], w0[2] * m0[0] - w0[0] * m0[2], w0[0] * m0[1] - w0[1] * m0[0]))
-        g = (w1[1] * p[2] - w1[2] * p[1] - c0[0], w1[2] * p[0] - w1[0] * p[2] - c0[1],
-             w1[0] * p[1] - w1[1] * p[0] - c0[2])
+        c0 = _rotate(rc, _cross(w0, m0))
+        c1 = _cross(w1, p)
+        g = (c1[0] - c0[0], c1[1] - c0[1], c1[2] - c0[2])
         n2 = m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2]
         if n2 <= 0.0:
             return

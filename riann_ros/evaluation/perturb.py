@@ -357,8 +357,15 @@ def _interval_means(buf: Recording, edges: NDArray[np.int64]) -> Recording:
 
 
 # ---------------------------------------------------------------------------------------------------
-# latency: receive-time stamps
+# latency and fifo: receive-time stamps
 # ---------------------------------------------------------------------------------------------------
+def _in_order(want: NDArray[np.int64], last: int | None, step_ns: int) -> NDArray[np.int64]:
+    """Stamps ``want`` kept in order and at least ``step_ns`` apart, after ``last`` (the previous chunk's
+    final stamp, None at the start): ``t'_k = max(want_k, t'_{k-1} + step)``."""
+    k = np.arange(len(want), dtype=np.int64) * step_ns
+    start = np.iinfo(np.int64).min // 2 if last is None else last + step_ns
+    return np.maximum.accumulate(np.maximum(want - k, start)) + k
+
 @dataclass(frozen=True)
 class Latency(Perturbation):
     """Stamps later than the measurement by a delay drawn uniformly from ``lo``–``hi`` s, kept in order."""
@@ -388,11 +395,7 @@ class _Latency(Transform):
         if n == 0:
             return rec
         delay = np.round(self.rng.uniform(self.p.lo, self.p.hi, n) * 1e9).astype(np.int64)
-        want = rec.stamps_ns + delay
-        # in order, at least MIN_STEP_NS apart: t'_k = max(want_k, t'_{k-1} + step)
-        k = np.arange(n, dtype=np.int64) * self.MIN_STEP_NS
-        start = np.iinfo(np.int64).min // 2 if self.last is None else self.last + self.MIN_STEP_NS
-        out = np.maximum.accumulate(np.maximum(want - k, start)) + k
+        out = _in_order(rec.stamps_ns + delay, self.last, self.MIN_STEP_NS)
         self.last = int(out[-1])
         self.samples += n
         return _with(rec, stamps_ns=out)
@@ -436,10 +439,7 @@ class _Fifo(Transform):
         read = self.t0 + -((self.t0 - rec.stamps_ns) // p) * p  # ceil to the read grid
         self.reads += len(np.unique(read)) - int(read[0] == self.last_read)  # a read split across chunks: once
         self.last_read = int(read[-1])
-        # in order, at least MIN_STEP_NS apart: t'_k = max(read_k, t'_{k-1} + step)
-        k = np.arange(n, dtype=np.int64) * self.MIN_STEP_NS
-        start = np.iinfo(np.int64).min // 2 if self.last is None else self.last + self.MIN_STEP_NS
-        out = np.maximum.accumulate(np.maximum(read - k, start)) + k
+        out = _in_order(read, self.last, self.MIN_STEP_NS)
         self.last = int(out[-1])
         self.samples += n
         return _with(rec, stamps_ns=out)
