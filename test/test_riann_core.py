@@ -387,6 +387,58 @@ def test_after_a_hole_a_fresh_network_takes_over_and_converges_faster():
     assert err[late].mean() < 0.5 * err0[late].mean(), (err[late].mean(), err0[late].mean())
 
 
+def _shaken_with_a_hole(rate: float = 200.0, hole: float = 0.3) -> tuple[np.ndarray, ...]:
+    """A sensor held at 20° roll and shaken along world x (6 m/s², 1.5 Hz) without turning, with a hole of
+    ``hole`` s at 10 s: the accelerometer alone is tens of degrees off gravity, the gyro knows the attitude."""
+    d = 1.0 / rate
+    t = np.arange(int(14 * rate)) * d
+    q_true = quat.from_rotvec([math.radians(20.0), 0.0, 0.0])
+    f_world = np.stack([6.0 * np.sin(2 * np.pi * 1.5 * t), np.zeros_like(t), np.full_like(t, G)], 1)
+    acc = quat.rotate(quat.conjugate(q_true), f_world)
+    keep = ~((t > 10.0) & (t < 10.0 + hole))
+    t = t[keep]
+    dt = np.diff(np.concatenate([[t[0] - d], t]))
+    return acc[keep], np.zeros((len(t), 3)), dt, t - (10.0 + hole), q_true
+
+
+def test_after_a_hole_in_motion_the_output_hands_over_from_the_bridge_to_the_fresh_network():
+    """The fresh network restarts from the accelerometer, which shaking tilts by tens of degrees; the gyro
+    bridge is right. With the hand-over the output stays near the bridge until the network has settled;
+    without it (hole_blend=false) the fresh network's error is published at once."""
+    acc, gyr, dt, after, q_true = _shaken_with_a_hole()
+    errs = {}
+    for blend in (True, False):
+        est = RiannEstimator(hole_blend=blend)
+        q = est.update_batch(acc, gyr, dt)
+        assert est.holes == 1
+        errs[blend] = np.degrees(quat.inclination_error(q_true, q))
+    first = (after >= 0.0) & (after < 1.0)
+    assert errs[True][first].max() < 5.0, errs[True][first].max()
+    assert errs[False][first].max() > 10.0, errs[False][first].max()
+    settled = after > 2.0  # both are the network's own output again
+    assert np.abs(errs[True][settled] - errs[False][settled]).max() < 0.5
+
+
+def test_after_a_hole_at_rest_the_fresh_network_takes_over_within_a_tenth_of_a_second():
+    """The sensor was tilted 40° during the hole and is at rest on both sides: the bridge (no rotation) is
+    wrong, and the fresh network, right at rest, takes over at once."""
+    _, t, err = _hole_stream(0.1)
+    assert err[0] > 30.0  # the bridged sample that ends the hole
+    assert err[(t >= 0.1) & (t < 3.0)].max() < 1.0
+
+
+def test_the_hand_over_is_the_same_per_sample_and_in_chunks():
+    acc, gyr, dt, after, _ = _shaken_with_a_hole(rate=100.0)
+    gyr = gyr + np.random.default_rng(5).normal(0.0, 0.5, gyr.shape)  # turning too: a real blend on both paths
+    est = RiannEstimator()
+    qs = np.array([est.update(acc[i], gyr[i], dt[i]) for i in range(len(dt))])
+    est.reset()
+    cut = int(np.argmax(after >= 0.3))  # split the batch in the middle of the hand-over
+    qb = np.vstack([est.update_batch(acc[:cut], gyr[:cut], dt[:cut]),
+                    est.update_batch(acc[cut:], gyr[cut:], dt[cut:])])
+    assert np.abs(qs - qb).max() < 1e-5
+
+
 def test_a_hole_is_counted_only_when_longer_than_restart_gap_and_four_input_steps():
     est = RiannEstimator()
     n = 400

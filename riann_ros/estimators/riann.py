@@ -66,6 +66,7 @@ from riann_ros.estimators.grid import DT_MIN, REL_EPS, RateTracker, SignalHistor
 from riann_ros.estimators.heading import MagHeading
 from riann_ros.estimators.heading import from_rotvec as _rotvec
 from riann_ros.estimators.heading import qmul as _qmul
+from riann_ros.estimators.holes import HoleBlend, bridge_sigma
 
 HIDDEN_SHAPE = (2, 1, 1, 200)
 BATCH_CHUNK = 200_000  # network rows per ONNX Runtime call in batch mode
@@ -122,6 +123,7 @@ class _Plan:
         self.rot: list[Quat] = []
         self.delta: list[Quat] = []
         self.holes: list[int] = []  # samples that end a hole (the heading re-acquires the field there)
+        self.bridges: list[tuple[float, float]] = []  # per hole: the bridge's uncertainty (deg), the faster rate
 
     def add(self, idx: int, rot: Quat, delta: Quat) -> None:
         self.idx.append(idx)
@@ -152,6 +154,10 @@ class RiannEstimator(AttitudeEstimator):
         ParamSpec("restart_gap", 0.1,
                   "s; after a stamp step longer than this (and than 4 input steps) a fresh network takes "
                   "over after restart_warmup. 0 = never.", min=0.0, max=3600.0),
+        ParamSpec("hole_blend", True,
+                  "After a hole, start from the gyro bridge and hand the inclination over to the fresh network "
+                  "as its error falls below the bridge's (weights from the gyro across the hole and the motion "
+                  "since). Off: the fresh network's output at once.", runtime=True),
         ParamSpec("restart_warmup", RESTART_WARMUP,
                   "s; how long the fresh network runs beside the old one after a hole before it takes over.",
                   min=0.0, max=60.0),
@@ -215,6 +221,7 @@ class RiannEstimator(AttitudeEstimator):
         self._t_net = 0.0  # ns of the last grid point run
         self._started = False
         self._fork_pending = False
+        self._blend: HoleBlend | None = None  # the hand-over from the bridge after a hole
 
     def diagnostics(self) -> dict[str, str]:
         out: dict[str, str] = {}
@@ -280,6 +287,8 @@ class RiannEstimator(AttitudeEstimator):
             if gap > 0.0 and dt > gap and dt > HOLE_STEPS * rate.median:
                 self._fork_pending = True
                 plan.holes.append(len(plan.idx))
+                w0, w1 = self._hist.x[-1][3:6], x[3:6]
+                plan.bridges.append((bridge_sigma(w0, w1, dt), max(math.hypot(*w0), math.hypot(*w1))))
             elif rate.push(dt) if switched is None else switched:
                 self._anchor = self._t_net
                 self._m = 0
@@ -437,7 +446,7 @@ class RiannEstimator(AttitudeEstimator):
         return out
 
     # -- output: carry-forward and heading ------------------------------------------------------------
-    def _compose(self, net: Array, plan: _Plan, dt: Array, mag: Array | None) -> Array:
+    def _compose(self, net: Array, plan: _Plan, dt: Array, acc: Array, mag: Array | None) -> Array:
         """Per-sample outputs from the network rows and the plan (vectorised heading stage up to the first
         field, then per sample with the magnetic correction)."""
         n = len(plan.idx)
@@ -457,6 +466,7 @@ class RiannEstimator(AttitudeEstimator):
         if has.any():
             self._q_net = tuple(base[np.flatnonzero(has)[-1]].tolist())
         qc = quat.normalize(quat.multiply(base, np.asarray(plan.rot)))
+        self._blend_rows(qc, plan, dt, acc)
         prev = np.vstack([np.asarray(self._qc_prev or qc[0])[None, :], qc[:-1]])
         e = quat.multiply(quat.multiply(prev, np.asarray(plan.delta)), quat.conjugate(qc))
         tw = np.remainder(2.0 * np.arctan2(e[:, 3], e[:, 0]) + np.pi, 2.0 * np.pi) - np.pi
@@ -474,6 +484,33 @@ class RiannEstimator(AttitudeEstimator):
         rz = np.column_stack([np.cos(0.5 * psi), np.zeros(n), np.zeros(n), np.sin(0.5 * psi)])
         q = quat.normalize(quat.multiply(rz, qc))
         return np.where(q[:, :1] < 0.0, -q, q)  # sign convention: w >= 0
+
+    def _blend_one(self, qc: Quat, delta: Quat, dt: float, acc: tuple[float, float, float],
+                   bridge: tuple[float, float] | None) -> Quat:
+        """The network attitude ``qc`` of one sample after the hand-over from the bridge (:mod:`.holes`);
+        ``bridge``: the sample ends a hole (uncertainty of its bridge, the faster rate at its ends)."""
+        if bridge is not None and self.params["hole_blend"]:
+            self._blend = HoleBlend(bridge[0], qc, bridge[1], acc)
+            return qc
+        if self._blend is None:
+            return qc
+        q, going = self._blend.step(qc, delta, dt, acc)
+        if not going:
+            self._blend = None
+        return q
+
+    def _blend_rows(self, qc: Array, plan: _Plan, dt: Array, acc: Array) -> None:
+        """:meth:`_blend_one` over the rows of a batch, in place (only where a hand-over runs)."""
+        starts = dict(zip(plan.holes, plan.bridges, strict=True))
+        i = 0 if self._blend is not None else min(starts, default=len(qc))
+        while i < len(qc):
+            b = starts.get(i)
+            if b is None and self._blend is None:
+                i = min((h for h in starts if h > i), default=len(qc))
+                continue
+            q = self._blend_one(tuple(qc[i].tolist()), plan.delta[i], float(dt[i]), tuple(acc[i].tolist()), b)
+            qc[i] = q
+            i += 1
 
     def _first_heading_row(self, mag: Array | None, n: int) -> int:
         """The first row that runs the magnetic heading stage: 0 once a field was seen, else the first row with
@@ -503,12 +540,14 @@ class RiannEstimator(AttitudeEstimator):
             out[i] = psi
         return out
 
-    def _compose_one(self, q_net: Quat, rot: Quat, delta: Quat, dt: float,
-                     mag: tuple[float, float, float] | None) -> Array:
+    def _compose_one(self, q_net: Quat, rot: Quat, delta: Quat, dt: float, acc: tuple[float, float, float],
+                     mag: tuple[float, float, float] | None, bridge: tuple[float, float] | None) -> Array:
         """:meth:`_compose` for one sample in plain floats (the node's hot path)."""
         qc = _qmul(q_net, rot) if rot is not IDENTITY_T else q_net
         n = math.sqrt(sum(v * v for v in qc))
         qc = (qc[0] / n, qc[1] / n, qc[2] / n, qc[3] / n)
+        if bridge is not None or self._blend is not None:
+            qc = self._blend_one(qc, delta, dt, acc, bridge)
         if self._qc_prev is None:
             self._psi = -2.0 * math.atan2(qc[3], qc[0])
         else:
@@ -550,7 +589,9 @@ class RiannEstimator(AttitudeEstimator):
             m = (m0, m1, m2) if math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2) else None
         if plan.holes:
             self._heading.reacquire()
-        return self._compose_one(self._q_net, plan.rot[0], plan.delta[0], _step_dt(float(dt)), m)
+        bridge = plan.bridges[0] if plan.bridges else None
+        return self._compose_one(self._q_net, plan.rot[0], plan.delta[0], _step_dt(float(dt)), (x[0], x[1], x[2]), m,
+                                 bridge)
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
         acc = np.asarray(acc, dtype=float).reshape(-1, 3)
@@ -577,7 +618,7 @@ class RiannEstimator(AttitudeEstimator):
             i += 1
         net = self._run_rows(plan.rows) if plan.rows else np.empty((0, 4))
         m = None if mag is None else np.asarray(mag, dtype=float).reshape(n, 3)
-        return self._compose(net, plan, np.array([_step_dt(v) for v in dts]), m)
+        return self._compose(net, plan, np.array([_step_dt(v) for v in dts]), acc, m)
 
 
 def _step_dt(dt: float) -> float:
