@@ -10,7 +10,7 @@ import pytest
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators.bias import GyroBiasFrontEnd
-from riann_ros.estimators.grid import RateTracker, SignalHistory, choose_step
+from riann_ros.estimators.grid import RateTracker, SampleModelTest, SignalHistory, choose_step
 from riann_ros.estimators.riann import RiannEstimator
 from riann_ros.evaluation.scoring import roll_pitch_deg
 
@@ -59,10 +59,26 @@ def test_rate_tracker_switches_only_after_half_a_window_of_the_new_rate():
         if r.push(0.004):  # 250 Hz from now on
             switched_at = k
             break
-    # the median flips after 32 new steps, then 32 more are needed to switch
-    assert switched_at is not None and 50 <= switched_at <= 70, switched_at
+    # while the 64 steps mix both rates they look jittery, and the grid holds (irregular sample times sit on no
+    # grid: any step in the trained range serves them); once all 64 are new, 32 more are needed to switch
+    assert switched_at is not None and 80 <= switched_at <= 100, switched_at
     assert r.step == pytest.approx(0.004)
     assert r.switches == 1
+
+
+@pytest.mark.parametrize(("lo", "hi"), [(0.005, 0.015), (0.002, 0.008), (0.008, 0.032)])
+def test_rate_tracker_holds_the_grid_for_jittery_sample_times(lo, hi):
+    """Uniformly jittered steps around 10, 5 and 20 ms: the running median wanders across the 11 ms (2 or 3
+    rows per sample), 5.5 ms (straight in or 2 rows) and 22 ms (4 or 5 rows) boundaries; a grid that followed
+    it would change the network's dt dozens of times (42 switches in 150 s at 5-15 ms, 0.49 -> 1.65 deg on
+    BROAD 02)."""
+    r = RateTracker(0.010)
+    rng = np.random.default_rng(0)
+    for _ in range(20000):
+        r.push(float(rng.uniform(lo, hi)))
+    assert r.jittery
+    assert r.switches == 0
+    assert 0.002 <= r.step <= 0.0055
 
 
 def test_rate_tracker_ignores_dropouts_small_drift_and_does_not_flap():
@@ -533,6 +549,62 @@ def test_input_model_matches_what_a_sample_is():
     est = RiannEstimator(input_model="means")
     est.update_batch(*_swing(50.0, True, seconds=1.0)[:3])
     assert est.diagnostics()["input model"] == "interval means (set)"
+
+
+def _jittered_swing(means: bool, seconds: float = 30.0, seed: int = 0) -> tuple[np.ndarray, ...]:
+    """The 1 Hz, 60° roll swing sampled at random times 10, 20 or 30 ms apart: point samples at the stamps,
+    or interval means over the preceding interval (gyro exact, accelerometer averaged on a fine grid)."""
+    a, w = math.radians(60.0), 2 * math.pi * 1.0
+    dt = np.random.default_rng(seed).choice([0.010, 0.020, 0.030], size=int(seconds / 0.020))
+    t = np.cumsum(dt)
+
+    def roll(tt: np.ndarray) -> np.ndarray:
+        return a * np.sin(w * tt)
+
+    if means:
+        gx = (roll(t) - roll(t - dt)) / dt
+        fine = t[:, None] - dt[:, None] * (np.arange(64) + 0.5)[None, :] / 64
+        acc = np.stack([np.zeros_like(t), (G * np.sin(roll(fine))).mean(1), (G * np.cos(roll(fine))).mean(1)], 1)
+    else:
+        gx = a * w * np.cos(w * t)
+        acc = np.stack([np.zeros_like(t), G * np.sin(roll(t)), G * np.cos(roll(t))], 1)
+    return acc, np.stack([gx, np.zeros_like(t), np.zeros_like(t)], 1), dt, roll(t)
+
+
+@pytest.mark.parametrize("data_means", [False, True])
+def test_the_gyro_tells_point_samples_from_interval_means_when_the_stamps_jitter(data_means):
+    """Irregular stamps: only the right reading puts each gyro sample where the smooth signal passes through it.
+    The test decides within the first second of motion, and the default then does as well as the right
+    setting, and far better than the wrong one."""
+    acc, gyr, dt, truth = _jittered_swing(data_means)
+    tracker = RateTracker(float(dt[0]))
+    t = 0.0
+    decided = None
+    for k in range(len(dt)):
+        tracker.push(float(dt[k]))
+        t += float(dt[k])
+        tracker.see(t, gyr[k])
+        if decided is None and tracker.model_test.points is not None:
+            decided = t
+    assert tracker.model_test.points is (not data_means)
+    assert tracker.means is data_means
+    assert decided is not None and decided < 2.0, decided  # 16 steps to look jittery, 32 moving samples
+    right = "means" if data_means else "points"
+    wrong = "points" if data_means else "means"
+    errs = {m: _roll_rmse(RiannEstimator(input_model=m, gyro_bias_estimation=False), acc, gyr, dt, truth)
+            for m in ("auto", right, wrong)}
+    assert errs["auto"] < 1.1 * errs[right] + 0.05, errs
+    assert errs["auto"] < 0.7 * errs[wrong], errs
+
+
+def test_at_rest_the_model_test_decides_nothing():
+    test = SampleModelTest()
+    rng = np.random.default_rng(3)
+    t = 0.0
+    for _ in range(5000):
+        t += float(rng.choice([0.010, 0.020, 0.030]))
+        test.push(t, tuple(rng.normal(0.0, 0.01, 3)), True)  # gyro noise only
+    assert test.points is None
 
 
 # -- stamps on arrival ------------------------------------------------------------------------------

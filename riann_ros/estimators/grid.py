@@ -50,6 +50,7 @@ DT_MAX = 0.020  # s, 50 Hz: slowest
 STEP_UP = 0.005  # s: slower inputs are up-sampled to a grid step of at most this (200 Hz)
 STEP_FAST = 0.005  # s: inputs faster than 500 Hz are averaged in blocks of about this
 STEP_SLACK = 0.1  # relative: the up-sampled grid step may exceed STEP_UP by this much (clock drift)
+STEP_MAX = STEP_UP * (1.0 + STEP_SLACK) * (1.0 + 1e-6)  # s: the largest grid step choose_step gives
 REL_EPS = 1e-6  # relative slack: a 20 ms step from ns stamps is 0.020000000000000004 s
 RATE_WINDOW = 64  # input steps in the running median
 HYSTERESIS = 0.1  # relative change of the grid step needed (for window // 2 samples) to switch
@@ -64,6 +65,13 @@ CLOCK_MIN_SPREAD = 0.02  # std / mean of the steps below which the question does
 # has a p90 - p10 of 0: the spread is measured by the standard deviation)
 CLOCK_WINDOW = 1024  # steps whose mean is the clock period of a clocked stream
 CLOCK_MIN_STEPS = 256  # steps seen before judging: ~24 independent spans, P(ratio < 0.3 | random times) ~ 3e-4
+
+MODEL_MEMORY = 256  # moving samples: memory of the point-samples-or-interval-means test
+MODEL_MIN_RATE = 0.3  # rad/s: only samples taken while the sensor turns at least this fast count (at rest the
+# gyro is noise, which both readings fit alike)
+MODEL_MIN_SAMPLES = 32  # moving samples before the test decides
+MODEL_POINTS_ON = 1.1  # misfit ratio (read as means / read as points) above which the samples are point samples
+MODEL_MEANS_ON = 0.9  # ... and below which they are interval means again
 
 CURVE_MIN_RATIO = 0.5  # the curved signal model needs neighbouring sample steps less than 2x apart
 
@@ -82,6 +90,69 @@ def choose_step(d: float, step_up: float = STEP_UP, step_fast: float = STEP_FAST
     return d / math.ceil(d / limit - REL_EPS)
 
 
+class SampleModelTest:
+    """Tells point samples from interval means in an *irregular* stream, from the gyro alone.
+
+    A point sample is the signal at its stamp ``t_k``; an interval mean is the signal's mean over
+    ``(t_{k-1}, t_k]``, i.e. (to second order) its value at the interval's centre ``t_k − d_k/2``. With
+    regular stamps the two readings differ by a constant shift that nothing on the IMU alone can see; with
+    irregular stamps the shift changes from sample to sample with the interval, so only the right reading
+    puts the samples at the times where a smooth signal passes through them. The test interpolates each
+    gyro sample from its two neighbours, once at the stamps and once at the interval centres, and keeps
+    the squared misfits of both readings (exponential memory of ``MODEL_MEMORY`` samples), counting only
+    samples taken while the sensor turns (``MODEL_MIN_RATE``): there the wrong reading adds the angular
+    acceleration times the misplacement to every misfit. ``points`` becomes True when the misfit read as
+    means exceeds that read as points by ``MODEL_POINTS_ON``, False when it is below ``MODEL_MEANS_ON``
+    times it, and stays None until ``MODEL_MIN_SAMPLES`` moving samples have been seen.
+    """
+
+    def __init__(self) -> None:
+        self.points: bool | None = None
+        self._t: deque[float] = deque(maxlen=4)  # the newest stamps (one more than samples: the centres)
+        self._w: deque[Sample] = deque(maxlen=3)  # the newest gyro samples
+        self._fit_points = 0.0
+        self._fit_means = 0.0
+        self._n = 0
+
+    def clear_window(self) -> None:
+        """Forget the newest samples (a restart, a hole: no interpolation across it); the evidence stays."""
+        self._t.clear()
+        self._w.clear()
+
+    def push(self, t: float, w: Sample, judge: bool) -> None:
+        """Take a sample at stamp ``t`` with gyro ``w``; with ``judge`` add the misfits of the previous one."""
+        self._t.append(t)
+        self._w.append(w)
+        if not judge or len(self._t) < 4:
+            return
+        w0, w1, w2 = self._w
+        if w1[0] * w1[0] + w1[1] * w1[1] + w1[2] * w1[2] < MODEL_MIN_RATE * MODEL_MIN_RATE:
+            return
+        tp = self._t
+        c0, c1, c2 = ((tp[k] + tp[k + 1]) * 0.5 for k in range(3))  # interval centres
+        fp = _misfit(tp[1], tp[2], tp[3], w0, w1, w2)
+        fm = _misfit(c0, c1, c2, w0, w1, w2)
+        a = 1.0 / MODEL_MEMORY
+        self._fit_points += a * (fp - self._fit_points)
+        self._fit_means += a * (fm - self._fit_means)
+        self._n += 1
+        if self._n < MODEL_MIN_SAMPLES or self._fit_points <= 0.0:
+            return
+        ratio = self._fit_means / self._fit_points
+        if ratio > MODEL_POINTS_ON:
+            self.points = True
+        elif ratio < MODEL_MEANS_ON:
+            self.points = False
+
+
+def _misfit(t0: float, t1: float, t2: float, w0: Sample, w1: Sample, w2: Sample) -> float:
+    """Squared distance of ``w1`` from the line through ``(t0, w0)`` and ``(t2, w2)`` at ``t1``."""
+    if not t2 > t0:
+        return 0.0
+    f = (t1 - t0) / (t2 - t0)
+    return sum((w1[i] - w0[i] - f * (w2[i] - w0[i])) ** 2 for i in range(3))
+
+
 class RateTracker:
     """Running-median input step, grid step with hysteresis, and the signal model (see module doc)."""
 
@@ -94,7 +165,9 @@ class RateTracker:
         self.median = first_dt
         self.step = choose_step(first_dt)
         self.irregular = bool(means)
+        self.jittery = False  # the steps spread widely (irregular sample times), whatever the set signal model
         self.clocked = False  # stamps = a regular sample clock + delivery delays (see variance_ratio)
+        self.model_test = SampleModelTest()  # point samples or interval means, for irregular streams
         self.switches = 0
         self._pending = 0
         self._long: deque[float] = deque(maxlen=CLOCK_WINDOW)
@@ -111,7 +184,7 @@ class RateTracker:
         """Read the samples as interval means (else as point samples); a set model holds regardless."""
         if self.forced is not None:
             return self.forced
-        return self.irregular and not self.clocked
+        return self.irregular and not self.clocked and not self.model_test.points
 
     @property
     def mean_step(self) -> float:
@@ -182,6 +255,12 @@ class RateTracker:
         self._judge_model(spread)
         self._judge_clock()
         d = self.input_step
+        if self.jittery and not self.clocked and DT_MIN * (1.0 - REL_EPS) <= self.step <= STEP_MAX:
+            # irregular sample times never sit on any grid: every step inside the trained range serves, and
+            # a switch only changes the network's dt mid-stream (a median of 64 jittered steps wanders:
+            # 5-15 ms steps flipped a ratio-keeping grid between 5 and 3.7 ms 42 times in 150 s)
+            self._pending = 0
+            return False
         # the current ratio of grid step to input step, kept while it still fits: a rate drifting
         # across a factor boundary (10 ms ± 1 %) must not flip between 2 and 3 rows per sample
         same = d * round(self.step / d) if self.step >= d else d / round(d / self.step)
@@ -197,13 +276,19 @@ class RateTracker:
         self.switches += 1
         return True
 
+    def see(self, t: float, gyr: Sample, hole: bool = False) -> None:
+        """Show the signal-model test the sample just taken (stamp ``t``, gyro ``gyr``); it judges only while
+        the stream is irregular sample times and the model is not set. ``hole``: the sample ends a hole."""
+        if hole:
+            self.model_test.clear_window()
+        self.model_test.push(t, gyr, self.forced is None and self.irregular and not self.clocked)
+
     def _judge_model(self, spread: float) -> None:
-        if self.forced is not None:
-            self.irregular = self.forced
-        elif spread > IRREGULAR_ON:
-            self.irregular = True
+        if spread > IRREGULAR_ON:
+            self.jittery = True
         elif spread < IRREGULAR_OFF:
-            self.irregular = False
+            self.jittery = False
+        self.irregular = self.jittery if self.forced is None else self.forced
 
     def _judge_clock(self) -> None:
         if len(self._long) < CLOCK_MIN_STEPS:

@@ -222,6 +222,8 @@ class RiannEstimator(AttitudeEstimator):
         self._started = False
         self._fork_pending = False
         self._blend: HoleBlend | None = None  # the hand-over from the bridge after a hole
+        if self._rate is not None:
+            self._rate.model_test.clear_window()  # the stamps start again from 0
 
     def diagnostics(self) -> dict[str, str]:
         out: dict[str, str] = {}
@@ -300,6 +302,7 @@ class RiannEstimator(AttitudeEstimator):
             self._t += step
         assert rate is not None
         self._hist.append(self._t, x)
+        rate.see(self._t, x[3:6], hole=self._fork_pending)
         bias = self._bias_now()
         delta = self._gyro_rotation(t_prev, bias, rate.means)
         last = self._emit_rows(rows, rate)
@@ -414,8 +417,13 @@ class RiannEstimator(AttitudeEstimator):
         self._t = float(t_ns[-1])
         self._t_net = self._anchor + self._m * T * 1e9
         hist = self._hist
-        for k in range(max(0, n - 3), n):
-            hist.append(float(t_ns[k]), (*acc[k].tolist(), *gyr[k].tolist()))
+        test = self._rate.model_test if self._rate is not None else None
+        for k in range(max(0, n - 4), n):
+            x = (*acc[k].tolist(), *gyr[k].tolist())
+            if k >= n - 3:
+                hist.append(float(t_ns[k]), x)
+            if test is not None:
+                test.push(float(t_ns[k]), x[3:6], False)  # regular steps: nothing to judge, only the window
         hist.trim(self._t_net - T * 1e9 - 1.0)
 
     # -- network --------------------------------------------------------------------------------
