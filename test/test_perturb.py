@@ -37,13 +37,15 @@ def test_parse_conditions_and_errors():
     assert pt.parse_condition("none").label == "none" and pt.parse_condition("").parts == ()
     assert pt.parse_perturbation("jitter:8-32ms") == pt.Jitter(lo=0.008, hi=0.032)
     assert pt.parse_perturbation("rate:50").text() == "rate:50"
+    assert pt.parse_perturbation("jitter:5-15ms:points") == pt.Jitter(lo=0.005, hi=0.015, points=True)
+    assert pt.parse_perturbation("rate:50:points").text() == "rate:50:points"
     assert pt.parse_perturbation("bias:random:2") == pt.Bias(sigma=2.0)
     assert pt.parse_perturbation("bias:-1,0.5,0").text() == "bias:-1,0.5,0"
     assert pt.parse_perturbation("dropout:0.1-0.6s@10s") == pt.Dropout(0.1, 0.6, 10.0)
     assert pt.parse_perturbation("latency:0-20ms") == pt.Latency(0.0, 0.02)
     assert pt.parse_perturbation("fifo:20ms") == pt.Fifo(0.02) and pt.Fifo(0.02).text() == "fifo:20ms"
     for bad in ("jitter:0ms", "jitter:30-10ms", "rate:-5", "bias:1,2", "dropout:0.6-0.1s@10s", "noise:1",
-                "latency:20-10ms", "latency:5ms", "fifo:0ms", "fifo:1-2ms"):
+                "latency:20-10ms", "latency:5ms", "fifo:0ms", "fifo:1-2ms", "bias:1,2,3:points", "jitter:5ms:means"):
         with pytest.raises(ValueError, match="bad perturbation"):
             pt.parse_perturbation(bad)
 
@@ -67,6 +69,17 @@ def test_jitter_intervals_from_the_set_and_exact_interval_means():
     assert (out.score_mask == ((t % 10.0) > 2.0)).mean() > 0.99
 
 
+def test_jitter_points_are_the_signal_at_the_new_stamps():
+    rec = linear()
+    means, _ = run(pt.parse_perturbation("jitter:10/20/30ms"), rec)
+    out, _ = run(pt.parse_perturbation("jitter:10/20/30ms:points"), rec)
+    np.testing.assert_array_equal(out.stamps_ns, means.stamps_ns)  # the same stamps for the same seed
+    t = (out.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    np.testing.assert_allclose(out.acc[:, 0], 1.0 + 2.0 * t, atol=1e-9)
+    np.testing.assert_allclose(out.gyr[:, 2], -0.3 * t, atol=1e-9)
+    np.testing.assert_allclose(out.quat_ref, means.quat_ref, atol=1e-12)
+
+
 def test_jitter_range_averages_a_fast_signal_and_upsamples_a_slow_one():
     rec = linear()
     out, _ = run(pt.parse_perturbation("jitter:8-32ms"), rec)
@@ -88,8 +101,8 @@ def test_rate_gives_exact_ns_stamps():
     np.testing.assert_array_equal(third.stamps_ns, rec.stamps_ns[0] + np.round(k * 1e9 / 300).astype(np.int64))
 
 
-@pytest.mark.parametrize("text", ["jitter:10/20/30ms", "jitter:3-7ms", "rate:77", "dropout:0.1-0.6s@2s",
-                                  "bias:random:2", "latency:0-20ms", "fifo:23ms"])
+@pytest.mark.parametrize("text", ["jitter:10/20/30ms", "jitter:3-7ms", "jitter:3-7ms:points", "rate:77",
+                                  "dropout:0.1-0.6s@2s", "bias:random:2", "latency:0-20ms", "fifo:23ms"])
 def test_chunked_equals_whole(text):
     rec = linear(n=5000)
     whole, info_w = run(pt.parse_perturbation(text), rec, seed=5)

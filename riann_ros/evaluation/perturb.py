@@ -12,6 +12,10 @@ sequence, after the scenario and before the estimators:
 ``rate:50``
     A regular stream at 50 Hz made the same way (``jitter`` with one interval): causal resampling,
     chunk by chunk. (``--rates`` resamples the whole recording with the FFT, as in the paper.)
+``jitter:5-15ms:points`` / ``rate:50:points``
+    The same stamps, but each sample is the signal *at* its stamp (interpolated linearly between the
+    recording's samples) instead of its mean over the interval: a sensor read at irregular times, which
+    is what a ROS stamp means (the measurement time).
 ``latency:0-20ms``
     Receive-time stamps: each sample keeps its values and its reference, but its stamp is the
     measurement time plus a delivery delay drawn uniformly from the range (stamps kept in order, at
@@ -42,7 +46,7 @@ from __future__ import annotations
 import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -56,6 +60,8 @@ DEFINITIONS = {
     "jitter": "jitter:10/20/30ms (set) or jitter:8-32ms (range): each next sample an interval later drawn uniformly; "
     "acc/gyr = means of the piecewise-linear signal over the interval; reference slerped at the sample",
     "rate": "rate:HZ: a regular stream at HZ made like jitter (interval means), causal, chunk by chunk",
+    "points": "jitter:...:points, rate:HZ:points: the same stamps, each sample the signal at its stamp (linear "
+    "between the recording's samples) instead of the interval mean",
     "latency": "latency:LO-HIms: each stamp = the measurement time + a delay drawn uniformly from LO-HI (kept in "
     "order); samples and reference unchanged",
     "fifo": "fifo:Pms: the FIFO read every P ms from the first stamp; each message stamped at its read time, "
@@ -208,12 +214,16 @@ class Jitter(Perturbation):
     choices: tuple[float, ...] = ()
     lo: float = 0.0
     hi: float = 0.0
+    points: bool = False  # each sample the signal at its stamp, not the mean over its interval
     kind = "jitter"
 
     def text(self) -> str:
         if self.choices:
-            return "jitter:" + "/".join(f"{v * 1e3:g}" for v in self.choices) + "ms"
-        return f"jitter:{self.lo * 1e3:g}-{self.hi * 1e3:g}ms"
+            return "jitter:" + "/".join(f"{v * 1e3:g}" for v in self.choices) + "ms" + self._suffix()
+        return f"jitter:{self.lo * 1e3:g}-{self.hi * 1e3:g}ms" + self._suffix()
+
+    def _suffix(self) -> str:
+        return ":points" if self.points else ""
 
     def mean_interval(self) -> float:
         return float(np.mean(self.choices)) if self.choices else 0.5 * (self.lo + self.hi)
@@ -229,7 +239,7 @@ class Jitter(Perturbation):
         return lambda: rng.integers(lo, hi, DRAW_BLOCK, endpoint=True)
 
     def start(self, rng: np.random.Generator) -> Transform:
-        return _IntervalMeans(self.draw(rng))
+        return _IntervalMeans(self.draw(rng), self.points)
 
 
 @dataclass(frozen=True)
@@ -240,7 +250,7 @@ class Rate(Jitter):
     kind = "rate"
 
     def text(self) -> str:
-        return f"rate:{self.hz:g}"
+        return f"rate:{self.hz:g}" + self._suffix()
 
     def mean_interval(self) -> float:
         return 1.0 / self.hz
@@ -259,10 +269,12 @@ class Rate(Jitter):
 
 
 class _IntervalMeans(Transform):
-    """New stamps t_k = t_{k-1} + interval; sample k = mean of the signal over (t_{k-1}, t_k]."""
+    """New stamps t_k = t_{k-1} + interval; sample k = mean of the signal over (t_{k-1}, t_k] (``points``: the
+    signal at t_k)."""
 
-    def __init__(self, draw: Callable[[], NDArray[np.int64]]) -> None:
+    def __init__(self, draw: Callable[[], NDArray[np.int64]], points: bool = False) -> None:
         self._draw = draw
+        self._points = points
         self._queue = np.zeros(0, np.int64)
         self._tail: Recording | None = None  # the samples needed again: from the last at or before t_prev
         self._t_prev: int | None = None
@@ -293,7 +305,7 @@ class _IntervalMeans(Transform):
             first, self._t_prev = rec.slice(0, 1), int(rec.stamps_ns[0])
         buf = rec if self._tail is None else _concat(self._tail, rec)
         times = self._times(self._t_prev, int(buf.stamps_ns[-1]))
-        out = _interval_means(buf, np.concatenate([[self._t_prev], times])) if len(times) else None
+        out = _interval_means(buf, np.concatenate([[self._t_prev], times]), self._points) if len(times) else None
         if len(times):
             self._t_prev = int(times[-1])
         keep_from = max(0, int(np.searchsorted(buf.stamps_ns, self._t_prev, side="right")) - 1)
@@ -320,10 +332,11 @@ def _concat(*recs: Recording) -> Recording:
     )
 
 
-def _interval_means(buf: Recording, edges: NDArray[np.int64]) -> Recording:
+def _interval_means(buf: Recording, edges: NDArray[np.int64], points: bool = False) -> Recording:
     """Samples at ``edges[1:]``: means of acc and gyr (piecewise linear between ``buf``'s samples) over each
-    (edges[k-1], edges[k]]; reference slerped at the edge, score mask of the nearest sample, magnetic
-    field of the latest sample at or before the edge (a magnetometer read when the sample is made)."""
+    (edges[k-1], edges[k]] (``points``: their values at the edge); reference slerped at the edge, score mask
+    of the nearest sample, magnetic field of the latest sample at or before the edge (a magnetometer read
+    when the sample is made)."""
     t0 = int(buf.stamps_ns[0])
     t = (buf.stamps_ns - t0) * 1e-9
     x = np.concatenate([buf.acc, buf.gyr], axis=1)
@@ -339,7 +352,12 @@ def _interval_means(buf: Recording, edges: NDArray[np.int64]) -> Recording:
     else:  # a single sample: constant signal
         integral = x[0] * (q - t[0])[:, None]
         s = np.zeros(len(q))
-    means = np.diff(integral, axis=0) / np.diff(q)[:, None]
+    if not points:
+        means = np.diff(integral, axis=0) / np.diff(q)[:, None]
+    elif len(t) > 1:
+        means = (x[i] + slope * d[:, None])[1:]
+    else:
+        means = np.repeat(x[:1], len(q) - 1, axis=0)
     ref = None
     if buf.quat_ref is not None:
         ref = np.full((len(q), 4), np.nan)
@@ -534,6 +552,19 @@ def _seconds(text: str, unit: str) -> float:
     return float(text) * (1e-3 if unit == "ms" else 1.0)
 
 
+def _points(parse: Callable[[str], Perturbation | None]) -> Callable[[str], Perturbation | None]:
+    """``parse`` that also takes a ``:points`` suffix (jitter and rate: the signal at the stamps)."""
+
+    def wrapped(args: str) -> Perturbation | None:
+        base, sep, tail = args.rpartition(":")
+        if sep and tail == "points":
+            p = parse(base)
+            return replace(p, points=True) if isinstance(p, Jitter) else None
+        return parse(args)
+
+    return wrapped
+
+
 def _jitter(args: str) -> Perturbation | None:
     m = re.fullmatch(rf"({_NUM}(?:/{_NUM})*)(ms|s)", args)
     if m:
@@ -594,7 +625,7 @@ def _magnetic(args: str) -> Perturbation | None:
     return Magnetic(strength=strength, t0=t0, t1=t1) if t0 < t1 else None
 
 
-_PARSERS = {"jitter": _jitter, "rate": _rate, "latency": _latency, "fifo": _fifo, "bias": _bias,
+_PARSERS = {"jitter": _points(_jitter), "rate": _points(_rate), "latency": _latency, "fifo": _fifo, "bias": _bias,
             "dropout": _dropout, "magnetic": _magnetic}
 
 
@@ -605,7 +636,8 @@ def parse_perturbation(text: str) -> Perturbation:
     p = parser(args) if parser else None
     if p is None:
         raise ValueError(
-            f"bad perturbation {text!r}; accepted: jitter:10/20/30ms, jitter:8-32ms, rate:50, latency:0-20ms, "
+            f"bad perturbation {text!r}; accepted: jitter:10/20/30ms, jitter:8-32ms, rate:50 (each also with :points), "
+            "latency:0-20ms, "
             "fifo:20ms, bias:3,3,0, bias:random:2 (deg/s), dropout:0.1-0.6s@10s, magnetic:offset:20,0,-10 (µT), "
             "magnetic:disturb:40@10-20s"
         )
