@@ -13,11 +13,13 @@ uniform time grid ``tau_m = anchor + m·T`` and never sees the input stamps dire
   stream ×3) instead of feeding it straight in (×2).
 * :class:`RateTracker` estimates ``d`` as the running median of the last ``window`` steps and switches
   ``T`` only when the candidate differs by more than ``hysteresis`` (relative) for ``window // 2``
-  samples in a row, so jitter or a dropout never makes the grid flap. It also decides the signal
-  model: a stream whose steps spread widely ((p90 − p10) / median > ``IRREGULAR_ON``) is taken as
+  samples in a row, so jitter or a dropout never makes the grid flap; a stream whose steps spread
+  widely ((p90 − p10) / median > ``IRREGULAR_ON``, hysteresis down to ``IRREGULAR_OFF``: *jittery*
+  sample times) keeps its grid step while it is inside the trained range, since such samples sit on no
+  grid. It also decides the signal model: a regular stream is read as *point samples*; a jittery one as
   *interval means* (each sample the average since the previous one: what a polled, integrating or
-  decimating sensor delivers); a regular stream as *point samples* (hysteresis down to
-  ``IRREGULAR_OFF``).
+  decimating sensor delivers) until :class:`SampleModelTest` finds from the gyro that its samples are
+  point samples read at irregular times.
 * It also tells *receive-time stamps* from *sample times*. A sensor sampling on its own regular clock and
   stamped on arrival (after a random delivery delay over USB, Bluetooth or a busy host, or read out of
   its FIFO a batch at a time) gives stamps that stay within a bounded distance of a regular timeline:

@@ -16,7 +16,8 @@ stages around it, each causal, with one output per input sample at that sample's
    straight in; slower inputs are up-sampled to ≤ 5.5 ms, faster ones averaged in blocks of ~5 ms);
    each grid value is resampled causally from the samples up to that stamp (point samples: up-sampled
    along the parabola through the newest three, which keeps the curvature of fast motion at 25–100 Hz;
-   irregular streams are read as interval means, ``input_model``). Stamps that are a regular sample
+   irregular streams as interval means or point samples, whichever lets the gyro pass through its samples
+   smoothly, ``input_model``; irregular sample times keep their grid step). Stamps that are a regular sample
    clock plus delivery delays (a driver stamping on arrival, or reading a FIFO in bursts: the time
    spanned by 16 steps does not grow like a random walk) are replaced by a de-jittered timeline at the
    clock's mean period.
@@ -149,7 +150,7 @@ class RiannEstimator(AttitudeEstimator):
         ),
         ParamSpec("input_model", "auto", "What an input sample is when the grid resamples it: 'points' (the "
                   "signal at the stamp), 'means' (the mean since the previous sample), 'auto' (means when the "
-                  "stamps jitter, else points).", choices=("auto", "points", "means")),
+                  "stamps jitter and the gyro says so, else points).", choices=("auto", "points", "means")),
         *front_end_params(True, "the network"),
         ParamSpec("restart_gap", 0.1,
                   "s; after a stamp step longer than this (and than 4 input steps) a fresh network takes "
