@@ -180,6 +180,13 @@ class RateTracker:
         self._spans: deque[float] = deque(maxlen=CLOCK_WINDOW - VR_SPAN)  # time spanned by VR_SPAN steps
         self._span_sum = 0.0
         self._span_sq = 0.0
+        # the steps inside every span that covers them (all VR_SPAN of those spans are in _spans): the step
+        # variance of the ratio is taken over these, so that a step just in (or about to leave) counts in
+        # both parts of the ratio alike; else one lone long step (a few lost messages) looks like a clock for
+        # the VR_SPAN samples after it, until the spans that contain it have come in
+        self._cov: deque[float] = deque()
+        self._cov_sum = 0.0
+        self._cov_sq = 0.0
 
     @property
     def means(self) -> bool:
@@ -203,10 +210,11 @@ class RateTracker:
         steps: ~1 for samples taken at random times (a renewal process: each interval drawn on its own),
         ~1/``VR_SPAN`` for a regular clock stamped after random delivery delays, ~0 for FIFO batches
         (see the module docstring). 1 while it cannot be told (too few steps, steps all equal)."""
-        n, k = len(self._long), len(self._spans)
+        n, k = len(self._cov), len(self._spans)
         if n < 3 or k < 2:
             return 1.0
-        m, var = self._step_moments()
+        m = self._cov_sum / n
+        var = self._cov_sq / n - m * m
         if var <= 1e-12 * m * m:
             return 1.0
         ms = self._span_sum / k
@@ -233,15 +241,24 @@ class RateTracker:
         self._time += dt
         ends.append(self._time)
         if len(ends) == VR_SPAN + 1:
-            spans = self._spans
+            spans, cov = self._spans, self._cov
             if len(spans) == spans.maxlen:
                 old = spans.popleft()
                 self._span_sum -= old
                 self._span_sq -= old * old
+                if cov:  # the oldest covered step has lost its first span
+                    old = cov.popleft()
+                    self._cov_sum -= old
+                    self._cov_sq -= old * old
             span = ends[-1] - ends[0]
             spans.append(span)
             self._span_sum += span
             self._span_sq += span * span
+            if len(spans) >= VR_SPAN:  # the step VR_SPAN - 1 before the newest now has all its spans
+                step = long[-VR_SPAN]
+                cov.append(step)
+                self._cov_sum += step
+                self._cov_sq += step * step
 
     def push(self, dt: float) -> bool:
         """Take one input step (s); return True when the grid step switched."""
