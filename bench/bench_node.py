@@ -91,7 +91,8 @@ class Harness:
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
         self.ex = SingleThreadedExecutor()
         self.ex.add_node(self.node)
-        threading.Thread(target=self.ex.spin, daemon=True).start()
+        self.spinner = threading.Thread(target=self.ex.spin, daemon=True)
+        self.spinner.start()
 
     def _on_out(self, m: QuaternionStamped) -> None:
         self.arrivals[stamps.to_ns(m.header.stamp)] = time.perf_counter_ns()
@@ -184,6 +185,7 @@ def main() -> int:
             r = h.run(cmd, rate, args.duration)
             print(f"| {label} | " + " | ".join(f"{r[c]:.0f}" for c in cols) + " |", flush=True)
     h.ex.shutdown()
+    h.spinner.join(timeout=5.0)  # the spin thread must end before the process does (else: std::terminate)
     h.node.destroy_node()
     rclpy.shutdown()
     return 0
