@@ -72,8 +72,7 @@ MODEL_MEMORY = 256  # moving samples: memory of the point-samples-or-interval-me
 MODEL_MIN_RATE = 0.3  # rad/s: only samples taken while the sensor turns at least this fast count (at rest the
 # gyro is noise, which both readings fit alike)
 MODEL_MIN_SAMPLES = 32  # moving samples before the test decides
-MODEL_POINTS_ON = 1.1  # misfit ratio (read as means / read as points) above which the samples are point samples
-MODEL_MEANS_ON = 0.9  # ... and below which they are interval means again
+MODEL_Z = 3.0  # the mean misfit difference must be this many standard errors from 0 to decide (or turn)
 
 CURVE_MIN_RATIO = 0.5  # the curved signal model needs neighbouring sample steps less than 2x apart
 
@@ -99,21 +98,22 @@ class SampleModelTest:
     ``(t_{k-1}, t_k]``, i.e. (to second order) its value at the interval's centre ``t_k − d_k/2``. With
     regular stamps the two readings differ by a constant shift that nothing on the IMU alone can see; with
     irregular stamps the shift changes from sample to sample with the interval, so only the right reading
-    puts the samples at the times where a smooth signal passes through them. The test interpolates each
-    gyro sample from its two neighbours, once at the stamps and once at the interval centres, and keeps
-    the squared misfits of both readings (exponential memory of ``MODEL_MEMORY`` samples), counting only
-    samples taken while the sensor turns (``MODEL_MIN_RATE``): there the wrong reading adds the angular
-    acceleration times the misplacement to every misfit. ``points`` becomes True when the misfit read as
-    means exceeds that read as points by ``MODEL_POINTS_ON``, False when it is below ``MODEL_MEANS_ON``
-    times it, and stays None until ``MODEL_MIN_SAMPLES`` moving samples have been seen.
+    puts the samples at the times where a smooth signal passes through them. The test predicts each gyro
+    sample from its two neighbours on either side (the cubic through them, so that the curvature of fast
+    motion between sparse samples does not drown the misplacement), once at the stamps and once at the
+    interval centres, and keeps the difference of the squared misfits (means − points), counting only
+    samples taken while the sensor turns (``MODEL_MIN_RATE``: at rest both readings fit the noise alike).
+    Its mean over an exponential memory of ``MODEL_MEMORY`` samples is compared with its standard error:
+    ``points`` becomes True when the mean is ``MODEL_Z`` standard errors above zero, False when it is as far
+    below, and stays as it was in between (None until decided: the stream is read as interval means).
     """
 
     def __init__(self) -> None:
         self.points: bool | None = None
-        self._t: deque[float] = deque(maxlen=4)  # the newest stamps (one more than samples: the centres)
-        self._w: deque[Sample] = deque(maxlen=3)  # the newest gyro samples
-        self._fit_points = 0.0
-        self._fit_means = 0.0
+        self._t: deque[float] = deque(maxlen=6)  # the newest stamps (one more than samples: the centres)
+        self._w: deque[Sample] = deque(maxlen=5)  # the newest gyro samples
+        self._mean = 0.0  # of (misfit read as means) - (misfit read as points)
+        self._sq = 0.0  # ... and of its square
         self._n = 0
 
     def clear_window(self) -> None:
@@ -122,37 +122,55 @@ class SampleModelTest:
         self._w.clear()
 
     def push(self, t: float, w: Sample, judge: bool) -> None:
-        """Take a sample at stamp ``t`` with gyro ``w``; with ``judge`` add the misfits of the previous one."""
+        """Take a sample at stamp ``t`` with gyro ``w``; with ``judge`` add the misfits of the one two before."""
         self._t.append(t)
         self._w.append(w)
-        if not judge or len(self._t) < 4:
+        if not judge or len(self._t) < 6:
             return
-        w0, w1, w2 = self._w
-        if w1[0] * w1[0] + w1[1] * w1[1] + w1[2] * w1[2] < MODEL_MIN_RATE * MODEL_MIN_RATE:
+        ws = self._w
+        mid = ws[2]
+        if mid[0] * mid[0] + mid[1] * mid[1] + mid[2] * mid[2] < MODEL_MIN_RATE * MODEL_MIN_RATE:
             return
         tp = self._t
-        c0, c1, c2 = ((tp[k] + tp[k + 1]) * 0.5 for k in range(3))  # interval centres
-        fp = _misfit(tp[1], tp[2], tp[3], w0, w1, w2)
-        fm = _misfit(c0, c1, c2, w0, w1, w2)
-        a = 1.0 / MODEL_MEMORY
-        self._fit_points += a * (fp - self._fit_points)
-        self._fit_means += a * (fm - self._fit_means)
+        stamps = (tp[1], tp[2], tp[3], tp[4], tp[5])
+        centres = tuple((tp[k] + tp[k + 1]) * 0.5 for k in range(5))
+        diff = _misfit(centres, ws) - _misfit(stamps, ws)
         self._n += 1
-        if self._n < MODEL_MIN_SAMPLES or self._fit_points <= 0.0:
+        a = max(1.0 / MODEL_MEMORY, 1.0 / self._n)
+        self._mean += a * (diff - self._mean)
+        self._sq += a * (diff * diff - self._sq)
+        if self._n < MODEL_MIN_SAMPLES:
             return
-        ratio = self._fit_means / self._fit_points
-        if ratio > MODEL_POINTS_ON:
+        var = self._sq - self._mean * self._mean
+        if var <= 0.0:
+            return
+        z = self._mean / math.sqrt(var / min(self._n, 2 * MODEL_MEMORY))
+        if z > MODEL_Z:
             self.points = True
-        elif ratio < MODEL_MEANS_ON:
+        elif z < -MODEL_Z:
             self.points = False
 
 
-def _misfit(t0: float, t1: float, t2: float, w0: Sample, w1: Sample, w2: Sample) -> float:
-    """Squared distance of ``w1`` from the line through ``(t0, w0)`` and ``(t2, w2)`` at ``t1``."""
-    if not t2 > t0:
-        return 0.0
-    f = (t1 - t0) / (t2 - t0)
-    return sum((w1[i] - w0[i] - f * (w2[i] - w0[i])) ** 2 for i in range(3))
+def _misfit(t: Sequence[float], w: Sequence[Sample]) -> float:
+    """Squared distance of the middle of five samples ``w`` (at times ``t``) from the cubic through the other
+    four, at its time."""
+    x = t[2]
+    others = (0, 1, 3, 4)
+    pred = [0.0, 0.0, 0.0]
+    for i in others:
+        li = 1.0
+        for j in others:
+            if j != i:
+                den = t[i] - t[j]
+                if den == 0.0:
+                    return 0.0
+                li *= (x - t[j]) / den
+        wi = w[i]
+        pred[0] += li * wi[0]
+        pred[1] += li * wi[1]
+        pred[2] += li * wi[2]
+    m = w[2]
+    return (m[0] - pred[0]) ** 2 + (m[1] - pred[1]) ** 2 + (m[2] - pred[2]) ** 2
 
 
 class RateTracker:

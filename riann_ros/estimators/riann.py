@@ -419,7 +419,7 @@ class RiannEstimator(AttitudeEstimator):
         self._t_net = self._anchor + self._m * T * 1e9
         hist = self._hist
         test = self._rate.model_test if self._rate is not None else None
-        for k in range(max(0, n - 4), n):
+        for k in range(max(0, n - 6), n):  # the model test's window: 6 stamps
             x = (*acc[k].tolist(), *gyr[k].tolist())
             if k >= n - 3:
                 hist.append(float(t_ns[k]), x)
