@@ -192,6 +192,8 @@ class RateTracker:
         self._pending = 0
         self._long: deque[float] = deque(maxlen=CLOCK_WINDOW)
         self._long_sum = 0.0  # running sums over _long: steps and their squares
+        self._lost: deque[int] = deque()  # per step in _long: samples of the clock lost within it (count_lost)
+        self._lost_sum = 0
         self._long_sq = 0.0
         self._ends: deque[float] = deque(maxlen=VR_SPAN + 1)  # running time at the last VR_SPAN + 1 samples
         self._time = 0.0
@@ -215,8 +217,24 @@ class RateTracker:
 
     @property
     def mean_step(self) -> float:
-        """Mean of the last ``CLOCK_WINDOW`` steps (s): the sample clock's period when ``clocked``."""
-        return self._long_sum / len(self._long) if self._long else self.median
+        """Mean step of the last ``CLOCK_WINDOW`` samples, counting the samples lost in between (s): the sample
+        clock's period when ``clocked``."""
+        return self._long_sum / (len(self._long) + self._lost_sum) if self._long else self.median
+
+    def count_lost(self, k: int) -> None:
+        """The step just taken spans ``k`` lost samples of the clock besides its own (told by the estimator's
+        de-jittered timeline), so that the period is not stretched by lost messages."""
+        self._lost[-1] += k
+        self._lost_sum += k
+
+    def delay_spread(self) -> float:
+        """Standard deviation (s) of the stamps around the clock: the time spanned by ``VR_SPAN`` steps varies
+        by the delays at its two ends, Var(span) = 2 Var(delay) (an upper bound when samples were lost)."""
+        k = len(self._spans)
+        if k < 2:
+            return 0.0
+        ms = self._span_sum / k
+        return math.sqrt(max(self._span_sq / k - ms * ms, 0.0) / 2.0)
 
     @property
     def input_step(self) -> float:
@@ -250,7 +268,9 @@ class RateTracker:
             old = long.popleft()
             self._long_sum -= old
             self._long_sq -= old * old
+            self._lost_sum -= self._lost.popleft()
         long.append(dt)
+        self._lost.append(0)
         self._long_sum += dt
         self._long_sq += dt * dt
         ends = self._ends

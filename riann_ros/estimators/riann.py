@@ -76,6 +76,7 @@ TIME_EPS_NS = 1000.0  # a grid point this close after the newest stamp counts as
 RESTART_WARMUP = 0.0  # s a fresh network runs beside the old one after a hole before it takes over
 HOLE_STEPS = 4.0  # a hole is also longer than this many median input steps
 CLOCK_GAIN = 1.0 / 256.0  # per sample: how fast the de-jittered timeline of a clocked stream follows its stamps
+CLOCK_LOST_SIGMAS = 3.0  # a stamp this many delay deviations (+ half a period) late means lost samples before it
 
 Quat = tuple[float, float, float, float]
 Row = tuple[float, ...]
@@ -319,10 +320,20 @@ class RiannEstimator(AttitudeEstimator):
     def _clock_step(self, period: float) -> float:
         """The step (ns) of a clocked stream's sample on the de-jittered timeline: one clock period, plus a
         small pull toward the stamps (so the timeline follows the stamps' long-term rate and drift but not
-        their delivery jitter)."""
+        their delivery jitter). A stamp later than the delays can explain (``CLOCK_LOST_SIGMAS`` deviations
+        and half a period) follows lost messages: the timeline then advances by the whole periods lost too,
+        and the rate tracker counts them (else the hole's time is swallowed, and the period stretched)."""
         pred = self._t + period
-        step = period + CLOCK_GAIN * (self._raw - pred)
-        return min(max(step, 0.5 * period), 1.5 * period)
+        dev = self._raw - pred
+        rate = self._rate
+        assert rate is not None
+        lost = 0
+        if dev > 0.5 * period + CLOCK_LOST_SIGMAS * rate.delay_spread() * 1e9:
+            lost = round(dev / period)
+            rate.count_lost(lost)
+        base = (1 + lost) * period
+        step = base + CLOCK_GAIN * (dev - lost * period)
+        return min(max(step, base - 0.5 * period), base + 0.5 * period)
 
     def _gyro_rotation(self, t0: float, bias: tuple[float, float, float], means: bool, eps: float = 0.0) -> Quat:
         """Rotation by the bias-corrected gyro from ``t0`` (ns) to the newest sample; identity when ``t0``
