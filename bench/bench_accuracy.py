@@ -10,7 +10,8 @@ Runs ``riann-bag-eval`` twice on the BROAD trial files (``$RIANN_BROAD_DIR`` or 
    onset) under the conditions ``none``, ``jitter:10/20/30ms`` (interval means), ``jitter:10/20/30ms:points``
    and ``jitter:5-15ms:points`` (point samples at random times), ``jitter:2-8ms``, ``latency:0-10ms``,
    ``fifo:20ms``, ``rate:50`` (stamps exactly 20 ms apart), ``bias:3,3,0``, ``bias:random:2``,
-   ``dropout:0.1-0.6s@10s`` and ``dropout:0.01-0.05s@1s`` (a few messages lost about once a second);
+   ``dropout:0.1-0.6s@10s``, ``dropout:0.01-0.05s@1s`` (a few messages lost about once a second) and
+   ``latency:0-10ms+dropout:0.01-0.05s@1s`` (the same on a stream stamped on arrival);
 2. the as-recorded scenario FFT-resampled to 25, 50, 100, 200, 500 and 1000 Hz (``--rates``).
 
 Prints markdown for README/BENCHMARKS: mean / worst RMSE (°) per condition and estimator, the dropout rows
@@ -39,7 +40,7 @@ from riann_ros.datasets.broad import broad_files, find_broad_dir
 ESTIMATORS = "riann,vqf,madgwick,mahony"
 CONDITIONS = ("none", "jitter:10/20/30ms", "jitter:10/20/30ms:points", "jitter:2-8ms", "jitter:5-15ms:points",
               "latency:0-10ms", "fifo:20ms", "rate:50", "bias:3,3,0", "bias:random:2", "dropout:0.1-0.6s@10s",
-              "dropout:0.01-0.05s@1s")
+              "dropout:0.01-0.05s@1s", "latency:0-10ms+dropout:0.01-0.05s@1s")
 RATES = "25,50,100,200,500,1000"
 DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")
 
