@@ -151,6 +151,12 @@ class SampleModelTest:
             self.points = False
 
 
+def _moments(total: float, sq: float, n: int) -> tuple[float, float]:
+    """Mean and variance of ``n`` values from their running sum and sum of squares."""
+    m = total / n
+    return m, sq / n - m * m
+
+
 def _misfit(t: Sequence[float], w: Sequence[Sample]) -> float:
     """Squared distance of the middle of five samples ``w`` (at times ``t``) from the cubic through the other
     four, at its time."""
@@ -230,11 +236,9 @@ class RateTracker:
     def delay_spread(self) -> float:
         """Standard deviation (s) of the stamps around the clock: the time spanned by ``VR_SPAN`` steps varies
         by the delays at its two ends, Var(span) = 2 Var(delay) (an upper bound when samples were lost)."""
-        k = len(self._spans)
-        if k < 2:
+        if len(self._spans) < 2:
             return 0.0
-        ms = self._span_sum / k
-        return math.sqrt(max(self._span_sq / k - ms * ms, 0.0) / 2.0)
+        return math.sqrt(self._span_var() / 2.0)
 
     @property
     def input_step(self) -> float:
@@ -246,21 +250,20 @@ class RateTracker:
         steps: ~1 for samples taken at random times (a renewal process: each interval drawn on its own),
         ~1/``VR_SPAN`` for a regular clock stamped after random delivery delays, ~0 for FIFO batches
         (see the module docstring). 1 while it cannot be told (too few steps, steps all equal)."""
-        n, k = len(self._cov), len(self._spans)
-        if n < 3 or k < 2:
+        if len(self._cov) < 3 or len(self._spans) < 2:
             return 1.0
-        m = self._cov_sum / n
-        var = self._cov_sq / n - m * m
+        m, var = _moments(self._cov_sum, self._cov_sq, len(self._cov))
         if var <= 1e-12 * m * m:
             return 1.0
-        ms = self._span_sum / k
-        return max(self._span_sq / k - ms * ms, 0.0) / (VR_SPAN * var)
+        return self._span_var() / (VR_SPAN * var)
+
+    def _span_var(self) -> float:
+        """Variance of the time spanned by ``VR_SPAN`` steps (from the running sums; not empty)."""
+        return max(_moments(self._span_sum, self._span_sq, len(self._spans))[1], 0.0)
 
     def _step_moments(self) -> tuple[float, float]:
         """Mean and variance of the last ``CLOCK_WINDOW`` steps (from the running sums; not empty)."""
-        n = len(self._long)
-        m = self._long_sum / n
-        return m, self._long_sq / n - m * m
+        return _moments(self._long_sum, self._long_sq, len(self._long))
 
     def _push_long(self, dt: float) -> None:
         long = self._long
