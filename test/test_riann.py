@@ -83,7 +83,7 @@ def test_a_clean_stream_in_the_trained_range_gives_the_network_inclination(broad
     sess = ort.InferenceSession(str(default_model_path()))
     x = np.column_stack([rec.acc, rec.gyr, gate_dts(rec)]).astype(np.float32)[None]
     out, _ = sess.run(None, {"input": x, "h0": np.zeros((2, 1, 1, 200), np.float32)})
-    est = create("riann", gyro_bias_estimation=False)
+    est = create("riann", gyro_bias_estimation=False, ensemble=1)
     q = est.update_batch(rec.acc, rec.gyr, gate_dts(rec))
     assert est.rows == len(rec)
     ref = out[0] / np.linalg.norm(out[0], axis=1, keepdims=True)
@@ -103,8 +103,8 @@ def test_inclination_rmse_on_all_broad_trials(broad_dir, broad_trial):
         est.reset()
         rmses[f.name] = rmse(rec, est.update_batch(rec.acc, rec.gyr, gate_dts(rec)))
     assert all(0.2 < v < 3.0 for v in rmses.values()), rmses
-    if len(rmses) == 12:  # the 12-trial subset: measured mean 0.96 deg (1.03 without the bias front end)
-        assert 0.7 <= np.mean(list(rmses.values())) <= 1.2, rmses
+    if len(rmses) == 12:  # the 12-trial subset: measured mean 0.72 deg (0.96 with ensemble=1)
+        assert 0.5 <= np.mean(list(rmses.values())) <= 0.9, rmses
 
 
 @pytest.mark.slow

@@ -439,7 +439,9 @@ def test_tilted_sensor_at_rest_gets_the_network_roll_and_heading_zero(roll_deg):
     w, x, y, z = q.T
     yaw = np.degrees(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
     roll = roll_pitch_deg(q)[:, 0]
-    assert np.abs(yaw).max() < 1.0
+    # not 180°: the heading starts at zero; the first output's inclination error (a degree or two, corrected
+    # afterwards about horizontal axes) leaves a ZYX yaw of that order at large tilts
+    assert np.abs(yaw).max() < 2.0
     assert abs(roll[-1] - roll_deg) < 2.0
 
 

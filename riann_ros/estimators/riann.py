@@ -63,6 +63,7 @@ from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import GyroBiasFrontEnd, front_end_params
 from riann_ros.estimators.common import BIAS_KEY, bias_text
+from riann_ros.estimators.ensemble import MAX_COPIES, combine, frames, rotate_rows
 from riann_ros.estimators.grid import DT_MIN, REL_EPS, RateTracker, SignalHistory
 from riann_ros.estimators.heading import MagHeading
 from riann_ros.estimators.heading import from_rotvec as _rotvec
@@ -152,6 +153,9 @@ class RiannEstimator(AttitudeEstimator):
         ParamSpec("input_model", "auto", "What an input sample is when the grid resamples it: 'points' (the "
                   "signal at the stamp), 'means' (the mean since the previous sample), 'auto' (means when the "
                   "stamps jitter and the gyro says so, else points).", choices=("auto", "points", "means")),
+        ParamSpec("ensemble", MAX_COPIES, "Copies of the network run on virtually rotated IMU frames, their "
+                  "inclinations averaged (the paper's training augmentation used at run time); 1 = the single "
+                  "network. Compute grows with it.", min=1, max=MAX_COPIES),
         *front_end_params(True, "the network"),
         ParamSpec("restart_gap", 0.1,
                   "s; after a stamp step longer than this (and than 4 input steps) a fresh network takes "
@@ -211,7 +215,8 @@ class RiannEstimator(AttitudeEstimator):
 
     def restart(self) -> None:
         """Start the network afresh at the next sample; keep the bias and rate estimates and the heading."""
-        self._h = np.zeros(HIDDEN_SHAPE, dtype=np.float32)
+        self._rots = frames(int(self.params["ensemble"]))
+        self._h = self._fresh_state()
         self._h_cand: np.ndarray | None = None  # the fresh network after a hole
         self._warm = 0  # rows the fresh network still runs before it takes over
         self._q_net: Quat | None = None  # last network output
@@ -439,11 +444,21 @@ class RiannEstimator(AttitudeEstimator):
         hist.trim(self._t_net - T * 1e9 - 1.0)
 
     # -- network --------------------------------------------------------------------------------
+    def _fresh_state(self) -> np.ndarray:
+        """A zero hidden state per copy of the ensemble."""
+        return np.zeros((len(self._rots), *HIDDEN_SHAPE), dtype=np.float32)
+
     def _net(self, rows: list[Row] | np.ndarray, h: np.ndarray) -> tuple[Array, np.ndarray]:
-        x = np.asarray(rows, dtype=np.float32).reshape(1, -1, 7)
-        out, hn = self._session.run(["output", "hn"], {"input": x, "h0": h})
-        q = out[0].astype(np.float64)
-        return q / np.linalg.norm(q, axis=-1, keepdims=True), hn
+        """Rows through every copy of the ensemble (:mod:`.ensemble`): the combined attitudes, next states."""
+        x = np.asarray(rows, dtype=np.float64).reshape(-1, 7)
+        hn = np.empty_like(h)
+        outs = []
+        for m, r in enumerate(self._rots):
+            xm = x if m == 0 else rotate_rows(x, r)
+            out, hn[m] = self._session.run(["output", "hn"], {"input": xm.astype(np.float32)[None], "h0": h[m]})
+            q = out[0].astype(np.float64)
+            outs.append(q / np.linalg.norm(q, axis=-1, keepdims=True))
+        return combine(outs, self._rots), hn
 
     def _run_rows(self, rows: list[Row]) -> Array:
         """Run the planned rows through the network(s); (M, 4) outputs, NaN at markers."""
@@ -459,7 +474,7 @@ class RiannEstimator(AttitudeEstimator):
                     _, self._h_cand = self._net(part, self._h_cand)
             if end < len(rows):
                 if rows[end] == FORK:
-                    self._h_cand = np.zeros(HIDDEN_SHAPE, dtype=np.float32)
+                    self._h_cand = self._fresh_state()
                 elif self._h_cand is not None:
                     self._h, self._h_cand = self._h_cand, None
             start = end + 1

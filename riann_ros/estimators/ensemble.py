@@ -1,0 +1,87 @@
+"""Virtual-rotation ensemble: RIANN run on rotated copies of the IMU frame, inclinations averaged (ROS-free).
+
+*Why.* RIANN was trained with *virtual IMU rotations* (the paper's data augmentation, §2: every
+training interval rotated by a random fixed rotation, so that the network does not depend on how the
+sensor is mounted). A network trained that way is equivariant only approximately: fed the same motion
+in another sensor frame it gives another estimate, whose error is partly independent of the first.
+Averaging the gravity directions of a few copies, each fed the IMU in its own rotated frame and mapped
+back, keeps what they agree on and averages out part of what they do not (test-time augmentation with
+the training's own augmentation).
+
+*Copies.* Copy 0 is the sensor frame itself; the others see it turned by 180° about three mutually
+orthogonal axes in general position (none near a sensor axis): with the identity, the four rotations
+are as far apart as four rotations can be (180° between any two), so the copies differ as much as
+possible. ``ensemble=1`` is the single published network.
+
+*Combination.* Copy ``m`` sees ``acc' = R_m acc``, ``gyr' = R_m gyr`` (dt unchanged); its attitude
+``q'_m`` (sensor' → world) maps back as ``q_m = q'_m ⊗ r_m``, so its gravity direction in the sensor
+frame is ``R_mᵀ g'_m``. The ensemble's gravity direction is the normalised mean of the copies'; the
+output is copy 0's attitude tilted to it about a horizontal axis (the network's yaw is not used
+downstream: the heading stage follows the gyro).
+
+Measured on the 12 BROAD trials as recorded (``docs/riann.md`` §5): mean / worst inclination RMSE
+0.96 / 2.38° with one copy, 0.71–0.75 / 1.7–1.95° with four (four different rotation sets, all alike),
+0.71 / 1.80° with eight. The compute per network row is ``ensemble`` times one copy's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from riann_ros import quaternion as quat
+
+Array = NDArray[np.float64]
+
+MAX_COPIES = 4
+
+
+def _axes() -> Array:
+    """Three orthonormal axes in general position: the columns of the rotation by 1 rad about (1, 2, 3)/√14
+    (each at least 33° from every sensor axis)."""
+    k = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+    c, s = np.cos(1.0), np.sin(1.0)
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) * c + s * kx + (1.0 - c) * np.outer(k, k)  # columns: the axes
+
+
+def frames(n: int) -> list[Array]:
+    """The rotation matrices of ``n`` copies (1 ≤ n ≤ :data:`MAX_COPIES`): the identity, then 180° turns
+    about the three axes of :func:`_axes` (R = 2 a aᵀ − I)."""
+    if not 1 <= n <= MAX_COPIES:
+        raise ValueError(f"ensemble must be 1 to {MAX_COPIES}, got {n}")
+    ax = _axes()
+    return [np.eye(3)] + [2.0 * np.outer(ax[:, i], ax[:, i]) - np.eye(3) for i in range(n - 1)]
+
+
+def rotate_rows(rows: Array, r: Array) -> Array:
+    """Network input rows (M, 7: acc, gyr, dt) in the frame turned by ``r``."""
+    out = rows.copy()
+    out[:, 0:3] = rows[:, 0:3] @ r.T
+    out[:, 3:6] = rows[:, 3:6] @ r.T
+    return out
+
+
+def gravity_rows(q: Array) -> Array:
+    """World z (up) in the sensor frame, R(q)ᵀ e_z, of attitudes (M, 4) w, x, y, z."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.column_stack([2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)])
+
+
+def combine(outs: list[Array], rots: list[Array]) -> Array:
+    """The ensemble attitude (M, 4) from the copies' unit outputs ``outs[m]`` (in their frames ``rots[m]``):
+    copy 0's attitude tilted to the mean gravity direction."""
+    q0 = outs[0]
+    if len(outs) == 1:
+        return q0
+    v = gravity_rows(q0)
+    for q, r in zip(outs[1:], rots[1:], strict=True):
+        v = v + gravity_rows(q) @ r  # row form of Rᵀ g'
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    u = gravity_rows(q0)
+    ax = np.cross(u, v)
+    s = np.linalg.norm(ax, axis=1)
+    a = np.arctan2(s, np.sum(u * v, axis=1))
+    h = np.where(s > 1e-12, -np.sin(0.5 * a) / np.maximum(s, 1e-300), 0.0)
+    r_inv = np.column_stack([np.cos(0.5 * a), ax * h[:, None]])  # the turn taking u to v, inverted
+    return quat.normalize(quat.multiply(q0, r_inv))
