@@ -10,7 +10,7 @@ import pytest
 from conftest import gate_dts, rmse
 from riann_ros import quaternion as quat
 from riann_ros.estimators import create
-from riann_ros.estimators.ensemble import MAX_COPIES, combine, frames, gravity_rows, rotate_rows
+from riann_ros.estimators.ensemble import FLOAT_ROWS, MAX_COPIES, combine, frames, gravity_rows, rotate_rows
 from riann_ros.estimators.riann import default_model_path
 
 
@@ -70,6 +70,18 @@ def test_combine_maps_each_copy_back_and_averages_the_gravity_directions():
     err_all = np.degrees(quat.inclination_error(q_true, combine(noisy, rs)))
     assert np.allclose(err_one, np.degrees(e), atol=1e-6) and err_all.max() < 1e-6
     assert combine(exact[:1], rs[:1]) is exact[0]
+
+
+def test_combine_per_row_in_floats_equals_the_vectorised_combination():
+    """The node's path (a few rows, plain floats, normalising) gives what the batch path gives."""
+    rng = np.random.default_rng(5)
+    rs = frames(4)
+    outs = [quat.normalize(rng.normal(size=(40, 4))) for _ in rs]
+    whole = combine(outs, rs)  # 40 rows: vectorised
+    assert len(whole) > FLOAT_ROWS
+    for i in range(0, 40, FLOAT_ROWS):
+        part = combine([1.001 * o[i : i + FLOAT_ROWS] for o in outs], rs)  # not quite unit: normalised
+        assert np.abs(part - whole[i : i + FLOAT_ROWS]).max() < 1e-12
 
 
 def test_estimator_output_is_the_four_network_copies_combined(broad_trial):

@@ -26,6 +26,8 @@ Measured on the 12 BROAD trials as recorded (``docs/riann.md`` §5): mean / wors
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -34,6 +36,7 @@ from riann_ros import quaternion as quat
 Array = NDArray[np.float64]
 
 MAX_COPIES = 4
+FLOAT_ROWS = 4  # up to this many rows are combined in plain floats
 
 
 def _axes() -> Array:
@@ -69,11 +72,15 @@ def gravity_rows(q: Array) -> Array:
 
 
 def combine(outs: list[Array], rots: list[Array]) -> Array:
-    """The ensemble attitude (M, 4) from the copies' unit outputs ``outs[m]`` (in their frames ``rots[m]``):
-    copy 0's attitude tilted to the mean gravity direction."""
+    """The ensemble attitude (M, 4) from the copies' outputs ``outs[m]`` in their frames ``rots[m]``: copy 0's
+    attitude tilted to the mean gravity direction. The outputs must be unit quaternions, except for up to
+    :data:`FLOAT_ROWS` rows (the node's path, in plain floats), which are normalised here."""
     q0 = outs[0]
     if len(outs) == 1:
         return q0
+    if len(q0) <= FLOAT_ROWS:  # the node's path (a row or two per message): plain floats, no numpy overhead
+        rl = [r.tolist() for r in rots]
+        return np.array([_combine_row([o[i].tolist() for o in outs], rl) for i in range(len(q0))])
     v = gravity_rows(q0)
     for q, r in zip(outs[1:], rots[1:], strict=True):
         v = v + gravity_rows(q) @ r  # row form of Rᵀ g'
@@ -85,3 +92,38 @@ def combine(outs: list[Array], rots: list[Array]) -> Array:
     h = np.where(s > 1e-12, -np.sin(0.5 * a) / np.maximum(s, 1e-300), 0.0)
     r_inv = np.column_stack([np.cos(0.5 * a), ax * h[:, None]])  # the turn taking u to v, inverted
     return quat.normalize(quat.multiply(q0, r_inv))
+
+
+def _gravity(q: list[float]) -> tuple[float, float, float]:
+    """:func:`gravity_rows` of one attitude, normalised first."""
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    w, x, y, z = q[0] / n, q[1] / n, q[2] / n, q[3] / n
+    return (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
+
+
+def _combine_row(qs: list[list[float]], rots: list[list[list[float]]]) -> list[float]:
+    """:func:`combine` of one row in plain floats."""
+    u = _gravity(qs[0])
+    vx, vy, vz = u
+    for q, r in zip(qs[1:], rots[1:], strict=True):
+        gx, gy, gz = _gravity(q)
+        vx += gx * r[0][0] + gy * r[1][0] + gz * r[2][0]  # Rᵀ g
+        vy += gx * r[0][1] + gy * r[1][1] + gz * r[2][1]
+        vz += gx * r[0][2] + gy * r[1][2] + gz * r[2][2]
+    n = math.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx / n, vy / n, vz / n
+    ax, ay, az = u[1] * vz - u[2] * vy, u[2] * vx - u[0] * vz, u[0] * vy - u[1] * vx
+    s = math.sqrt(ax * ax + ay * ay + az * az)
+    n0 = math.sqrt(sum(c * c for c in qs[0]))
+    w0, x0, y0, z0 = (c / n0 for c in qs[0])
+    if s <= 1e-12:
+        return [w0, x0, y0, z0]
+    a = math.atan2(s, u[0] * vx + u[1] * vy + u[2] * vz)
+    c, h = math.cos(0.5 * a), -math.sin(0.5 * a) / s
+    bx, by, bz = ax * h, ay * h, az * h  # q0 ⊗ (c, b)
+    w = w0 * c - x0 * bx - y0 * by - z0 * bz
+    x = w0 * bx + x0 * c + y0 * bz - z0 * by
+    y = w0 * by - x0 * bz + y0 * c + z0 * bx
+    z = w0 * bz + x0 * by - y0 * bx + z0 * c
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    return [w / n, x / n, y / n, z / n]

@@ -63,7 +63,7 @@ from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import GyroBiasFrontEnd, front_end_params
 from riann_ros.estimators.common import BIAS_KEY, bias_text
-from riann_ros.estimators.ensemble import MAX_COPIES, combine, frames, rotate_rows
+from riann_ros.estimators.ensemble import FLOAT_ROWS, MAX_COPIES, combine, frames, rotate_rows
 from riann_ros.estimators.grid import DT_MIN, REL_EPS, RateTracker, SignalHistory
 from riann_ros.estimators.heading import MagHeading
 from riann_ros.estimators.heading import from_rotvec as _rotvec
@@ -456,8 +456,9 @@ class RiannEstimator(AttitudeEstimator):
         for m, r in enumerate(self._rots):
             xm = x if m == 0 else rotate_rows(x, r)
             out, hn[m] = self._session.run(["output", "hn"], {"input": xm.astype(np.float32)[None], "h0": h[m]})
-            q = out[0].astype(np.float64)
-            outs.append(q / np.linalg.norm(q, axis=-1, keepdims=True))
+            outs.append(out[0].astype(np.float64))
+        if len(outs) == 1 or len(x) > FLOAT_ROWS:
+            outs = [q / np.linalg.norm(q, axis=-1, keepdims=True) for q in outs]
         return combine(outs, self._rots), hn
 
     def _run_rows(self, rows: list[Row]) -> Array:
