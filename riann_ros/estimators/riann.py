@@ -41,6 +41,11 @@ without the bridge (:meth:`RiannEstimator.on_gap`); the bias estimate, the rate 
 heading carry on across both (with a field, the heading re-acquires it: :meth:`MagHeading.reacquire`).
 A clock jump, a fault or ``~/reset`` reset everything.
 
+**Ensemble.** The network itself runs as ``ensemble`` copies (default 4), each fed the IMU in a virtually
+rotated sensor frame, their gravity directions mapped back and averaged (:mod:`.ensemble`): the paper
+trained RIANN with such rotations, and the copies' errors are partly independent. Every stage above sees
+the combined network attitude; ``ensemble=1`` is the single network.
+
 ``rate_adaptation=false`` is the direct path: every sample is one network row with its own dt
 (stages 1 and 4 still apply).
 
@@ -241,6 +246,7 @@ class RiannEstimator(AttitudeEstimator):
             model = "interval means" if self._rate.means else "point samples"
             out["input model"] = model if self._rate.forced is None else model + " (set)"
             out["input stamps"] = "regular clock + delivery jitter" if self._rate.clocked else "sample times"
+        out["network copies"] = str(len(self._rots))
         out["network restarts after holes"] = str(self.holes)
         if self._heading.started:
             out["magnetic disturbance"] = "detected" if self._heading.disturbed else "none"
