@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros import quaternion as quat
+from riann_ros.estimators.holes import gravity, tilt_to
 
 Array = NDArray[np.float64]
 
@@ -94,36 +95,19 @@ def combine(outs: list[Array], rots: list[Array]) -> Array:
     return quat.normalize(quat.multiply(q0, r_inv))
 
 
-def _gravity(q: list[float]) -> tuple[float, float, float]:
-    """:func:`gravity_rows` of one attitude, normalised first."""
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    w, x, y, z = q[0] / n, q[1] / n, q[2] / n, q[3] / n
-    return (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
-
-
 def _combine_row(qs: list[list[float]], rots: list[list[list[float]]]) -> list[float]:
-    """:func:`combine` of one row in plain floats."""
-    u = _gravity(qs[0])
-    vx, vy, vz = u
-    for q, r in zip(qs[1:], rots[1:], strict=True):
-        gx, gy, gz = _gravity(q)
+    """:func:`combine` of one row in plain floats (the copies' outputs normalised first)."""
+    units: list[tuple[float, float, float, float]] = []
+    for q in qs:
+        n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        units.append((q[0] / n, q[1] / n, q[2] / n, q[3] / n))
+    vx, vy, vz = gravity(units[0])
+    for u, r in zip(units[1:], rots[1:], strict=True):
+        gx, gy, gz = gravity(u)
         vx += gx * r[0][0] + gy * r[1][0] + gz * r[2][0]  # Rᵀ g
         vy += gx * r[0][1] + gy * r[1][1] + gz * r[2][1]
         vz += gx * r[0][2] + gy * r[1][2] + gz * r[2][2]
     n = math.sqrt(vx * vx + vy * vy + vz * vz)
-    vx, vy, vz = vx / n, vy / n, vz / n
-    ax, ay, az = u[1] * vz - u[2] * vy, u[2] * vx - u[0] * vz, u[0] * vy - u[1] * vx
-    s = math.sqrt(ax * ax + ay * ay + az * az)
-    n0 = math.sqrt(sum(c * c for c in qs[0]))
-    w0, x0, y0, z0 = (c / n0 for c in qs[0])
-    if s <= 1e-12:
-        return [w0, x0, y0, z0]
-    a = math.atan2(s, u[0] * vx + u[1] * vy + u[2] * vz)
-    c, h = math.cos(0.5 * a), -math.sin(0.5 * a) / s
-    bx, by, bz = ax * h, ay * h, az * h  # q0 ⊗ (c, b)
-    w = w0 * c - x0 * bx - y0 * by - z0 * bz
-    x = w0 * bx + x0 * c + y0 * bz - z0 * by
-    y = w0 * by - x0 * bz + y0 * c + z0 * bx
-    z = w0 * bz + x0 * by - y0 * bx + z0 * c
+    w, x, y, z = tilt_to(units[0], (vx / n, vy / n, vz / n))
     n = math.sqrt(w * w + x * x + y * y + z * z)
     return [w / n, x / n, y / n, z / n]
