@@ -82,11 +82,11 @@ def combine(outs: list[Array], rots: list[Array]) -> Array:
     if len(q0) <= FLOAT_ROWS:  # the node's path (a row or two per message): plain floats, no numpy overhead
         rl = [r.tolist() for r in rots]
         return np.array([_combine_row([o[i].tolist() for o in outs], rl) for i in range(len(q0))])
-    v = gravity_rows(q0)
-    for q, r in zip(outs[1:], rots[1:], strict=True):
-        v = v + gravity_rows(q) @ r  # row form of Rᵀ g'
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
     u = gravity_rows(q0)
+    v = u.copy()
+    for q, r in zip(outs[1:], rots[1:], strict=True):
+        v += gravity_rows(q) @ r  # row form of Rᵀ g'
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
     ax = np.cross(u, v)
     s = np.linalg.norm(ax, axis=1)
     a = np.arctan2(s, np.sum(u * v, axis=1))
