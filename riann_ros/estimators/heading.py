@@ -17,7 +17,22 @@ follows the bias-corrected gyro (:meth:`RiannEstimator._compose`). With a field,
 4. **correction**: ``ψ ← ψ + k e`` with ``k = dt / tau_mag`` (during the first ``tau_mag`` seconds at least
    ``1/n``: the running mean of the magnetic heading, so the start converges at once). The first usable field
    sets the heading outright. After a hole in the input (:meth:`MagHeading.reacquire`) the heading re-converges
-   the same way, since the rotation during the hole is unknown.
+   the same way, since the rotation during the hole is only roughly known, but as an inverse-variance weighted
+   mean (below).
+
+**Re-acquiring after a hole.** Two things are uncertain after a hole: the heading the gyro carried across it
+(the bridge, standard deviation ``σ_b`` from :func:`~riann_ros.estimators.holes.bridge_sigma`) and, for a
+while, the inclination (the hand-over of :mod:`~riann_ros.estimators.holes`, standard deviation ``σ_t(t)``
+falling as the fresh network converges). The tilt compensation turns an inclination error into a heading error
+of up to ``tan(dip)`` times it (2.6× at a dip of 69°), so a field read in the first few tenths of a second
+after a hole in fast motion can be off by tens of degrees. The heading is therefore the weighted mean of the
+bridged heading (weight ``1/σ_b²``) and each field heading since the hole (weight
+``1/(σ_m² + tan²(dip) σ_t²)``, ``σ_m`` = :data:`MAG_HEADING_SD`), carried by the gyro: the gain of a sample is
+``w / Σw``, never below ``dt / tau_mag``. Without a bridge (a gap longer than ``max_dt``) and with a converged
+inclination this is the plain running mean of the start. The bridge's ``σ_b`` comes from the rates at the hole's
+ends, so a turn made entirely inside the hole (still before and after it) escapes it: if the first usable field
+after the hole differs from the bridged heading by more than :data:`BRIDGE_GATE` combined standard deviations,
+the bridge is dropped and the field sets the heading, as without one.
 
 The correction is a rotation about the world vertical, so the sensor-frame vertical — RIANN's inclination —
 is never changed by the magnetometer (tested: 9D inclination = 6D inclination). The vertical gyro bias is
@@ -46,6 +61,9 @@ MAX_WINDOW = 0.2  # s; a longer window (no field, a gap) is dropped
 DELAY_TAU = 30.0  # s of windows; older windows are forgotten with this time constant
 DELAY_PRIOR = 1.0  # (rad/s)²; the starting value weighs as much as one window with a 1 rad/s change of rate
 MAX_DELAY = 0.1  # s; the largest latency compensated
+# re-acquiring after a hole
+MAG_HEADING_SD = 5.0  # deg; one field heading's error apart from the tilt (the default mag_yaw_stddev_deg)
+BRIDGE_GATE = 3.0  # the bridge is dropped if the first field after the hole is this many standard deviations off
 
 Quat = tuple[float, float, float, float]
 
@@ -188,14 +206,20 @@ class MagHeading:
         self.hist: list[tuple[float, float, float, float]] = []  # (dt, rotation vector of the increment)
         self.observed = False  # the last sample's heading was corrected by the field
         self.reacq = False  # re-acquiring the heading after a hole (start phase without reference learning)
+        self.weight = 0.0  # while re-acquiring: Σ of the weights (1/deg²) of the bridge and the fields since the hole
+        self.gate = False  # the next field is tested against the bridge
         self.latency.reset()
 
-    def reacquire(self) -> None:
-        """A hole in the input: the rotation during it is unknown, so the heading re-converges to the field as
-        at the start (running mean of the magnetic heading for ``tau_mag`` s; the first undisturbed field
-        sets it), keeping the learned field reference and the latency estimate."""
+    def reacquire(self, bridge_sd: float | None = None) -> None:
+        """A hole in the input: the rotation during it is not known well, so the heading re-converges to the
+        field as at the start (for ``tau_mag`` s, the weighted mean of the module docstring; without a bridge,
+        the first undisturbed field sets it), keeping the learned field reference and the latency estimate.
+        ``bridge_sd``: standard deviation (deg) of the heading the gyro carried across the hole; None: no
+        bridge (its weight is 0)."""
         if self.started:
             self.t, self.n, self.reacq = 0.0, 0, True
+            self.weight = 1.0 / (bridge_sd * bridge_sd) if bridge_sd else 0.0
+            self.gate = self.weight > 0.0
 
     def _delay_rotation(self, delta: Quat, dt: float) -> Quat:
         """Sensor-frame rotation over the last :attr:`delay` s from the gyro increments (oldest partial)."""
@@ -214,9 +238,11 @@ class MagHeading:
         del self.hist[: len(self.hist) - max(keep, 1)]
         return r
 
-    def step(self, q: Quat, delta: Quat, dt: float, mag: tuple[float, float, float] | None) -> float:
+    def step(self, q: Quat, delta: Quat, dt: float, mag: tuple[float, float, float] | None,
+             tilt_sd: float = 0.0) -> float:
         """The heading correction (rad, about world z) for the output ``q`` of this sample before correction;
-        ``delta`` is the sample's bias-corrected gyro increment (sensor frame), ``mag`` its field or None."""
+        ``delta`` is the sample's bias-corrected gyro increment (sensor frame), ``mag`` its field or None,
+        ``tilt_sd`` the standard deviation (deg) of ``q``'s inclination after a hole (0: converged)."""
         self.observed = False
         w = _rotvec(delta)
         rate = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / dt if dt > 0.0 else 0.0
@@ -253,10 +279,22 @@ class MagHeading:
         if self.reject:
             k = self._disturbance(mn, dip, dt, k, initial)
         if self.reacq and k > 0.0 and not self.disturbed:  # (not the half gain after a long rejection)
-            self.n += 1
-            k = max(k, 1.0 / self.n)
+            k = max(k, self._reacquire_gain(err, mw, tilt_sd))
         self.observed = k > 0.0
         return k * err
+
+    def _reacquire_gain(self, err: float, mw: tuple[float, float, float], tilt_sd: float) -> float:
+        """The weight of this field's heading (error ``err``, rad; world-frame field ``mw``) in the mean since the
+        hole; the first field after a hole also tests the bridge (module docstring)."""
+        tan_dip = abs(mw[2]) / math.sqrt(mw[0] * mw[0] + mw[1] * mw[1])
+        var = MAG_HEADING_SD * MAG_HEADING_SD + (tan_dip * tilt_sd) ** 2
+        if self.gate:  # the first field after the hole: is the bridge consistent with it?
+            self.gate = False
+            if (err / DEG) ** 2 > BRIDGE_GATE * BRIDGE_GATE * (1.0 / self.weight + var):
+                self.weight = 0.0
+        w = 1.0 / var
+        self.weight += w
+        return w / self.weight
 
     def _disturbance(self, n: float, dip: float, dt: float, k: float, start: bool) -> float:
         """VQF-style magnetic disturbance detection; the gain to use for this sample."""

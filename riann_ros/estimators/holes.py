@@ -112,11 +112,21 @@ class HoleBlend:
     def _see(self, acc: Vec) -> None:
         self.lin = max(self.lin, abs(math.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) - G))
 
+    def _sf(self) -> float:
+        """σ_f(t) (deg), the fresh network's uncertainty now."""
+        s0 = S_REST + S_RATE * self.w_max + S_LIN * DEG * math.atan2(self.lin, G)
+        return s0 * math.exp(-self.t / TAU)
+
     def weight(self) -> float:
         """K: how far the output moves to the network's inclination at the current time."""
-        s0 = S_REST + S_RATE * self.w_max + S_LIN * DEG * math.atan2(self.lin, G)
-        sf = s0 * math.exp(-self.t / TAU)
+        sf = self._sf()
         return self.sb2 / (self.sb2 + sf * sf)
+
+    def sigma(self) -> float:
+        """Uncertainty (deg) of the output's inclination now, as the fusion of the two estimates sees it:
+        ``σ_b σ_f / √(σ_b² + σ_f²)`` (the heading stage weighs the field's heading with it)."""
+        sf2 = self._sf() ** 2
+        return math.sqrt(self.sb2 * sf2 / (self.sb2 + sf2))
 
     def step(self, q_net: Quat, delta: Quat, dt: float, acc: Vec) -> tuple[Quat, bool]:
         """The output attitude for the next sample (network attitude ``q_net``, bias-corrected gyro increment

@@ -508,7 +508,7 @@ class RiannEstimator(AttitudeEstimator):
         if has.any():
             self._q_net = tuple(base[np.flatnonzero(has)[-1]].tolist())
         qc = quat.normalize(quat.multiply(base, np.asarray(plan.rot)))
-        self._blend_rows(qc, plan, dt, acc)
+        tilt_sd = self._blend_rows(qc, plan, dt, acc)
         prev = np.vstack([np.asarray(self._qc_prev or qc[0])[None, :], qc[:-1]])
         e = quat.multiply(quat.multiply(prev, np.asarray(plan.delta)), quat.conjugate(qc))
         tw = np.remainder(2.0 * np.arctan2(e[:, 3], e[:, 0]) + np.pi, 2.0 * np.pi) - np.pi
@@ -520,7 +520,8 @@ class RiannEstimator(AttitudeEstimator):
             if mag is None:  # the heading started in an earlier call: this batch has no field
                 mag = np.full((n, 3), np.nan)
             psi[first:] = self._mag_psi(float(psi[first - 1]) if first else self._psi, tw[first:], qc[first:],
-                                        plan.delta[first:], dt[first:], mag[first:], [h - first for h in plan.holes])
+                                        plan.delta[first:], dt[first:], mag[first:], tilt_sd[first:],
+                                        {h - first: b[0] for h, b in zip(plan.holes, plan.bridges, strict=True)})
         self._psi = math.remainder(float(psi[-1]), 2.0 * math.pi)
         self._qc_prev = tuple(qc[-1].tolist())
         rz = np.column_stack([np.cos(0.5 * psi), np.zeros(n), np.zeros(n), np.sin(0.5 * psi)])
@@ -541,9 +542,11 @@ class RiannEstimator(AttitudeEstimator):
             self._blend = None
         return q
 
-    def _blend_rows(self, qc: Array, plan: _Plan, dt: Array, acc: Array) -> None:
-        """:meth:`_blend_one` over the rows of a batch, in place (only where a hand-over runs)."""
+    def _blend_rows(self, qc: Array, plan: _Plan, dt: Array, acc: Array) -> Array:
+        """:meth:`_blend_one` over the rows of a batch, in place (only where a hand-over runs); returns each row's
+        inclination uncertainty (deg; 0 where no hand-over runs)."""
         starts = dict(zip(plan.holes, plan.bridges, strict=True))
+        sd = np.zeros(len(qc))
         i = 0 if self._blend is not None else min(starts, default=len(qc))
         while i < len(qc):
             b = starts.get(i)
@@ -552,7 +555,10 @@ class RiannEstimator(AttitudeEstimator):
                 continue
             q = self._blend_one(tuple(qc[i].tolist()), plan.delta[i], float(dt[i]), tuple(acc[i].tolist()), b)
             qc[i] = q
+            if self._blend is not None:
+                sd[i] = self._blend.sigma()
             i += 1
+        return sd
 
     def _first_heading_row(self, mag: Array | None, n: int) -> int:
         """The first row that runs the magnetic heading stage: 0 once a field was seen, else the first row with
@@ -564,21 +570,22 @@ class RiannEstimator(AttitudeEstimator):
         has = np.isfinite(mag).all(axis=1)
         return int(np.argmax(has)) if has.any() else n
 
-    def _mag_psi(self, psi: float, tw: Array, qc: Array, delta: list[Quat], dt: Array, mag: Array,
-                 holes: list[int]) -> Array:
+    def _mag_psi(self, psi: float, tw: Array, qc: Array, delta: list[Quat], dt: Array, mag: Array, tilt_sd: Array,
+                 holes: dict[int, float]) -> Array:
         """Heading angles of the rows after the first field: gyro increment plus the magnetic correction
-        (``holes``: rows that end a hole)."""
+        (``tilt_sd``: each row's inclination uncertainty after a hole; ``holes``: rows that end a hole → the
+        uncertainty of the bridge over it, deg)."""
         out = np.empty(len(tw))
         step = self._heading.step
-        hole = set(holes)
-        for i, (t, q, m, h) in enumerate(zip(tw.tolist(), qc.tolist(), mag.tolist(), dt.tolist(), strict=True)):
-            if i in hole:
-                self._heading.reacquire()
+        for i, (t, q, m, h, sd) in enumerate(zip(tw.tolist(), qc.tolist(), mag.tolist(), dt.tolist(), tilt_sd.tolist(),
+                                                 strict=True)):
+            if i in holes:
+                self._heading.reacquire(holes[i])
             psi += t
             c, s = math.cos(0.5 * psi), math.sin(0.5 * psi)
             qo = (c * q[0] - s * q[3], c * q[1] - s * q[2], c * q[2] + s * q[1], c * q[3] + s * q[0])
             ok = math.isfinite(m[0]) and math.isfinite(m[1]) and math.isfinite(m[2])
-            psi += step(qo, delta[i], h, (m[0], m[1], m[2]) if ok else None)
+            psi += step(qo, delta[i], h, (m[0], m[1], m[2]) if ok else None, sd)
             out[i] = psi
         return out
 
@@ -588,8 +595,11 @@ class RiannEstimator(AttitudeEstimator):
         qc = _qmul(q_net, rot) if rot is not IDENTITY_T else q_net
         n = math.sqrt(sum(v * v for v in qc))
         qc = (qc[0] / n, qc[1] / n, qc[2] / n, qc[3] / n)
+        tilt_sd = 0.0
         if bridge is not None or self._blend is not None:
             qc = self._blend_one(qc, delta, dt, acc, bridge)
+            if self._blend is not None:
+                tilt_sd = self._blend.sigma()
         if self._qc_prev is None:
             self._psi = -2.0 * math.atan2(qc[3], qc[0])
         else:
@@ -600,7 +610,7 @@ class RiannEstimator(AttitudeEstimator):
         if mag is not None or self._heading.started:
             h = 0.5 * self._psi
             qo = _qmul((math.cos(h), 0.0, 0.0, math.sin(h)), qc)
-            self._psi = math.remainder(self._psi + self._heading.step(qo, delta, dt, mag), 2.0 * math.pi)
+            self._psi = math.remainder(self._psi + self._heading.step(qo, delta, dt, mag, tilt_sd), 2.0 * math.pi)
         h = 0.5 * self._psi
         w, x, y, z = _qmul((math.cos(h), 0.0, 0.0, math.sin(h)), qc)
         n = math.sqrt(w * w + x * x + y * y + z * z)
@@ -630,7 +640,7 @@ class RiannEstimator(AttitudeEstimator):
             m0, m1, m2 = (float(v) for v in mag)  # type: ignore[union-attr, arg-type]
             m = (m0, m1, m2) if math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2) else None
         if plan.holes:
-            self._heading.reacquire()
+            self._heading.reacquire(plan.bridges[0][0])
         bridge = plan.bridges[0] if plan.bridges else None
         return self._compose_one(self._q_net, plan.rot[0], plan.delta[0], _step_dt(float(dt)), (x[0], x[1], x[2]), m,
                                  bridge)
