@@ -217,7 +217,7 @@ class MagHeading:
         ``bridge_sd``: standard deviation (deg) of the heading the gyro carried across the hole; None: no
         bridge (its weight is 0)."""
         if self.started:
-            self.t, self.n, self.reacq = 0.0, 0, True
+            self.t, self.reacq = 0.0, True
             self.weight = 1.0 / (bridge_sd * bridge_sd) if bridge_sd else 0.0
             self.gate = self.weight > 0.0
 
