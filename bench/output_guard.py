@@ -1,0 +1,143 @@
+"""Every RIANN output on the BROAD trials, recorded once and compared later: the guard of a change that must not
+move one number (a redesign, a faster network call).
+
+Usage::
+
+    .venv/bin/python bench/output_guard.py record DIR [--jobs 2] [--trials 02,07]
+    .venv/bin/python bench/output_guard.py check DIR [--jobs 2] [--tol 1e-6] [--trials 02,07]
+
+For each BROAD trial (``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``) and each of 6D (``--use-mag false``)
+and 9D (``--use-mag auto``), RIANN at its defaults runs through the evaluator's own pipeline
+(:func:`riann_ros.evaluation.evaluate_source`, so scenario cropping, perturbations and the input gate are part of
+what is guarded) under every condition of ``bench/bench_accuracy.py``: scenarios as-recorded and realistic × its
+perturbations, and the as-recorded scenario at its resampled rates. ``record`` writes every output quaternion
+(float32: its round-off, 6e-8, is far below any tolerance used) to ``DIR/<trial>-<6d|9d>.npz``; ``check``
+recomputes them and prints the largest difference per quaternion component per file, exiting 1 when one
+exceeds ``--tol``. The files are derived from BROAD and stay outside the repository (``test/test_output_guard.py``
+reads them from ``$RIANN_OUTPUT_GUARD`` and skips without them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing as mp
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench_accuracy import CONDITIONS, RATES  # noqa: E402
+
+from riann_ros.datasets.broad import broad_files, find_broad_dir  # noqa: E402
+
+MODES = {"6d": "false", "9d": "auto"}
+
+
+def outputs(trial: str, use_mag: str, conditions: tuple[str, ...] = CONDITIONS,
+            rates: str = RATES) -> dict[str, np.ndarray]:
+    """key ``scenario|condition|rate`` -> (N, 4) RIANN outputs of one trial, in the evaluator's pipeline."""
+    from riann_ros import evaluation as ev
+    from riann_ros.evaluation import run as run_mod
+
+    got: dict[str, list[np.ndarray]] = {}
+    rate_now: list[str] = ["native"]
+    orig = run_mod._ScenarioRun.feed
+
+    def feed(self: Any, chunk: Any, offset: int) -> None:
+        inner = self.run
+
+        class Tap:
+            def feed(self_t: Any, rec: Any) -> list[np.ndarray]:
+                qs = inner.feed(rec)
+                key = f"{self.plan.scenario}|{self.condition.label}|{rate_now[0]}"
+                got.setdefault(key, []).append(np.asarray(qs[0], dtype=np.float32))
+                return qs
+
+            def finish(self_t: Any) -> Any:
+                return inner.finish()
+
+        self.run = Tap()
+        try:
+            orig(self, chunk, offset)
+        finally:
+            self.run = inner
+
+    run_mod._ScenarioRun.feed = feed  # type: ignore[method-assign]
+    try:
+        base = dict(estimators=ev.parse_estimators("riann"), seed=0, use_mag=use_mag)
+        perturbed = ev.EvalSettings(scenarios=["as-recorded", "realistic"],
+                                    conditions=[ev.parse_condition(c) for c in conditions], **base)
+        res = ev.evaluate_source(trial, perturbed)
+        if res.error:
+            raise RuntimeError(res.error)
+        for r in rates.split(","):
+            rate_now[0] = r
+            res = ev.evaluate_source(trial, ev.EvalSettings(scenarios=["as-recorded"], rates=[float(r)], **base))
+            if res.error:
+                raise RuntimeError(res.error)
+    finally:
+        run_mod._ScenarioRun.feed = orig  # type: ignore[method-assign]
+    return {k: np.concatenate(v) for k, v in got.items()}
+
+
+def _file(trial: Path, mode: str) -> str:
+    return f"{trial.name[:2]}-{mode}.npz"
+
+
+def _job(args: tuple[str, str, str, str, float]) -> tuple[str, float, str]:
+    import os
+
+    os.environ["OMP_NUM_THREADS"] = "1"
+    action, trial, mode, out_dir, _tol = args
+    out = outputs(trial, MODES[mode])
+    path = Path(out_dir) / _file(Path(trial), mode)
+    if action == "record":
+        np.savez_compressed(path, **out)
+        return path.name, 0.0, f"{len(out)} runs, {sum(len(v) for v in out.values())} outputs"
+    ref = np.load(path)
+    if set(ref.files) != set(out):
+        return path.name, float("inf"), f"runs differ: {sorted(set(ref.files) ^ set(out))}"
+    worst, where = 0.0, ""
+    for k in ref.files:
+        a, b = ref[k].astype(np.float64), out[k].astype(np.float64)
+        if a.shape != b.shape:
+            return path.name, float("inf"), f"{k}: {a.shape} vs {b.shape}"
+        d = float(np.nanmax(np.abs(a - b))) if len(a) else 0.0
+        if np.isnan(a).any() != np.isnan(b).any() or not np.array_equal(np.isnan(a), np.isnan(b)):
+            d = float("inf")
+        if d > worst:
+            worst, where = d, k
+    return path.name, worst, where
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("action", choices=("record", "check"))
+    ap.add_argument("dir", type=Path)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--tol", type=float, default=1e-6)
+    ap.add_argument("--trials", default="", help="comma-separated trial numbers (default: all)")
+    ap.add_argument("--modes", default="6d,9d")
+    args = ap.parse_args(argv)
+    d = find_broad_dir()
+    if d is None:
+        print("BROAD not found (set RIANN_BROAD_DIR)", file=sys.stderr)
+        return 1
+    trials = [p for p in broad_files(d) if not args.trials or p.name[:2] in args.trials.split(",")]
+    args.dir.mkdir(parents=True, exist_ok=True)
+    jobs = [(args.action, str(t), m, str(args.dir), args.tol) for t in trials for m in args.modes.split(",")]
+    with mp.get_context("forkserver").Pool(args.jobs) as pool:
+        results = pool.map(_job, jobs, chunksize=1)
+    bad = 0
+    for name, worst, info in sorted(results):
+        flag = "" if worst <= args.tol else "  EXCEEDS"
+        bad += worst > args.tol
+        print(f"{name}: max |diff| {worst:.3g} {info}{flag}" if args.action == "check" else f"{name}: {info}")
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
