@@ -31,6 +31,7 @@ from typing import Any
 import yaml
 
 QOS_CHOICES = ("auto", "reliable", "best_effort")
+GIVEN_WAIT_S = 2.0  # with --type: how long to look for the topic in the graph before subscribing anyway
 
 
 class TopicError(Exception):
@@ -166,19 +167,23 @@ class TopicTool:
         return self.node.resolve_topic_name(topic)
 
     def topic_type(self, topic: str, given: str | None, timeout: float) -> str:
-        """The topic's type from the graph (waiting up to ``timeout``), or ``given``."""
-        end = time.monotonic() + timeout
+        """The topic's type from the graph (waiting up to ``timeout``), or ``given`` (checked against the graph once
+        the topic shows up; taken as it is when it has not shown up within ``GIVEN_WAIT_S``)."""
+        start = time.monotonic()
         while True:
             types = self.topics().get(topic)
-            if given is not None:
-                if types and given not in types and _short(given) not in map(_short, types):
+            if types and given is not None:
+                if given not in types and _short(given) not in map(_short, types):
                     raise TopicError(f"{topic} has type {', '.join(types)}, not {given}")
                 return given
             if types:
                 if len(types) > 1:
                     raise TopicError(f"{topic} has several types ({', '.join(types)}): choose one with --type")
                 return types[0]
-            if time.monotonic() >= end:
+            waited = time.monotonic() - start
+            if given is not None and waited >= min(timeout, GIVEN_WAIT_S):
+                return given
+            if waited >= timeout:
                 raise TopicError(f"no topic {topic} after {timeout:g} s ({_domain_text()}); riann-topic list shows "
                                  "what there is")
             self.spin_for(0.1)
