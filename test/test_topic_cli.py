@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import subprocess
+import sys
 import threading
 import time
 
@@ -14,8 +15,6 @@ from sensor_msgs.msg import Imu
 from conftest import executable, wait_for, wait_matched
 from helpers_ros import imu_msg
 from riann_ros.cli.topic import RateStats, message_class, plain
-
-pytestmark = pytest.mark.ros
 
 RATE = 100.0
 
@@ -66,6 +65,7 @@ def echo_one(topic: str) -> dict:
     return doc
 
 
+@pytest.mark.ros
 def test_echo_prints_each_message_type_as_yaml(running):
     out = topic_cli("echo", "imu/madgwick/attitude", "-n", "3")
     assert out.returncode == 0, out.stderr
@@ -87,6 +87,7 @@ def test_echo_prints_each_message_type_as_yaml(running):
     assert float(values["input rate (Hz)"]) > 0.0
 
 
+@pytest.mark.ros
 def test_hz_reports_the_rate_of_arrivals_and_of_header_stamps(running):
     out = topic_cli("hz", "imu/madgwick/attitude", "--duration", "4")
     assert out.returncode == 0, out.stderr
@@ -100,6 +101,7 @@ def test_hz_reports_the_rate_of_arrivals_and_of_header_stamps(running):
     assert 0.6 * 4 * RATE < n < 1.4 * 4 * RATE
 
 
+@pytest.mark.ros
 def test_list_and_errors(running):
     want = ("/imu/madgwick/attitude [geometry_msgs/msg/QuaternionStamped]", "/imu/madgwick/rpy "
             "[geometry_msgs/msg/Vector3Stamped]", "/diagnostics [diagnostic_msgs/msg/DiagnosticArray]",
@@ -124,3 +126,13 @@ def test_message_helpers_without_dds():
         s.add(i * 0.01, 5.0 + i * 0.005)
     arrivals, stamps = s.report()
     assert arrivals.startswith("average rate: 100.000 Hz") and stamps.startswith("header stamps: 200.000 Hz")
+
+
+def test_library_prints_on_fd_1_go_to_stderr():
+    """Fast DDS prints its log lines (ANSI-coloured) on file descriptor 1 on a busy machine; riann-topic's stdout
+    must stay its own (YAML documents to pipe or parse)."""
+    code = ("import os\nfrom riann_ros.cli.topic import keep_stdout_clean\nkeep_stdout_clean()\n"
+            "os.write(1, b'\\x1b[31mlibrary line\\n')\nprint('header: {}')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "header: {}\n" and "library line" in r.stderr

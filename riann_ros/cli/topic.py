@@ -260,11 +260,21 @@ def cmd_hz(tool: TopicTool, args: argparse.Namespace) -> int:
 VERBS = {"list": cmd_list, "echo": cmd_echo, "hz": cmd_hz}
 
 
+def keep_stdout_clean() -> None:
+    """Send what the DDS libraries print on file descriptor 1 (Fast DDS' coloured log lines on a busy machine) to
+    stderr, so that stdout holds only riann-topic's own output (YAML documents for ``echo``, a pipe stays parseable)."""
+    sys.stdout.flush()
+    ours = os.dup(1)
+    os.dup2(2, 1)
+    sys.stdout = os.fdopen(ours, "w", buffering=1)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.verb != "list" and not math.isfinite(args.timeout):
         print("riann-topic: error: --timeout must be finite", file=sys.stderr)
         return 2
+    keep_stdout_clean()
     tool = TopicTool()
     try:
         return VERBS[args.verb](tool, args)

@@ -108,6 +108,7 @@ class NodeParameters:
         self.specs = {s.name: s for s in specs}
         self.log: list[tuple[str, str]] = []
         self._handled: set[str] = set()
+        self._origins: dict[str, list[str]] = {}  # our parameter -> the imu_tools names that set it
 
     # -- start-up ---------------------------------------------------------------------------------------
     def declare(self) -> dict[str, Any]:
@@ -122,10 +123,15 @@ class NodeParameters:
         for name, spec in self.specs.items():
             raw = self.node.declare_parameter(name, ros_value(spec.default),
                                               ParameterDescriptor(dynamic_typing=True)).value
+            origin = ""
             if name not in overrides and name in from_aliases:
                 raw = from_aliases[name]
+                origin = f" (from imu_tools' {', '.join(self._origins[name])})"
             self.node.undeclare_parameter(name)
-            values[name] = spec.coerce(raw)
+            try:
+                values[name] = spec.coerce(raw)
+            except ValueError as e:
+                raise ValueError(f"{e}{origin}") from None
             self.node.declare_parameter(name, ros_value(values[name]), descriptor(spec), ignore_override=True)
         self._report_unknown(overrides)
         return values
@@ -153,6 +159,7 @@ class NodeParameters:
                     arr[int(target.split("[")[1].rstrip("]"))] = v
                     v = arr
                 out[base] = v
+                self._origins.setdefault(base, []).append(f"'{name}'")
             else:
                 targets = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
                                     for k, v in t.values.items())
@@ -161,8 +168,8 @@ class NodeParameters:
         return out
 
     def _report_unknown(self, overrides: dict[str, Parameter]) -> None:
-        declared = set(self.node._parameters)  # ours and rclpy's own (use_sim_time, ...)
-        unknown = [n for n in sorted(overrides) if n not in declared and n not in self._handled]
+        unknown = [n for n in sorted(overrides)  # not ours nor rclpy's own (use_sim_time, ...)
+                   if not self.node.has_parameter(n) and n not in self._handled]
         if unknown:
             known = sorted({*self.specs, *imu_tools.ALIASES})
             own = {k: v for k, v in owners().items() if k not in self.specs}
