@@ -219,6 +219,15 @@ def test_gain_sets_beta_and_unknown_names_are_named(ros, start_node):
     ros.destroy(pub, att)
 
 
+def test_our_name_wins_over_an_imu_tools_name(ros, start_node):
+    node = start_node("madgwick_node", "-p", "gain:=0.2", "-p", "beta_marg:=0.05", "-p", "mag_bias_z:=2e-6")
+    log = started(node)
+    assert "parameter 'gain' (imu_filter_madgwick) ignored: beta_marg set too" in log
+    got = get_params(ros, "/madgwick_node", ["beta", "beta_marg", "mag_hard_iron"])
+    assert (got["beta"][1], got["beta_marg"][1]) == (0.033, 0.05)  # gain applied to neither
+    assert got["mag_hard_iron"][1] == (0.0, 0.0, 2e-6)
+
+
 def test_a_parameter_file_for_another_node_name_is_reported(ros, start_node):
     """imu_tools' files are keyed by its node name (imu_filter): rcl skips such a section for madgwick_node in
     silence; the node names the section, its parameters and how to apply them."""

@@ -147,11 +147,12 @@ class NodeParameters:
             if t.refused is not None:
                 self.log.append(("warning", f"parameter '{name}' ({t.source}) = {value!r} refused: {t.refused}"))
                 continue
+            clash = sorted({target.split("[")[0] for target in t.values} & set(overrides))
+            if clash:
+                self.log.append(("warning", f"parameter '{name}' ({t.source}) ignored: {', '.join(clash)} set too"))
+                continue
             for target, v in t.values.items():
                 base = target.split("[")[0]
-                if base in overrides:
-                    self.log.append(("warning", f"parameter '{name}' ({t.source}) ignored: '{base}' is set too"))
-                    break
                 if base not in self.specs:
                     continue
                 if "[" in target:
@@ -160,11 +161,9 @@ class NodeParameters:
                     v = arr
                 out[base] = v
                 self._origins.setdefault(base, []).append(f"'{name}'")
-            else:
-                targets = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
-                                    for k, v in t.values.items())
-                self.log.append(("info", f"parameter '{name}' ({t.source}) = {value!r}: "
-                                 + (f"{targets} ({t.note})" if targets else t.note)))
+            targets = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}" for k, v in t.values.items())
+            self.log.append(("info", f"parameter '{name}' ({t.source}) = {value!r}: "
+                             + (f"{targets} ({t.note})" if targets else t.note)))
         return out
 
     def _report_unknown(self, overrides: dict[str, Parameter]) -> None:
