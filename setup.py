@@ -29,6 +29,7 @@ setup(
             "vqf_node = riann_ros.nodes.vqf_node:main",
             "riann-bag-convert = riann_ros.cli.convert:main",
             "riann-bag-eval = riann_ros.cli.evaluate:main",
+            "riann-topic = riann_ros.cli.topic:main",
         ],
     },
 )

@@ -14,8 +14,8 @@ path (bag reader, evaluator), so both give an estimator the same field for the s
   used; the estimator then runs 6D for that sample (its heading follows the gyro).
 * ``use_mag``: ``auto`` (default) uses the field whenever a fresh, plausible one is paired; ``true``
   does the same and reports a missing field as a warning; ``false`` never passes a field.
-* **declination** (deg, east positive): 9D estimators reference their heading to magnetic north; once a
-  field has been used the output is rotated by ``Rz(−declination)`` so that the ENU y axis is true north.
+* **declination_deg** (east positive): 9D estimators reference their heading to magnetic north; once a
+  field has been used the output is rotated by ``Rz(−declination_deg)`` so that the ENU y axis is true north.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ MAG_PARAMS: tuple[ParamSpec, ...] = (
               min=-1.0, max=1.0, runtime=True),
     ParamSpec("mag_soft_iron", IDENTITY_9, "Soft-iron matrix S (row-major 3x3) applied after the offset: "
               "m = S (m_raw - hard_iron).", min=-1.0e3, max=1.0e3, runtime=True),
-    ParamSpec("declination", 0.0, "deg, east positive; magnetic declination at the site, so that the heading "
+    ParamSpec("declination_deg", 0.0, "deg, east positive; magnetic declination at the site, so that the heading "
               "of a 9D estimate is relative to true north.", min=-180.0, max=180.0, runtime=True),
 )
 _MAG_DEFAULTS = defaults(MAG_PARAMS)
@@ -65,7 +65,7 @@ class MagConfig:
     mag_timeout: float = _MAG_DEFAULTS["mag_timeout"]
     mag_hard_iron: tuple[float, ...] = _MAG_DEFAULTS["mag_hard_iron"]
     mag_soft_iron: tuple[float, ...] = _MAG_DEFAULTS["mag_soft_iron"]
-    declination: float = _MAG_DEFAULTS["declination"]
+    declination_deg: float = _MAG_DEFAULTS["declination_deg"]
 
     def __post_init__(self) -> None:
         for spec in MAG_PARAMS:
@@ -216,8 +216,8 @@ class MagInput:
         return out
 
     def declination_applied(self, q: NDArray[np.float64], seen: NDArray[np.bool_]) -> NDArray[np.float64]:
-        """Rotate the rows seen with a field by Rz(−declination) (ENU: y becomes true north)."""
-        d = self.config.declination
+        """Rotate the rows seen with a field by Rz(−declination_deg) (ENU: y becomes true north)."""
+        d = self.config.declination_deg
         if d == 0.0 or not seen.any():
             return q
         from riann_ros import quaternion as quat

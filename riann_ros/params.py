@@ -12,6 +12,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+_BOOL_TEXT = {"true": True, "false": False, "yes": True, "no": False, "on": True, "off": False, "1": True, "0": False}
+
 
 @dataclass(frozen=True)
 class ParamSpec:
@@ -64,6 +66,47 @@ class ParamSpec:
         if self.max is not None and v > self.max:
             raise ValueError(f"{self.name}={v:g} is above its maximum {self.max:g}")
         return int(v) if isinstance(self.default, int) else v
+
+    def coerce(self, value: Any) -> Any:
+        """``value`` as a user naturally writes it, converted to the parameter's type and validated.
+
+        YAML and the ROS command line type a value by its spelling, so the same intent arrives as another
+        type: ``200`` for a float, ``false`` (a bool) for ``use_mag``, ``"true"`` (a string, e.g. from a
+        launch substitution) for a bool, ``[0, 0, 1]`` (integers) for a float array, ``NED`` for ``ned``.
+        Accepted: for a float or integer parameter a number or a numeric string (an integer parameter
+        only whole values); for a bool ``true``/``false``/``yes``/``no``/``on``/``off``/``1``/``0`` (any
+        case) or the integers 1 and 0; for a string with choices any case of a choice, and ``true``/``false``
+        given as bools where the choices contain them; for a free string any scalar (its text); for an array
+        a list of numbers or its text (``"1,2,3"``). Anything else raises ``ValueError`` as :meth:`validate`.
+        """
+        if isinstance(self.default, bool):
+            return self.validate(self._as_bool(value))
+        if isinstance(self.default, str):
+            return self.validate(self._as_str(value))
+        if isinstance(self.default, tuple):
+            if isinstance(value, str):
+                return self.parse(value)
+            return self.validate(list(value) if isinstance(value, list | tuple) else value)
+        if isinstance(value, str):
+            return self.parse(value)
+        return self.validate(value)
+
+    def _as_bool(self, value: Any) -> Any:
+        if isinstance(value, str) and value.strip().lower() in _BOOL_TEXT:
+            return _BOOL_TEXT[value.strip().lower()]
+        if isinstance(value, int) and not isinstance(value, bool) and value in (0, 1):
+            return bool(value)
+        return value
+
+    def _as_str(self, value: Any) -> Any:
+        if isinstance(value, bool):
+            value = "true" if value else "false"
+        elif isinstance(value, int | float) and not self.choices:
+            value = str(value)
+        if isinstance(value, str) and self.choices and value not in self.choices:
+            folded = {c.lower(): c for c in self.choices}
+            value = folded.get(value.strip().lower(), value)
+        return value
 
     def parse(self, text: str) -> Any:
         """The value of a command-line string (``"0.1"``, ``"true"``, ``"sensor_data"``), validated."""

@@ -281,7 +281,7 @@ class EstimatorStream:
         q = self.estimator.update(acc, gyr, r.dt, field)
         if not _is_unit(q):
             return None, self._fault(r)
-        if self.mag.note(field is not None) and self.mag.config.declination != 0.0:
+        if self.mag.note(field is not None) and self.mag.config.declination_deg != 0.0:
             q = self.mag.declination_applied(q[None, :], np.ones(1, dtype=bool))[0]
         return q, r
 

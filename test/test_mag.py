@@ -379,7 +379,7 @@ def test_use_mag_false_is_6d(name: str) -> None:
     stamps, acc, gyr, mag = mixed_sequence()
     gate = GateConfig(nominal_rate=100.0)
     q6, _ = EstimatorStream(create(name), gate).process_batch(stamps, acc, gyr, None)
-    off = EstimatorStream(create(name), gate, MagConfig(use_mag="false", declination=10.0))
+    off = EstimatorStream(create(name), gate, MagConfig(use_mag="false", declination_deg=10.0))
     q_off, ok = off.process_batch(stamps, acc, gyr, mag)
     assert ok.all()
     np.testing.assert_allclose(q_off, q6, rtol=0, atol=1e-12)
@@ -417,9 +417,9 @@ def test_declination_rotates_9d_output(name: str) -> None:
     mag[:first] = np.nan
     mag[600:] = np.nan  # the field stops: the output stays referenced to true north
     gate = GateConfig(nominal_rate=100.0)
-    q0, _ = EstimatorStream(create(name), gate, MagConfig(declination=0.0)).process_batch(
+    q0, _ = EstimatorStream(create(name), gate, MagConfig(declination_deg=0.0)).process_batch(
         rec.stamps_ns, rec.acc, rec.gyr, mag)
-    q10, _ = EstimatorStream(create(name), gate, MagConfig(declination=10.0)).process_batch(
+    q10, _ = EstimatorStream(create(name), gate, MagConfig(declination_deg=10.0)).process_batch(
         rec.stamps_ns, rec.acc, rec.gyr, mag)
     tol = STREAM_TOL.get(name, 1e-9)
     np.testing.assert_allclose(q10[:first], q0[:first], rtol=0, atol=tol)  # before the first field: unchanged
@@ -429,7 +429,7 @@ def test_declination_rotates_9d_output(name: str) -> None:
     assert gravity_angle(q0, q10).max() < 1e-6
     np.testing.assert_allclose(heading_change_deg(q0[first:], q10[first:]), 10.0, atol=1e-6)
     if name == "vqf":  # the per-sample path applies it the same way
-        q1, _ = per_sample(EstimatorStream(create(name), gate, MagConfig(declination=10.0)),
+        q1, _ = per_sample(EstimatorStream(create(name), gate, MagConfig(declination_deg=10.0)),
                            rec.stamps_ns, rec.acc, rec.gyr, mag)
         np.testing.assert_allclose(sign_aligned(q10, q1), q10, rtol=0, atol=1e-6)
 

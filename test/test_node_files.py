@@ -7,20 +7,20 @@ Regenerate the parameter table of docs/node.md after changing a ParamSpec:
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import re
-import sys
-import types
 
+import helpers_launch as hl
 import pytest
 
 from conftest import ROOT
 from riann_ros.estimators import estimator_class
 from riann_ros.nodes.madgwick_node import MadgwickNode
 from riann_ros.nodes.mahony_node import MahonyNode
-from riann_ros.nodes.node_base import NODE_PARAMS, rpy_topic
+from riann_ros.nodes.node_base import INPUT_TOPIC, MAG_TOPIC
+from riann_ros.nodes.outputs import rpy_topic
+from riann_ros.nodes.parameters import NODE_PARAMS
 from riann_ros.nodes.riann_node import RiannNode
 from riann_ros.nodes.vqf_node import VqfNode
 from riann_ros.params import ParamSpec
@@ -133,133 +133,89 @@ def test_setup_installs_the_config_and_launch_files():
         assert f"<exec_depend>{dep}</exec_depend>" in pkg
 
 
-# -- launch files, against stand-in launch modules ----------------------------------------------------------
-class _Recorder:
-    def __init__(self, *args, **kwargs) -> None:
-        self.args, self.kwargs = args, kwargs
-
-
-class LaunchConfiguration(_Recorder):
-    def perform(self, context: dict[str, str]) -> str:
-        return context[self.args[0]]
-
-
-class DeclareLaunchArgument(_Recorder):
-    @property
-    def name(self) -> str:
-        return self.args[0]
-
-
-class OpaqueFunction(_Recorder):
-    pass
-
-
-class Node(_Recorder):
-    pass
-
-
-class ParameterValue(_Recorder):
-    pass
-
-
-class LaunchDescription(_Recorder):
-    @property
-    def entities(self) -> list:
-        return self.args[0]
-
-
+# -- launch files, against stand-in launch modules (test/helpers_launch.py) ----------------------------------
 @pytest.fixture
 def load_launch(monkeypatch, tmp_path):
     """Load a launch file with stand-ins for launch / launch_ros (which record what they are given)."""
-    mods = {
-        "launch": {"LaunchDescription": LaunchDescription},
-        "launch.actions": {"DeclareLaunchArgument": DeclareLaunchArgument, "OpaqueFunction": OpaqueFunction},
-        "launch.substitutions": {"LaunchConfiguration": LaunchConfiguration},
-        "launch_ros": {},
-        "launch_ros.actions": {"Node": Node},
-        "launch_ros.parameter_descriptions": {"ParameterValue": ParameterValue},
-        "ament_index_python.packages": {"get_package_share_directory": lambda pkg: str(tmp_path / "share" / pkg)},
-    }
-    for name, attrs in mods.items():
-        m = types.ModuleType(name)
-        for k, v in attrs.items():
-            setattr(m, k, v)
-        monkeypatch.setitem(sys.modules, name, m)
+    share = tmp_path / "share" / "riann_ros"
+    hl.install_stand_ins(monkeypatch, share)
 
     def load(file: str):
-        spec = importlib.util.spec_from_file_location(file.replace(".", "_"), ROOT / "launch" / file)
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        return mod, mod.generate_launch_description().entities, tmp_path / "share" / "riann_ros"
+        mod, entities = hl.load(file)
+        return mod, entities, share
 
     return load
 
 
-def _arguments(entities) -> dict[str, str]:
-    return {e.name: e.kwargs["default_value"] for e in entities if isinstance(e, DeclareLaunchArgument)}
-
-
 def test_riann_launch_arguments_and_defaults(load_launch):
     mod, entities, share = load_launch("riann.launch.py")
-    args = _arguments(entities)
+    args = hl.arguments(entities)
     assert args == {
-        "params_file": str(share / "config" / "riann.yaml"), "input_topic": "imu/data_raw",
-        "attitude_topic": "imu/attitude", "imu_topic": "imu/data", "rpy_topic": "imu/rpy",
+        "params_file": str(share / "config" / "riann.yaml"), "input_topic": "imu/data_raw", "mag_topic": "imu/mag",
+        "namespace": "", "attitude_topic": "imu/attitude", "imu_topic": "imu/data", "rpy_topic": "imu/rpy",
         "nominal_rate": "", "world_frame": "", "fixed_frame": "", "publish_tf": "", "publish_rpy": "",
     }
     # the remapped topics are the node's own defaults, the overridable arguments its parameters of that type
     assert set(mod.OUTPUT_TOPICS.values()) == {RiannNode.ATTITUDE_TOPIC, RiannNode.IMU_TOPIC,
                                                rpy_topic(RiannNode.ATTITUDE_TOPIC)}
+    assert (mod.INPUT_TOPIC, mod.MAG_TOPIC) == (INPUT_TOPIC, MAG_TOPIC)
     specs = {s.name: s for s in NODE_PARAMS}
     for name, (kind, _) in mod.PARAMETER_ARGUMENTS.items():
         assert type(specs[name].default).__name__ == kind, name
     assert '"riann_node = riann_ros.nodes.riann_node:main"' in (ROOT / "setup.py").read_text()
 
-    # defaults: the parameter file alone, every topic where the node puts it
-    (fn,) = [e for e in entities if isinstance(e, OpaqueFunction)]
-    (node,) = fn.kwargs["function"](args)
+    # defaults: the parameter file alone, every topic where the node puts it, no namespace
+    (node,) = hl.nodes(entities, args)
     assert node.kwargs["executable"] == "riann_node" and node.kwargs["package"] == "riann_ros"
     assert node.kwargs["parameters"] == [str(share / "config" / "riann.yaml")]
-    assert dict(node.kwargs["remappings"]) == {"imu/data_raw": "imu/data_raw", "imu/attitude": "imu/attitude",
-                                               "imu/data": "imu/data", "imu/rpy": "imu/rpy"}
+    assert node.kwargs["namespace"] is None
+    assert dict(node.kwargs["remappings"]) == {"imu/data_raw": "imu/data_raw", "imu/mag": "imu/mag",
+                                               "imu/attitude": "imu/attitude", "imu/data": "imu/data",
+                                               "imu/rpy": "imu/rpy"}
 
 
 def test_riann_launch_overrides_only_what_is_given(load_launch):
-    from riann_ros.nodes.node_base import NODE_PARAMS as specs
-
     _, entities, _ = load_launch("riann.launch.py")
-    context = {**_arguments(entities), "params_file": "/my.yaml", "input_topic": "/my_imu/data_raw",
-               "attitude_topic": "/robot/attitude", "nominal_rate": "200", "world_frame": "ned",
-               "publish_tf": "True"}
-    (fn,) = [e for e in entities if isinstance(e, OpaqueFunction)]
-    (node,) = fn.kwargs["function"](context)
+    context = {**hl.arguments(entities), "params_file": "/my.yaml", "input_topic": "/my_imu/data_raw",
+               "mag_topic": "/my_imu/mag", "namespace": "robot1", "attitude_topic": "/robot/attitude",
+               "nominal_rate": "200", "world_frame": "ned", "publish_tf": "True"}
+    (node,) = hl.nodes(entities, context)
     file, overrides = node.kwargs["parameters"]
-    assert file == "/my.yaml"
+    assert file == "/my.yaml" and node.kwargs["namespace"] == "robot1"
     assert overrides == {"nominal_rate": 200.0, "world_frame": "ned", "publish_tf": True}
+    specs = {s.name: s for s in NODE_PARAMS}
     for name, value in overrides.items():  # values the node accepts
-        assert next(s for s in specs if s.name == name).validate(value) == value
+        assert specs[name].validate(value) == value
     remaps = dict(node.kwargs["remappings"])
     assert remaps["imu/data_raw"] == "/my_imu/data_raw" and remaps["imu/attitude"] == "/robot/attitude"
+    assert remaps["imu/mag"] == "/my_imu/mag"
     with pytest.raises(ValueError, match="publish_rpy must be true or false"):
-        fn.kwargs["function"]({**context, "publish_rpy": "yes"})
+        hl.nodes(entities, {**context, "publish_rpy": "yes"})
 
 
-def test_side_by_side_launch_passes_the_frame_arguments(load_launch):
-    _, entities, share = load_launch("side_by_side.launch.py")
-    args = _arguments(entities)
-    assert args == {"input_topic": "imu/data_raw", "nominal_rate": "100.0", "world_frame": "enu",
-                    "fixed_frame": "odom", "publish_tf": "false", "publish_rpy": "false"}
+def test_side_by_side_launch_overrides_only_what_is_given(load_launch):
+    mod, entities, share = load_launch("side_by_side.launch.py")
+    args = hl.arguments(entities)
+    assert args == {"input_topic": "imu/data_raw", "mag_topic": "imu/mag", "namespace": "", "nominal_rate": "",
+                    "world_frame": "", "fixed_frame": "", "publish_tf": "", "publish_rpy": ""}
     specs = {s.name: s for s in NODE_PARAMS}
-    for name in ("world_frame", "fixed_frame", "publish_tf", "publish_rpy"):  # launch defaults = node defaults
-        assert specs[name].parse(args[name]) == specs[name].default
-    nodes = {e.kwargs["executable"]: e for e in entities if isinstance(e, Node)}
+    for name, (kind, _) in mod.PARAMETER_ARGUMENTS.items():
+        assert type(specs[name].default).__name__ == kind, name
+    # defaults: each node with its own parameter file only (nothing overrides what the files say)
+    nodes = {n.kwargs["executable"]: n for n in hl.nodes(entities, args)}
     assert set(nodes) == {f"{n}_node" for n in NODE_CLASSES}
     for exe, node in nodes.items():
-        file, params = node.kwargs["parameters"]
+        assert node.kwargs["parameters"] == [str(share / "config" / exe.replace("_node", ".yaml"))]
+        assert dict(node.kwargs["remappings"]) == {"imu/data_raw": "imu/data_raw", "imu/mag": "imu/mag"}
+        assert node.kwargs["namespace"] is None
+    # given values go to all four, publish_tf to riann_node only
+    context = {**args, "nominal_rate": "200", "publish_tf": "true", "world_frame": "ned", "namespace": "robot1",
+               "mag_topic": "/robot1/magnetometer"}
+    for node in hl.nodes(entities, context):
+        exe = node.kwargs["executable"]
+        file, overrides = node.kwargs["parameters"]
         assert file == str(share / "config" / exe.replace("_node", ".yaml"))
-        want = {"nominal_rate", "world_frame", "fixed_frame", "publish_rpy"} | ({"publish_tf"} if exe == "riann_node"
-                                                                                  else set())
-        assert set(params) == want, exe
-        for name, pv in params.items():
-            assert pv.args[0].args[0] == name  # the launch argument of the same name
-            assert pv.kwargs["value_type"] is type(specs[name].default)
+        assert overrides == {"nominal_rate": 200.0, "world_frame": "ned",
+                             **({"publish_tf": True} if exe == "riann_node" else {})}, exe
+        assert node.kwargs["namespace"] == "robot1"
+        assert dict(node.kwargs["remappings"])["imu/mag"] == "/robot1/magnetometer"

@@ -21,10 +21,11 @@ from conftest import wait_for, wait_matched
 from helpers_ros import imu_msg, quats, stamp_ns
 from riann_ros import frames
 from riann_ros.estimators import create
+from riann_ros.nodes.diagnostics import StampRateCheck
 from riann_ros.nodes.live import call_service
 from riann_ros.nodes.madgwick_node import MadgwickNode
 from riann_ros.nodes.mahony_node import MahonyNode
-from riann_ros.nodes.node_base import StampRateCheck, make_transform, rpy_topic, tf_frames_problem
+from riann_ros.nodes.outputs import make_transform, rpy_topic, tf_frames_problem
 from riann_ros.nodes.riann_node import RiannNode
 from riann_ros.nodes.vqf_node import VqfNode
 from riann_ros.stream import EstimatorStream, GateConfig

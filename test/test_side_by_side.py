@@ -83,8 +83,7 @@ def test_launch_file_starts_every_node_executable_with_its_config():
 
 def test_launch_description_when_launch_ros_is_present(tmp_path, monkeypatch):
     pytest.importorskip("launch_ros")
-    from launch.actions import DeclareLaunchArgument
-    from launch_ros.actions import Node
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction
 
     # a minimal ament prefix so get_package_share_directory("riann_ros") finds config/ without a colcon build
     (tmp_path / "share" / "ament_index" / "resource_index" / "packages").mkdir(parents=True)
@@ -97,10 +96,9 @@ def test_launch_description_when_launch_ros_is_present(tmp_path, monkeypatch):
     spec.loader.exec_module(mod)
     ld = mod.generate_launch_description()
     args = [e for e in ld.entities if isinstance(e, DeclareLaunchArgument)]
-    nodes = [e for e in ld.entities if isinstance(e, Node)]
-    assert {a.name for a in args} == {"input_topic", "nominal_rate", "world_frame", "fixed_frame", "publish_tf",
-                                      "publish_rpy"}
-    assert len(nodes) == 4
+    assert {a.name for a in args} == {"input_topic", "mag_topic", "namespace", "nominal_rate", "world_frame",
+                                      "fixed_frame", "publish_tf", "publish_rpy"}
+    assert len([e for e in ld.entities if isinstance(e, OpaqueFunction)]) == 1  # the four nodes
 
 
 def test_riann_launch_description_when_launch_ros_is_present(tmp_path, monkeypatch):
@@ -117,8 +115,9 @@ def test_riann_launch_description_when_launch_ros_is_present(tmp_path, monkeypat
     spec.loader.exec_module(mod)
     ld = mod.generate_launch_description()
     args = [e for e in ld.entities if isinstance(e, DeclareLaunchArgument)]
-    assert {a.name for a in args} == {"params_file", "input_topic", "attitude_topic", "imu_topic", "rpy_topic",
-                                      "nominal_rate", "world_frame", "fixed_frame", "publish_tf", "publish_rpy"}
+    assert {a.name for a in args} == {"params_file", "input_topic", "mag_topic", "namespace", "attitude_topic",
+                                      "imu_topic", "rpy_topic", "nominal_rate", "world_frame", "fixed_frame",
+                                      "publish_tf", "publish_rpy"}
     assert len([e for e in ld.entities if isinstance(e, OpaqueFunction)]) == 1
 
 

@@ -1,0 +1,148 @@
+"""The nodes' ``/diagnostics`` and the stamp-rate check behind ``nominal_rate``'s warning."""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+from collections import Counter
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+
+from riann_ros import mag as mg
+from riann_ros import stream as st
+
+RATE_CHECK_SAMPLES = 100  # accepted samples (restarts excluded) whose median dt gives the measured stamp rate
+RATE_TOLERANCE = 0.10  # relative difference between measured and nominal rate that is warned about
+
+
+class StampRateCheck:
+    """The IMU's stamp rate, measured once: the median dt over the first ``samples`` accepted samples that
+    continue a sequence (the first sample after a (re)start gets dt = 1/nominal_rate, so it is left out).
+    The median ignores the odd gap, burst or jittery stamp."""
+
+    def __init__(self, samples: int = RATE_CHECK_SAMPLES, tolerance: float = RATE_TOLERANCE) -> None:
+        self.samples = samples
+        self.tolerance = tolerance
+        self.measured_hz: float | None = None
+        self._dts: list[float] = []
+
+    def add(self, dt: float) -> bool:
+        """Count one dt (s); True when this one completes the measurement."""
+        if self.measured_hz is not None or not dt > 0.0:
+            return False
+        self._dts.append(dt)
+        if len(self._dts) < self.samples:
+            return False
+        self.measured_hz = 1.0 / statistics.median(self._dts)
+        self._dts = []
+        return True
+
+    def mismatch(self, nominal_hz: float) -> float | None:
+        """Relative difference measured/nominal − 1 when it exceeds the tolerance, else None."""
+        if self.measured_hz is None:
+            return None
+        rel = self.measured_hz / nominal_hz - 1.0
+        return rel if abs(rel) > self.tolerance else None
+
+    def text(self, nominal_hz: float) -> str:
+        rel = self.mismatch(nominal_hz) or 0.0
+        return (f"measured IMU stamp rate {self.measured_hz:.1f} Hz (median dt of {self.samples} samples) differs "
+                f"from nominal_rate {nominal_hz:.1f} Hz by {rel * 100:+.0f} %: set the parameter nominal_rate to "
+                f"{self.measured_hz:.1f} (dt of the first sample after a (re)start; VQF's sample time, its time "
+                "constants scale with it)")
+
+
+def _stat(values: list[float], f: str) -> str:
+    if not values:
+        return "nan"
+    a = np.asarray(values)
+    return f"{np.percentile(a, 99) if f == 'p99' else getattr(a, f)():.1f}"
+
+
+class Diagnostics:
+    """One node's ``/diagnostics`` status: counts what happens in each period and publishes it."""
+
+    def __init__(self, node: Node, stream: st.EstimatorStream, estimator: str, input_topic: str, mag_topic: str,
+                 period_s: float) -> None:
+        self.node = node
+        self.stream = stream
+        self.estimator = estimator
+        self.input_topic = node.resolve_topic_name(input_topic)
+        self.mag_topic = node.resolve_topic_name(mag_topic)
+        self.rate = StampRateCheck()
+        self.frame_id = ""
+        self.world = ""
+        self.mag_received = 0
+        self._pub = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._start = time.monotonic()
+        self.inputs = 0
+        self.rejected: Counter[str] = Counter()
+        self.proc_us: list[float] = []
+        self.est_us: list[float] = []
+        node.create_timer(period_s, self.publish)
+
+    def level(self) -> tuple[bytes, str]:
+        """(level, message) of this period: no input, rejections, a nominal_rate far from the stamp rate."""
+        problems = []
+        if self.inputs == 0:
+            problems.append("no input on " + self.input_topic)
+        if sum(self.rejected.values()):
+            problems.append("samples rejected: " + ", ".join(f"{k}={v}" for k, v in self.rejected.items()))
+        nominal = self.stream.gate.config.nominal_rate
+        if self.rate.mismatch(nominal) is not None:
+            problems.append(f"nominal_rate {nominal:.1f} Hz differs from the measured stamp rate "
+                            f"{self.rate.measured_hz:.1f} Hz: set nominal_rate")
+        mag = self.stream.mag
+        if mag.config.use_mag == "true" and self.stream.estimator.USES_MAG and mag.state != mg.FIELD_USED:
+            problems.append(f"use_mag is true but {mag.state[4:]} on {self.mag_topic}")
+        if problems:
+            return DiagnosticStatus.WARN, "; ".join(problems)
+        return DiagnosticStatus.OK, "ok"
+
+    def values(self, period: float) -> dict[str, str]:
+        gate = self.stream.gate
+        est = self.stream.estimator
+        dts = gate.pop_dt_stats()
+        measured = self.rate.measured_hz
+        values = {
+            "input rate (Hz)": f"{self.inputs / period:.2f}",
+            "stamp rate measured (Hz)": f"{measured:.2f}" if measured is not None else "nan",
+            "nominal_rate (Hz)": f"{gate.config.nominal_rate:.2f}",
+            **{f"dt {k} (ms)": f"{dts.get(k, math.nan) * 1e3:.3f}" for k in ("min", "mean", "max", "std")},
+            "samples accepted (total)": str(gate.accepted),
+            "inference time mean (us)": _stat(self.est_us, "mean"),
+            "inference time max (us)": _stat(self.est_us, "max"),
+            "processing time mean (us)": _stat(self.proc_us, "mean"),
+            "processing time p99 (us)": _stat(self.proc_us, "p99"),
+            "processing time max (us)": _stat(self.proc_us, "max"),
+            "world frame": self.world,
+            "magnetometer": self.stream.mag.state if est.USES_MAG else "not used by this estimator",
+            "field readings received (total)": str(self.mag_received),
+            "heading": "magnetic (9D)" if est.heading_observed() else "gyro only",
+        }
+        values.update(est.diagnostics())
+        for reason in st.REJECT_REASONS:
+            values[f"rejected {reason} (total)"] = str(gate.rejected[reason])
+        for cause in (st.GAP, st.CLOCK_JUMP):
+            values[f"restarts {cause} (total)"] = str(gate.resets[cause])
+        return values
+
+    def publish(self) -> None:
+        now = time.monotonic()
+        status = DiagnosticStatus()
+        status.name = f"{self.node.get_name()}: {self.estimator} attitude estimator"
+        status.hardware_id = self.frame_id
+        status.level, status.message = self.level()
+        status.values = [KeyValue(key=k, value=v) for k, v in self.values(max(now - self._start, 1e-9)).items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.node.get_clock().now().to_msg()
+        arr.status = [status]
+        self._pub.publish(arr)
+        self._start = now
+        self.inputs = 0
+        self.rejected.clear()
+        self.proc_us = []
+        self.est_us = []
