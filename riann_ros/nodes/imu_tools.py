@@ -96,6 +96,19 @@ def _radians_to(ours: str, what: str) -> Callable[[Any, str], Translation]:
     return tr
 
 
+DECLINATION_PLAUSIBLE = 0.6  # rad (34°): |declination| beyond this is rare outside polar regions
+
+
+def _declination(v: Any, est: str) -> Translation:
+    """imu_tools' declination is in radians, ours (declination_deg) in degrees: a value that is implausible in
+    radians was probably meant in degrees (this package called its parameter declination once)."""
+    t = _radians_to("declination_deg", "magnetic declination, east positive")(v, est)
+    if abs(_number("declination", v)) > DECLINATION_PLAUSIBLE:
+        t.note += (f" -- WARNING: {_number('declination', v):g} rad is implausible; declination is in radians "
+                   "(imu_tools); for degrees set declination_deg")
+    return t
+
+
 def _constant_dt(v: Any, est: str) -> Translation:
     t = Translation("constant_dt", BOTH)
     dt = _number("constant_dt", v)
@@ -162,7 +175,7 @@ ALIASES: dict[str, Callable[[Any, str], Translation]] = {
     "mag_bias_z": _mag_bias(2),
     "orientation_stddev": _orientation_stddev,
     "yaw_offset": _radians_to("yaw_offset_deg", "yaw offset about the world z axis"),
-    "declination": _radians_to("declination_deg", "magnetic declination, east positive"),
+    "declination": lambda v, est: _declination(v, est),
     "constant_dt": _constant_dt,
     "publish_debug_topics": _debug_topics,
     "stateless": _stateless,
