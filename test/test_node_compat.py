@@ -125,3 +125,11 @@ def test_docs_have_one_imu_tools_table_with_every_name() -> None:
     first_cells = [line.split("|")[1] for line in tables[0].strip().splitlines()[2:]]
     rows = {name for cell in first_cells for name in re.findall(r"`([\w.*/]+)`", cell)}
     assert rows >= set(imu_tools.ALIASES) | set(imu_tools.SAME_NAMES) | {"qos_overrides.*"}
+
+
+def test_a_declination_implausible_in_radians_is_warned_about():
+    from riann_ros.nodes import imu_tools
+
+    t = imu_tools.translate("declination", 2.5, "riann")
+    assert "WARNING" in t.note and "declination_deg" in t.note
+    assert "WARNING" not in imu_tools.translate("declination", 0.05, "riann").note

@@ -162,7 +162,8 @@ class NodeParameters:
                 out[base] = v
                 self._origins.setdefault(base, []).append(f"'{name}'")
             targets = ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}" for k, v in t.values.items())
-            self.log.append(("warning" if "WARNING" in t.note else "info", f"parameter '{name}' ({t.source}) = {value!r}: "
+            level = "warning" if "WARNING" in t.note else "info"
+            self.log.append((level, f"parameter '{name}' ({t.source}) = {value!r}: "
                              + (f"{targets} ({t.note})" if targets else t.note)))
         return out
 
