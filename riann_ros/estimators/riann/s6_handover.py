@@ -1,4 +1,4 @@
-"""After a hole in the stream: hand the inclination over from the gyro bridge to the fresh network (ROS-free).
+"""Stage 6, the hand-over after a hole: the inclination moves from the gyro bridge to the fresh network (ROS-free).
 
 During a hole (messages lost while the sensor moves) the rotation is unknown. Two estimates of the
 inclination exist after it, and each is wrong in its own way:
@@ -30,8 +30,8 @@ everywhere. The blend ends when ``K`` is within ``DONE`` of 1: from then on the 
 again, exactly. Gaps longer than the input gate's ``max_dt`` are not bridged at all (the estimator
 restarts without a bridge) and never blend.
 
-Measured on the 12 BROAD trials with holes of 0.1–0.6 s every ~10 s, and why these constants: see
-``docs/riann.md`` §3 ("hand-over after a hole").
+Measured on the 12 BROAD trials with holes of 0.1–0.6 s every ~10 s, and why these constants: docs/riann.md,
+stage 6.
 """
 
 from __future__ import annotations
@@ -39,12 +39,11 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from riann_ros.estimators.heading import _rotate, qmul
+from riann_ros.estimators.riann.stage import Cause, Hole, Quat, Vec
+from riann_ros.rotations import gravity, rotate, tilt_to, toward, unit
 
-Quat = tuple[float, float, float, float]
-Vec = tuple[float, float, float]
+RAD = 180.0 / math.pi  # degrees in one radian
 
-DEG = 180.0 / math.pi
 G = 9.81  # m/s²
 TAU = 0.5  # s: a fresh network's error decays with about this time constant after a restart in motion
 S_REST = 2.0  # deg: the fresh network's starting error at rest
@@ -60,42 +59,7 @@ def bridge_sigma(w_before: Sequence[float], w_after: Sequence[float], hole_s: fl
     of the samples on either side."""
     dw = math.dist(w_before, w_after)
     w = max(math.hypot(*w_before), math.hypot(*w_after))
-    return math.sqrt(S_FLOOR**2 + (DEG * dw * hole_s / 2.0) ** 2 + (DEG * ROT_SHARE * w * hole_s) ** 2)
-
-
-def gravity(q: Quat) -> Vec:
-    """World z (up) in the sensor frame of the sensor-to-world attitude ``q``: R(q)ᵀ e_z."""
-    w, x, y, z = q
-    return (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
-
-
-def _unit(v: Vec) -> Vec:
-    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    return (v[0] / n, v[1] / n, v[2] / n)
-
-
-def _toward(a: Vec, b: Vec, k: float) -> Vec:
-    """Unit vector ``a`` turned toward unit vector ``b`` by the fraction ``k`` of the angle between them."""
-    c = max(-1.0, min(1.0, a[0] * b[0] + a[1] * b[1] + a[2] * b[2]))
-    th = math.acos(c)
-    s = math.sin(th)
-    if s < 1e-9:  # the same direction, or opposite (no unique path): the network's
-        return b
-    fa, fb = math.sin((1.0 - k) * th) / s, math.sin(k * th) / s
-    return _unit((fa * a[0] + fb * b[0], fa * a[1] + fb * b[1], fa * a[2] + fb * b[2]))
-
-
-def tilt_to(q: Quat, v: Vec) -> Quat:
-    """``q`` turned by the smallest rotation that makes its gravity direction :func:`gravity` equal ``v``
-    (about a horizontal axis: the heading of ``q`` is kept)."""
-    u = gravity(q)
-    ax = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
-    s = math.sqrt(ax[0] * ax[0] + ax[1] * ax[1] + ax[2] * ax[2])
-    if s < 1e-12:
-        return q
-    a = math.atan2(s, u[0] * v[0] + u[1] * v[1] + u[2] * v[2])
-    h = -math.sin(0.5 * a) / s
-    return qmul(q, (math.cos(0.5 * a), ax[0] * h, ax[1] * h, ax[2] * h))  # q ⊗ r⁻¹, r takes u to v in the sensor frame
+    return math.sqrt(S_FLOOR**2 + (RAD * dw * hole_s / 2.0) ** 2 + (RAD * ROT_SHARE * w * hole_s) ** 2)
 
 
 class HoleBlend:
@@ -114,7 +78,7 @@ class HoleBlend:
 
     def _sf(self) -> float:
         """σ_f(t) (deg), the fresh network's uncertainty now."""
-        s0 = S_REST + S_RATE * self.w_max + S_LIN * DEG * math.atan2(self.lin, G)
+        s0 = S_REST + S_RATE * self.w_max + S_LIN * RAD * math.atan2(self.lin, G)
         return s0 * math.exp(-self.t / TAU)
 
     def weight(self) -> float:
@@ -137,9 +101,53 @@ class HoleBlend:
             s = math.sqrt(delta[1] * delta[1] + delta[2] * delta[2] + delta[3] * delta[3])
             self.w_max = max(self.w_max, 2.0 * math.atan2(s, abs(delta[0])) / dt)
         w, x, y, z = delta
-        carried = _rotate((w, -x, -y, -z), self.v)  # the bridge's gravity direction in the new sensor frame
+        carried = rotate((w, -x, -y, -z), self.v)  # the bridge's gravity direction in the new sensor frame
         k = self.weight()
-        self.v = _toward(_unit(carried), gravity(q_net), k)
+        self.v = toward(unit(carried), gravity(q_net), k)
         if 1.0 - k < DONE:
             return q_net, False
         return tilt_to(q_net, self.v), True
+
+
+class Handover:
+    """Stage 6: a :class:`HoleBlend` from each hole on, while it lasts (``enabled``: the ``hole_blend`` parameter).
+    Every hole's bridge uncertainty is passed on for the heading stage, blend or not."""
+
+    NAME = "handover"
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.blend: HoleBlend | None = None
+
+    def restart(self, cause: Cause) -> None:
+        self.blend = None
+
+    def run(self, qc: list[Quat], delta: list[Quat], dt: list[float], acc: list[Vec], holes: list[Hole]
+            ) -> tuple[list[Quat], list[float], dict[int, float]]:
+        """The attitudes after the hand-over (in place), each sample's inclination uncertainty (deg; 0 where no
+        hand-over runs), and per sample that ends a hole the uncertainty of its bridge (deg)."""
+        starts = {}
+        for h in holes:
+            w_max = max(math.hypot(*h.w_before), math.hypot(*h.w_after))
+            starts[h.index] = (bridge_sigma(h.w_before, h.w_after, h.seconds), w_max)
+        sd = [0.0] * len(qc)
+        i = 0 if self.blend is not None else min(starts, default=len(qc))
+        while i < len(qc):
+            b = starts.get(i)
+            if b is None and self.blend is None:
+                i = min((h for h in starts if h > i), default=len(qc))
+                continue
+            if b is not None and self.enabled:
+                self.blend = HoleBlend(b[0], qc[i], b[1], acc[i])
+            elif self.blend is not None:
+                q, going = self.blend.step(qc[i], delta[i], dt[i], acc[i])
+                qc[i] = q
+                if not going:
+                    self.blend = None
+            if self.blend is not None:
+                sd[i] = self.blend.sigma()
+            i += 1
+        return qc, sd, {k: v[0] for k, v in starts.items()}
+
+    def diagnostics(self) -> dict[str, str]:
+        return {}

@@ -1,4 +1,4 @@
-"""Virtual-rotation ensemble: RIANN run on rotated copies of the IMU frame, inclinations averaged (ROS-free).
+"""Stage 4a, the ensemble: RIANN run on rotated copies of the IMU frame, inclinations averaged (ROS-free).
 
 *Why.* RIANN was trained with *virtual IMU rotations* (the paper's data augmentation, §2: every
 training interval rotated by a random fixed rotation, so that the network does not depend on how the
@@ -19,7 +19,7 @@ frame is ``R_mᵀ g'_m``. The ensemble's gravity direction is the normalised mea
 output is copy 0's attitude tilted to it about a horizontal axis (the network's yaw is not used
 downstream: the heading stage follows the gyro).
 
-Measured on the 12 BROAD trials as recorded (``docs/riann.md`` §5): mean / worst inclination RMSE
+Measured on the 12 BROAD trials as recorded (``docs/riann.md``, stage 4): mean / worst inclination RMSE
 0.96 / 2.38° with one copy, 0.71–0.75 / 1.7–1.95° with four (four different rotation sets, all alike),
 0.71 / 1.80° with eight. The compute per network row is ``ensemble`` times one copy's.
 """
@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros import quaternion as quat
-from riann_ros.estimators.holes import gravity, tilt_to
+from riann_ros.rotations import gravity, tilt_to
 
 Array = NDArray[np.float64]
 
