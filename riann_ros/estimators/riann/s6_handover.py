@@ -1,36 +1,12 @@
 """Stage 6, the hand-over after a hole: the inclination moves from the gyro bridge to the fresh network (ROS-free).
 
-During a hole (messages lost while the sensor moves) the rotation is unknown. Two estimates of the
-inclination exist after it, and each is wrong in its own way:
-
-* the **bridge** — the attitude before the hole carried across it by the gyro interpolated between the
-  samples on either side — is off by what the gyro did in between: little when the sensor translates or
-  turns steadily, tens of degrees after a 0.4 s hole in a fast swing;
-* a **fresh network** (the running one trusts its integrated state and would keep the bridge's error for
-  seconds, so RIANN restarts it after a hole) starts from the accelerometer alone. At rest that is
-  gravity and it is right within a row or two; in motion it is gravity plus the linear acceleration, and
-  the fresh state is off by tens of degrees — over 100° in fast translation — until it has seen enough
-  motion to separate the two (about half a second).
-
-The output therefore starts at the bridge and moves toward the fresh network's inclination with the
-weight of a two-estimate fusion, ``K = σ_b² / (σ_b² + σ_f(t)²)``:
-
-* ``σ_b`` (deg), the bridge's uncertainty, is set once at the hole from what the gyro says about it: the
-  rate change across the hole times half its length (the trapezoid bridge is exact for a rate that
-  changes linearly) and a quarter of the rotation the faster of the two rates would make over the hole
-  (what the rate may have done in between), with a floor of 1°;
-* ``σ_f(t)`` (deg), the fresh network's, decays with the network's re-convergence time ``TAU`` from a
-  start that grows with the motion seen since the hole: 2° at rest, plus 10° per rad/s of rotation rate
-  and 10× the tilt that the linear acceleration seen (| |a| − g |, a lower bound of it) can cause.
-
-Each sample the blended gravity direction is carried on by the sample's bias-corrected gyro increment
-and moved toward the network's by ``K``; the output's inclination is the blended one (the smallest
-rotation of the network attitude that gives it that gravity direction), heading handled after it as
-everywhere. The blend ends when ``K`` is within ``DONE`` of 1: from then on the output is the network's
-again, exactly. Gaps longer than the input gate's ``max_dt`` are not bridged at all (the estimator
-restarts without a bridge) and never blend.
-
-Measured on the 12 BROAD trials with holes of 0.1–0.6 s every ~10 s, and why these constants: docs/riann.md,
+After a hole the *bridge* (the attitude carried across it by the interpolated gyro) is off by what the gyro did
+in the hole; the *fresh network* (stage 4) starts from the accelerometer alone and is off by the linear
+acceleration until it has seen enough motion. The output starts at the bridge and its gravity direction moves
+toward the network's with the weight of a two-estimate fusion ``K = σ_b² / (σ_b² + σ_f(t)²)``: ``σ_b``
+(:func:`bridge_sigma`) from the gyro at the hole's ends, ``σ_f(t)`` from the motion seen since, decaying with the
+network's re-convergence time :data:`TAU`. The blend ends when ``K`` is within :data:`DONE` of 1. Gaps longer
+than the gate's ``max_dt`` have no bridge and never blend. Physics, constants and measurements: docs/riann.md,
 stage 6.
 """
 

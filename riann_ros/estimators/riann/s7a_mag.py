@@ -1,42 +1,14 @@
 """Stage 7a, the magnetic heading: a heading-only correction toward the field, with disturbance rejection (ROS-free).
 
-RIANN estimates inclination only. Its output is ``q = Rz(ψ) ⊗ q_c``: ``q_c`` the (carried) network attitude,
-which fixes roll and pitch, and ``ψ`` a heading angle about the world vertical. Without a field, ``ψ``
-follows the bias-corrected gyro (stage 7, :mod:`.s7_heading`). With a field, each sample also does
-
-1. **latency compensation**: a field read ``D`` seconds behind the gyro is rotated into the sensor frame of
-   the sample's stamp with the gyro increments of the last ``D`` seconds, ``m ← R(r)ᵀ m``. ``D`` is estimated
-   online (:class:`~.s7b_latency.LatencyEstimator`, starting from ``mag_delay``) or fixed at ``mag_delay``;
-2. **tilt compensation**: ``m_w = R(q) m``; the heading error is ``e = atan2(m_w,x, m_w,y)`` (zero when the
-   horizontal field points along +y: magnetic north in ENU) and the dip is ``−asin(m_w,z / |m|)``;
-3. **disturbance test** (as VQF, Laidig & Seel 2023, with VQF's default constants): the low-passed norm and
-   dip are compared with a reference learned online; a field off by more than 10 % in norm or 10° in dip is
-   disturbed — the heading then follows the gyro only (for at most 60 s, after which the correction runs at
-   half gain, so a permanently changed field is accepted again); a new field that stays stable for 20 s of
-   motion becomes the reference;
-4. **correction**: ``ψ ← ψ + k e`` with ``k = dt / tau_mag`` (during the first ``tau_mag`` seconds at least
-   ``1/n``: the running mean of the magnetic heading, so the start converges at once). The first usable field
-   sets the heading outright. After a hole in the input (:meth:`MagHeading.reacquire`) the heading re-converges
-   the same way, since the rotation during the hole is only roughly known, but as an inverse-variance weighted
-   mean (below).
-
-**Re-acquiring after a hole.** Two things are uncertain after a hole: the heading the gyro carried across it
-(the bridge, standard deviation ``σ_b`` from :func:`~.s6_handover.bridge_sigma`) and, for a
-while, the inclination (the hand-over of :mod:`.s6_handover`, standard deviation ``σ_t(t)``
-falling as the fresh network converges). The tilt compensation turns an inclination error into a heading error
-of up to ``tan(dip)`` times it (2.6× at a dip of 69°), so a field read in the first few tenths of a second
-after a hole in fast motion can be off by tens of degrees. The heading is therefore the weighted mean of the
-bridged heading (weight ``1/σ_b²``) and each field heading since the hole (weight
-``1/(σ_m² + tan²(dip) σ_t²)``, ``σ_m`` = :data:`MAG_HEADING_SD`), carried by the gyro: the gain of a sample is
-``w / Σw``, never below ``dt / tau_mag``. Without a bridge (a gap longer than ``max_dt``) and with a converged
-inclination this is the plain running mean of the start. The bridge's ``σ_b`` comes from the rates at the hole's
-ends, so a turn made entirely inside the hole (still before and after it) escapes it: if the first usable field
-after the hole differs from the bridged heading by more than :data:`BRIDGE_GATE` combined standard deviations,
-the bridge is dropped and the field sets the heading, as without one.
-
-The correction is a rotation about the world vertical, so the sensor-frame vertical — RIANN's inclination —
-is never changed by the magnetometer (tested: 9D inclination = 6D inclination). The vertical gyro bias is
-left to the gyro-bias front end in front of the network.
+Per sample with a field (:meth:`MagHeading.step`): the field is rotated back by the gyro over the magnetometer's
+latency (stage 7b), tilt-compensated with the output attitude (``m_w = R(q) m``; heading error
+``atan2(m_w,x, m_w,y)``, zero when the horizontal field points along +y, magnetic north in ENU), tested for
+disturbance against a reference norm and dip learned online (VQF's rules and constants: then the heading follows
+the gyro only), and the heading moves toward it with the gain ``dt / tau_mag`` (the running mean during the first
+``tau_mag`` seconds). After a hole (:meth:`MagHeading.reacquire`) it re-converges as the inverse-variance weighted
+mean of the bridged heading and each field heading since, a field weighing less while the inclination is
+uncertain (``1 / (σ_m² + tan²(dip) σ_t²)``, ``σ_m`` = :data:`MAG_HEADING_SD`). The correction is a rotation about
+the world vertical: the inclination is never changed by the field. docs/magnetometer.md has the physics.
 """
 
 from __future__ import annotations

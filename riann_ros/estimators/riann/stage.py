@@ -65,6 +65,17 @@ RESTARTS: dict[str, dict[Cause, str]] = {
     },
 }
 
+
+
+def restart_table() -> str:
+    """:data:`RESTARTS` as the markdown table docs/riann.md shows."""
+    causes = {Cause.HOLE: "hole", Cause.GAP: "gap (> max_dt)", Cause.RESET: "clock jump back, fault, reset"}
+    lines = ["| stage | " + " | ".join(causes.values()) + " |", "|---|" + "---|" * len(causes)]
+    for stage, what in RESTARTS.items():
+        lines.append(f"| {stage} | " + " | ".join(what[c] for c in causes) + " |")
+    return "\n".join(lines)
+
+
 GridSpec = tuple[float, float, bool, bool]  # grid step T (s), box width (s), interval means, curved (see s2_grid)
 Row6 = tuple[float, ...]  # acc xyz (m/s²), gyr xyz (rad/s) of a sample or a grid point
 
@@ -110,4 +121,4 @@ class GridBlock:
     s_carry: list[float] = field(default_factory=list)
 
 
-__all__ = ["RESTARTS", "Cause", "GridBlock", "GridSpec", "Hole", "Quat", "Row6", "TimelineBlock", "Vec"]
+__all__ = ["RESTARTS", "Cause", "restart_table", "GridBlock", "GridSpec", "Hole", "Quat", "Row6", "TimelineBlock", "Vec"]
