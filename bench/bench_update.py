@@ -27,6 +27,7 @@ CHILD = r"""
 import json, math, sys, time
 import numpy as np
 from riann_ros.estimators import create
+STREAMS = ("200 Hz", "1 kHz", "200 Hz on arrival", "jittery 5-15 ms")
 n, copies = int(sys.argv[1]), int(sys.argv[2])
 rng = np.random.default_rng(0)
 def steps(kind):
@@ -38,7 +39,7 @@ def steps(kind):
         return np.diff(np.concatenate([[0.0], t]))
     return rng.uniform(0.005, 0.015, n)
 out = {}
-for kind in %s:
+for kind in STREAMS:
     dt = steps(kind)
     t = np.cumsum(dt)
     roll = 0.5 * np.sin(2 * math.pi * t)
@@ -51,7 +52,7 @@ for kind in %s:
         est.update(a[i], g[i], d[i])
     out[kind] = (time.perf_counter() - t0) / n * 1e6
 print(json.dumps(out))
-""" % (STREAMS,)
+"""
 
 
 def run(tree: Path, n: int, copies: int) -> dict[str, float]:

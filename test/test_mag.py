@@ -17,7 +17,6 @@ from riann_ros.datasets.synthetic import generate
 from riann_ros.estimators import create, estimator_class
 from riann_ros.estimators.riann.s7a_mag import MAG_HEADING_SD, MagHeading
 from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
-from riann_ros.rotations import from_rotvec
 from riann_ros.mag import (
     FIELD_BAD,
     FIELD_NONE,
@@ -32,6 +31,7 @@ from riann_ros.mag import (
     pair_fields,
 )
 from riann_ros.recording import Recording
+from riann_ros.rotations import from_rotvec
 from riann_ros.stream import EstimatorStream, GateConfig
 
 G = 9.81

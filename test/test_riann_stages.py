@@ -216,6 +216,6 @@ def test_after_a_hole_the_stages_act_at_the_hole(session):
     assert [h.index for h in tl.holes] == [600]
     g = est.grid.run(x, tl)
     assert g.forks == [(g.r1[600], tl.spec[600][0])]  # the fresh state starts after the hole sample's rows
-    rows, bias = est.bias.run(g.rows, g.steps)
+    rows, _ = est.bias.run(g.rows, g.steps)
     est.network.run(rows, g.forks)
     assert est.network.holes == 1

@@ -121,4 +121,5 @@ class GridBlock:
     s_carry: list[float] = field(default_factory=list)
 
 
-__all__ = ["RESTARTS", "Cause", "restart_table", "GridBlock", "GridSpec", "Hole", "Quat", "Row6", "TimelineBlock", "Vec"]
+__all__ = ["RESTARTS", "Cause", "GridBlock", "GridSpec", "Hole", "Quat", "Row6", "TimelineBlock", "Vec",
+           "restart_table"]
