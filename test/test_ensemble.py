@@ -10,8 +10,8 @@ import pytest
 from conftest import gate_dts, rmse
 from riann_ros import quaternion as quat
 from riann_ros.estimators import create
-from riann_ros.estimators.ensemble import FLOAT_ROWS, MAX_COPIES, combine, frames, gravity_rows, rotate_rows
 from riann_ros.estimators.riann import default_model_path
+from riann_ros.estimators.riann.s4a_ensemble import FLOAT_ROWS, MAX_COPIES, combine, frames, gravity_rows, rotate_rows
 
 
 def _quat_of(r: np.ndarray) -> np.ndarray:

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from riann_ros import quaternion as quat
-from riann_ros.estimators.holes import TAU, HoleBlend, bridge_sigma, gravity, tilt_to
+from riann_ros.estimators.riann.s6_handover import TAU, HoleBlend, bridge_sigma
+from riann_ros.rotations import gravity, tilt_to
 
 G = 9.81
 

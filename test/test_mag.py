@@ -15,7 +15,8 @@ from riann_ros import evaluation as ev
 from riann_ros import quaternion as quat
 from riann_ros.datasets.synthetic import generate
 from riann_ros.estimators import create, estimator_class
-from riann_ros.estimators.heading import MAG_HEADING_SD, LatencyEstimator, MagHeading, from_rotvec
+from riann_ros.estimators.riann.s7a_mag import MAG_HEADING_SD, MagHeading
+from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
 from riann_ros.mag import (
     FIELD_BAD,
     FIELD_NONE,
@@ -30,6 +31,7 @@ from riann_ros.mag import (
     pair_fields,
 )
 from riann_ros.recording import Recording
+from riann_ros.rotations import from_rotvec
 from riann_ros.stream import EstimatorStream, GateConfig
 
 G = 9.81
@@ -644,9 +646,9 @@ def test_riann_heading_reacquires_the_field_after_a_hole() -> None:
     assert a.mag is not None and b.mag is not None
     est = create("riann")
     est.update_batch(a.acc, a.gyr, a.dt, a.mag)
-    holes = est.holes
+    holes = est.network.holes
     q = est.update_batch(b.acc, b.gyr, np.concatenate([[0.3], b.dt[1:]]), b.mag)
-    assert est.holes == holes + 1
+    assert est.network.holes == holes + 1
     err = np.degrees(quat.heading_error(q_b, q))
     assert err[100:].max() < 2.0  # within 1 s of the hole
     est = create("riann")  # a sample at a time (the node's path) re-acquires as well
@@ -710,13 +712,13 @@ def test_riann_heading_after_holes_weighs_bridge_and_field_broad(broad_trial) ->
         for weighted in (True, False):
             est = create("riann")
             if not weighted:  # as before: no bridge, every field weighed alike
-                h = est._heading
+                h = est.heading.mag
                 plain = MagHeading.reacquire.__get__(h)
                 h.reacquire = lambda bridge_sd=None, plain=plain: plain(None)  # type: ignore[method-assign]
                 step = MagHeading.step.__get__(h)
                 h.step = lambda q, d, dt, m, tilt_sd=0.0, step=step: step(q, d, dt, m, 0.0)  # type: ignore[method-assign]
             q = est.update_batch(holes.acc, holes.gyr, dt, holes.mag)
-            assert est.holes >= 3
+            assert est.network.holes >= 3
             e = quat.heading_error(holes.quat_ref[mask], q[mask])
             rmse[weighted].append(float(np.degrees(np.sqrt(np.mean(e ** 2)))))
     assert np.mean(rmse[True]) < 0.95 * np.mean(rmse[False])

@@ -10,11 +10,35 @@ import pytest
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators.bias import GyroBiasFrontEnd
-from riann_ros.estimators.grid import RateTracker, SampleModelTest, SignalHistory, choose_step
 from riann_ros.estimators.riann import RiannEstimator
+from riann_ros.estimators.riann.s1_timeline import Timeline
+from riann_ros.estimators.riann.s1a_rate import choose_step
+from riann_ros.estimators.riann.s1c_sample_model import SampleModelTest
+from riann_ros.estimators.riann.s2_grid import SignalHistory
 from riann_ros.evaluation.scoring import roll_pitch_deg
 
 G = 9.81
+AT_REST = (0.0, 0.0, G, 0.0, 0.0, 0.0)
+
+
+class RateTracker:
+    """Stage 1 (the timeline) driven by input steps alone: the first step starts it, each further one is pushed (no
+    holes: restart_gap 0)."""
+
+    def __init__(self, first_dt: float, means: bool | None = None) -> None:
+        self.tl = Timeline(0.0, "auto" if means is None else "means" if means else "points")
+        self.tl.run([AT_REST], [first_dt])
+
+    def push(self, d: float, gyr: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> bool:
+        return self.tl.run([(*AT_REST[:3], *gyr)], [d]).switched[0]
+
+    def __getattr__(self, name: str):
+        tl = self.tl
+        return {"switches": lambda: tl.steps.switches, "step": lambda: tl.steps.step,
+                "median": lambda: tl.steps.median, "jittery": lambda: tl.steps.jittery,
+                "model_test": lambda: tl.model, "irregular": lambda: tl.irregular, "means": lambda: tl.means,
+                "clocked": lambda: tl.clock.clocked, "mean_step": lambda: tl.clock.period(tl.steps.median),
+                "variance_ratio": lambda: tl.clock.variance_ratio, "box_width": lambda: tl.box_width}[name]()
 
 
 # -- grid step policy -------------------------------------------------------------------------------
@@ -50,7 +74,7 @@ def test_grid_step_rejects_a_non_positive_step():
 
 # -- rate estimate with hysteresis ------------------------------------------------------------------
 def test_rate_tracker_switches_only_after_half_a_window_of_the_new_rate():
-    r = RateTracker(0.010, window=64)
+    r = RateTracker(0.010)  # a window of 64 steps
     for _ in range(100):
         assert not r.push(0.010)
     assert r.step == pytest.approx(0.005)
@@ -198,7 +222,7 @@ def test_short_holes_are_bridged_like_the_samples_they_lost():
     est.reset()
     q_filled = est.update_batch(filled[:, :3], filled[:, 3:], dt)[keep]
     roll_h, roll_f = roll_pitch_deg(q_holes)[:, 0], roll_pitch_deg(q_filled)[:, 0]
-    assert not est._rate.clocked
+    assert not est.timeline.clock.clocked
     assert np.abs(roll_h - roll_f)[len(t) // 4:].max() < 0.5, np.abs(roll_h - roll_f).max()
 
 
@@ -220,8 +244,8 @@ def test_lost_messages_of_a_clock_stamped_on_arrival_advance_its_timeline(delive
     lossy = _roll_rmse(est, acc[keep], gyr[keep], dt_rx, truth[keep])
     full = _roll_rmse(RiannEstimator(gyro_bias_estimation=False), acc, gyr, np.diff(np.concatenate([[0.0], stamps])),
                       truth)
-    assert est._rate.clocked
-    assert est._rate.mean_step == pytest.approx(0.005, rel=0.01)  # 2 % of the samples are lost
+    assert est.timeline.clock.clocked
+    assert est.timeline.clock.period(0.0) == pytest.approx(0.005, rel=0.01)  # 2 % of the samples are lost
     assert lossy < 3.5 * full + 0.2, (lossy, full)
 
 
@@ -314,10 +338,10 @@ def test_slow_input_runs_the_network_on_a_5_ms_grid_and_fast_input_in_blocks():
     n = 250
     acc = np.tile([0.0, 0.0, G], (n, 1))
     est.update_batch(acc, np.zeros((n, 3)), np.full(n, 0.040))  # 25 Hz
-    assert est.rows == pytest.approx(8 * n, abs=8)
+    assert est.network.rows == pytest.approx(8 * n, abs=8)
     est.reset()
     est.update_batch(np.tile(acc, (20, 1)), np.zeros((20 * n, 3)), np.full(20 * n, 0.001))  # 1 kHz
-    assert est.rows == pytest.approx(20 * n / 5, abs=5)
+    assert est.network.rows == pytest.approx(20 * n / 5, abs=5)
 
 
 def test_a_clean_stream_at_the_grid_step_is_fed_straight_in():
@@ -328,7 +352,7 @@ def test_a_clean_stream_at_the_grid_step_is_fed_straight_in():
     gyr = rng.normal(0, 0.5, (n, 3))
     est = RiannEstimator(gyro_bias_estimation=False)
     qb = est.update_batch(acc, gyr, np.full(n, 0.004))
-    assert est.rows == n
+    assert est.network.rows == n
     est.reset()
     qs = np.array([est.update(acc[i], gyr[i], 0.004) for i in range(n)])
     assert np.abs(qb - qs).max() < 1e-5
@@ -463,7 +487,7 @@ def _hole_stream(restart_gap: float) -> tuple[RiannEstimator, np.ndarray, np.nda
 
 def test_after_a_hole_a_fresh_network_takes_over_and_converges_faster():
     est, t, err = _hole_stream(0.1)
-    assert est.holes == 1
+    assert est.network.holes == 1
     _, _, err0 = _hole_stream(0.0)
     late = (t > 1.5) & (t < 2.5)
     assert err[late].max() < 5.0, err[late].max()
@@ -493,7 +517,7 @@ def test_after_a_hole_in_motion_the_output_hands_over_from_the_bridge_to_the_fre
     for blend in (True, False):
         est = RiannEstimator(hole_blend=blend)
         q = est.update_batch(acc, gyr, dt)
-        assert est.holes == 1
+        assert est.network.holes == 1
         errs[blend] = np.degrees(quat.inclination_error(q_true, q))
     first = (after >= 0.0) & (after < 1.0)
     assert errs[True][first].max() < 5.0, errs[True][first].max()
@@ -529,11 +553,11 @@ def test_a_hole_is_counted_only_when_longer_than_restart_gap_and_four_input_step
     dt = np.full(n, 0.040)  # 25 Hz: a 0.12 s step is 3 input steps, not a hole
     dt[200] = 0.12
     est.update_batch(acc, np.zeros((n, 3)), dt)
-    assert est.holes == 0
+    assert est.network.holes == 0
     dt[300] = 0.2
     est.reset()
     est.update_batch(acc, np.zeros((n, 3)), dt)
-    assert est.holes == 1
+    assert est.network.holes == 1
 
 
 def test_restart_keeps_the_bias_estimate_and_heading_reset_forgets_them():
@@ -543,7 +567,7 @@ def test_restart_keeps_the_bias_estimate_and_heading_reset_forgets_them():
     est = RiannEstimator()
     est.update_batch(acc, gyr, np.full(n, 0.005))
     b = est.diagnostics()["gyro bias estimate (deg/s)"]
-    est.restart()
+    est.on_gap()
     assert est.diagnostics()["gyro bias estimate (deg/s)"] == b
     est.reset()
     assert "gyro bias estimate (deg/s)" not in est.diagnostics()
@@ -558,16 +582,16 @@ def test_a_gap_longer_than_max_dt_keeps_the_bias_estimate_a_clock_jump_forgets_i
     stamps = (np.arange(n) * 5_000_000).astype(np.int64)
     s = EstimatorStream(RiannEstimator(), GateConfig(nominal_rate=200.0, max_dt=0.5))
     s.process_batch(stamps, acc, gyr)
-    learned = np.array(s.estimator._bias_now())
+    learned = np.array(s.estimator.bias.bias)
     assert np.abs(np.degrees(learned) - [3.0, -2.0, 0.0]).max() < 0.5
     # 1 s later: a gap (messages lost, same sensor)
     q, r = s.process(int(stamps[-1]) + 1_000_000_000, acc[0], gyr[0])
     assert r.reset == "gap" and q is not None
-    assert np.abs(np.array(s.estimator._bias_now()) - learned).max() < math.radians(0.05)
+    assert np.abs(np.array(s.estimator.bias.bias) - learned).max() < math.radians(0.05)
     # 10 s back: a clock jump (a bag loop, a new recording)
     q, r = s.process(int(stamps[-1]) - 10_000_000_000, acc[0], gyr[0])
     assert r.reset == "clock_jump" and q is not None
-    assert np.abs(np.degrees(s.estimator._bias_now())).max() < 0.5
+    assert np.abs(np.degrees(s.estimator.bias.bias)).max() < 0.5
 
 
 # -- input model ------------------------------------------------------------------------------------
@@ -648,9 +672,8 @@ def test_the_gyro_tells_point_samples_from_interval_means_when_the_stamps_jitter
     t = 0.0
     decided = None
     for k in range(len(dt)):
-        tracker.push(float(dt[k]))
+        tracker.push(float(dt[k]), tuple(gyr[k]))
         t += float(dt[k])
-        tracker.see(t, gyr[k])
         if decided is None and tracker.model_test.points is not None:
             decided = t
     assert tracker.model_test.points is (not data_means)

@@ -1,27 +1,10 @@
-"""Virtual-rotation ensemble: RIANN run on rotated copies of the IMU frame, inclinations averaged (ROS-free).
+"""Stage 4a, the ensemble: RIANN run on rotated copies of the IMU frame, gravity directions averaged (ROS-free).
 
-*Why.* RIANN was trained with *virtual IMU rotations* (the paper's data augmentation, §2: every
-training interval rotated by a random fixed rotation, so that the network does not depend on how the
-sensor is mounted). A network trained that way is equivariant only approximately: fed the same motion
-in another sensor frame it gives another estimate, whose error is partly independent of the first.
-Averaging the gravity directions of a few copies, each fed the IMU in its own rotated frame and mapped
-back, keeps what they agree on and averages out part of what they do not (test-time augmentation with
-the training's own augmentation).
-
-*Copies.* Copy 0 is the sensor frame itself; the others see it turned by 180° about three mutually
-orthogonal axes in general position (none near a sensor axis): with the identity, the four rotations
-are as far apart as four rotations can be (180° between any two), so the copies differ as much as
-possible. ``ensemble=1`` is the single published network.
-
-*Combination.* Copy ``m`` sees ``acc' = R_m acc``, ``gyr' = R_m gyr`` (dt unchanged); its attitude
-``q'_m`` (sensor' → world) maps back as ``q_m = q'_m ⊗ r_m``, so its gravity direction in the sensor
-frame is ``R_mᵀ g'_m``. The ensemble's gravity direction is the normalised mean of the copies'; the
-output is copy 0's attitude tilted to it about a horizontal axis (the network's yaw is not used
-downstream: the heading stage follows the gyro).
-
-Measured on the 12 BROAD trials as recorded (``docs/riann.md`` §5): mean / worst inclination RMSE
-0.96 / 2.38° with one copy, 0.71–0.75 / 1.7–1.95° with four (four different rotation sets, all alike),
-0.71 / 1.80° with eight. The compute per network row is ``ensemble`` times one copy's.
+RIANN was trained with virtual IMU rotations, so a copy fed the IMU in another frame gives an estimate whose
+error is partly independent. Copy 0 is the sensor frame; the others see it turned by 180° about three orthogonal
+axes in general position (:func:`frames`). Copy ``m`` sees ``R_m acc``, ``R_m gyr``; its gravity direction maps
+back by ``R_mᵀ``; the ensemble attitude is copy 0's tilted to the normalised mean direction (:func:`combine`).
+Physics and measurements: docs/riann.md, stage 4.
 """
 
 from __future__ import annotations
@@ -32,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros import quaternion as quat
-from riann_ros.estimators.holes import gravity, tilt_to
+from riann_ros.rotations import gravity, tilt_to
 
 Array = NDArray[np.float64]
 

@@ -1,0 +1,177 @@
+"""RIANN: the published recurrent network inside a chain of stages that make it work on real streams (ROS-free).
+
+The network was trained on constant steps of 2–20 ms, gyros without a large bias, and estimates inclination
+only. Real streams jitter, lose messages, run at 25 Hz or 1 kHz, start with a bias of several °/s, and carry a
+magnetometer. The estimator is the chain below, each stage in its own module (``docs/riann.md`` explains each,
+with the physics; :data:`~.stage.RESTARTS` says what each does when the stream restarts):
+
+1. :mod:`.s1_timeline` — where each sample sits in time (rate, clock, sample model; holes found here)
+2. :mod:`.s2_grid` — the samples resampled onto the network's constant-step grid (the rows)
+3. :mod:`.s3_bias` — the gyro bias estimated on the rows and removed
+4. :mod:`.s4_network` — the GRU network as an ensemble of rotated copies, a fresh state after a hole
+5. :mod:`.s5_carry` — the newest network attitude carried by the gyro to each sample's stamp
+6. :mod:`.s6_handover` — after a hole, from the gyro bridge to the fresh network
+7. :mod:`.s7_heading` — a heading that follows the gyro, and the magnetometer when there is one
+
+One output per input sample, at its stamp. ``update`` is a block of one; ``update_batch`` runs the same stages on
+the whole block (the network once over all its rows), so both give the same numbers (within float32 round-off).
+With ``rate_adaptation`` off stages 1–2 are replaced by one row per sample with its own dt.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import onnxruntime as ort
+from numpy.typing import ArrayLike
+
+from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
+from riann_ros.estimators.bias import front_end_params
+from riann_ros.estimators.riann.s1_timeline import Timeline
+from riann_ros.estimators.riann.s2_grid import DirectRows, Grid
+from riann_ros.estimators.riann.s3_bias import Bias
+from riann_ros.estimators.riann.s4_network import Network, make_session
+from riann_ros.estimators.riann.s4a_ensemble import MAX_COPIES
+from riann_ros.estimators.riann.s5_carry import Carry
+from riann_ros.estimators.riann.s6_handover import Handover
+from riann_ros.estimators.riann.s7_heading import Heading
+from riann_ros.estimators.riann.s7a_mag import MagHeading
+from riann_ros.estimators.riann.stage import Cause, Row6, Vec
+
+RESTART_WARMUP = 0.0  # s a fresh network runs beside the old one after a hole before it takes over
+
+
+class RiannEstimator(AttitudeEstimator):
+    """RIANN with its stages (see the module docstring)."""
+
+    name = "riann"
+    PARAMS = (
+        ParamSpec(
+            "model_path",
+            "",
+            "Path of a RIANN-compatible ONNX file; empty = the official weights of the riann package.",
+        ),
+        ParamSpec(
+            "rate_adaptation",
+            True,
+            "Run the network on its own constant-rate grid (2-5.5 ms) resampled causally from the input, "
+            "whatever its rate, jitter or dropouts. Off: every sample goes straight into the network.",
+        ),
+        ParamSpec("input_model", "auto", "What an input sample is when the grid resamples it: 'points' (the "
+                  "signal at the stamp), 'means' (the mean since the previous sample), 'auto' (means when the "
+                  "stamps jitter and the gyro says so, else points).", choices=("auto", "points", "means")),
+        ParamSpec("ensemble", MAX_COPIES, "Copies of the network run on virtually rotated IMU frames, their "
+                  "inclinations averaged (the paper's training augmentation used at run time); 1 = the single "
+                  "network. Compute grows with it.", min=1, max=MAX_COPIES),
+        *front_end_params(True, "the network"),
+        ParamSpec("restart_gap", 0.1,
+                  "s; after a stamp step longer than this (and than 4 input steps) a fresh network takes "
+                  "over after restart_warmup. 0 = never.", min=0.0, max=3600.0),
+        ParamSpec("hole_blend", True,
+                  "After a hole, start from the gyro bridge and hand the inclination over to the fresh network "
+                  "as its error falls below the bridge's (weights from the gyro across the hole and the motion "
+                  "since). Off: the fresh network's output at once.", runtime=True),
+        ParamSpec("restart_warmup", RESTART_WARMUP,
+                  "s; how long the fresh network runs beside the old one after a hole before it takes over.",
+                  min=0.0, max=60.0),
+        ParamSpec("tau_mag", 9.0, "s; time constant of the heading correction toward the magnetometer (9D only; "
+                  "the default is VQF's tauMag).", min=0.01, max=1000.0, runtime=True),
+        ParamSpec("mag_delay", 0.0, "s; latency of the magnetometer behind the gyro, compensated by rotating the "
+                  "field with the gyro; with estimate_mag_delay the starting value of the estimate (9D only).",
+                  min=0.0, max=0.5, runtime=True),
+        ParamSpec("estimate_mag_delay", True, "Estimate the magnetometer's latency online from the field's "
+                  "rotation against the gyro's during motion (no reference needed) and compensate it (9D only).",
+                  runtime=True),
+        ParamSpec("mag_dist_rejection", True, "Detect magnetic disturbances (field norm and dip against a learned "
+                  "reference) and hold the heading with the gyro while disturbed (9D only).", runtime=True),
+    )
+    USES_MAG = True
+
+    def __init__(self, session: ort.InferenceSession | None = None, **params: Any) -> None:
+        self._session = session or make_session(params.get("model_path") or None)
+        super().__init__(**params)
+
+    # -- the chain --------------------------------------------------------------------------------
+    def reset(self) -> None:
+        p = self.params
+        grid = bool(p["rate_adaptation"])
+        self.timeline = Timeline(p["restart_gap"], p["input_model"]) if grid else None
+        self.grid: Grid | DirectRows = Grid() if grid else DirectRows()
+        self.bias = Bias(p["gyro_bias_estimation"], p["bias_clip"], p["bias_sigma_init"], fixed_step=not grid)
+        self.network = Network(self._session, int(p["ensemble"]), p["restart_warmup"])
+        self.carry = Carry()
+        self.handover = Handover(p["hole_blend"])
+        self.heading = Heading(MagHeading(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"],
+                                          p["estimate_mag_delay"]))
+        self.samples = 0  # input samples taken since reset
+
+    @property
+    def stages(self) -> list[Any]:
+        head = [self.timeline] if self.timeline is not None else []
+        return [*head, self.grid, self.bias, self.network, self.carry, self.handover, self.heading]
+
+    def on_gap(self) -> None:
+        """A stamp gap longer than the gate's ``max_dt``: each stage does what :data:`~.stage.RESTARTS` says for a
+        gap (the network starts afresh without a bridge; bias, rate statistics and heading carry on)."""
+        for stage in self.stages:
+            stage.restart(Cause.GAP)
+
+    def _on_params_changed(self) -> None:
+        h, p = self.heading.mag, self.params
+        h.tau_mag, h.mag_delay, h.reject, h.estimate_delay = (p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"],
+                                                              p["estimate_mag_delay"])
+        self.handover.enabled = p["hole_blend"]
+
+    def heading_observed(self) -> bool:
+        return self.heading.mag.observed
+
+    def diagnostics(self) -> dict[str, str]:
+        out: dict[str, str] = {}
+        for stage in (self.bias, *(s for s in self.stages if s is not self.bias)):
+            out.update(stage.diagnostics())
+        return out
+
+    def _run(self, x: list[Row6], dt: list[float], mag: list[Vec | None] | None) -> Array:
+        """A block of samples through the chain."""
+        self.samples += len(x)
+        if self.timeline is not None:
+            tl = self.timeline.run(x, dt)
+            g = self.grid.run(x, tl)  # type: ignore[arg-type]
+            holes = tl.holes
+        else:
+            g = self.grid.run(x, dt)  # type: ignore[arg-type]
+            holes = []
+        rows, bias = self.bias.run(g.rows, g.steps)
+        net = self.network.run(rows, g.forks)
+        qc, delta = self.carry.run(net, g, bias)
+        dts = [d if math.isfinite(d) and d > 0.0 else 0.0 for d in dt]  # the heading's step (0 for a bad dt)
+        qc, tilt_sd, bridges = self.handover.run(qc, delta, dts, [(r[0], r[1], r[2]) for r in x], holes)
+        return self.heading.run(qc, delta, dts, mag, bridges, tilt_sd)
+
+    # -- public API -----------------------------------------------------------------------------
+    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
+        a0, a1, a2 = acc  # type: ignore[misc, str-unpack]
+        g0, g1, g2 = gyr  # type: ignore[misc, str-unpack]
+        x = (float(a0), float(a1), float(a2), float(g0), float(g1), float(g2))  # type: ignore[arg-type]
+        m = None
+        if mag is not None:
+            m0, m1, m2 = (float(v) for v in mag)  # type: ignore[union-attr, arg-type]
+            m = (m0, m1, m2) if math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2) else None
+        return self._run([x], [float(dt)], [m])[0]
+
+    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
+        acc = np.asarray(acc, dtype=float).reshape(-1, 3)
+        gyr = np.asarray(gyr, dtype=float).reshape(-1, 3)
+        n = len(acc)
+        if n == 0:
+            return np.empty((0, 4))
+        dts = np.broadcast_to(np.asarray(dt, dtype=float), (n,)).tolist()
+        xs = list(map(tuple, np.column_stack([acc, gyr]).tolist()))
+        fields = None
+        if mag is not None:
+            m = np.asarray(mag, dtype=float).reshape(n, 3)
+            ok = np.isfinite(m).all(axis=1).tolist()
+            fields = [tuple(v) if good else None for v, good in zip(m.tolist(), ok, strict=True)]
+        return self._run(xs, dts, fields)

@@ -1,0 +1,134 @@
+"""Stage 1, the timeline: where each input sample sits in time for the network, and how the grid reads it (ROS-free).
+
+Per sample, in this order: a step longer than ``restart_gap`` (and than :data:`HOLE_STEPS` median steps) is a
+*hole* (messages lost while the sensor moved; it travels down the chain as an event); any other step feeds the
+clock test (1b, :mod:`.s1b_clock`) and the rate tracker (1a, :mod:`.s1a_rate`), which may switch the grid step;
+the sample is placed on the timeline (as stamped, or de-jittered for a clocked stream); the gyro shows the
+sample-model test (1c, :mod:`.s1c_sample_model`) where the sample sits. Its output says, per sample, its time and
+the :data:`~.stage.GridSpec` the grid (stage 2) reads it with. docs/riann.md, stage 1.
+"""
+
+from __future__ import annotations
+
+from riann_ros.estimators.riann.s1a_rate import DT_MIN, REL_EPS, StepTracker
+from riann_ros.estimators.riann.s1b_clock import Clock
+from riann_ros.estimators.riann.s1c_sample_model import SampleModelTest
+from riann_ros.estimators.riann.stage import Cause, GridSpec, Hole, Row6, TimelineBlock, Vec
+
+HOLE_STEPS = 4.0  # a hole is also longer than this many median input steps
+DEFAULT_DT = 0.01  # s, the first step when the stream gives none usable
+
+
+class Timeline:
+    """Stage 1 (see the module docstring)."""
+
+    NAME = "timeline"
+
+    def __init__(self, restart_gap: float, input_model: str) -> None:
+        self.restart_gap = restart_gap
+        self.forced = None if input_model == "auto" else input_model == "means"  # None: judged from the stream
+        self._clear()
+
+    def _clear(self) -> None:
+        self.steps: StepTracker | None = None
+        self.clock = Clock()
+        self.model = SampleModelTest()
+        self._started = False
+        self._w_prev: Vec = (0.0, 0.0, 0.0)
+
+    def restart(self, cause: Cause) -> None:
+        if cause is Cause.RESET:
+            self._clear()
+        else:  # GAP
+            self._started = False
+            self.model.clear_window()  # the stamps start again from 0
+
+    # -- what the grid needs to know ---------------------------------------------------------------
+    @property
+    def irregular(self) -> bool:
+        """The samples are read as taken at irregular times (jittery, or set to interval means)."""
+        if self.forced is not None:
+            return self.forced
+        return self.steps is not None and self.steps.jittery
+
+    @property
+    def means(self) -> bool:
+        """Read the samples as interval means (else as point samples); a set model holds regardless."""
+        if self.forced is not None:
+            return self.forced
+        return self.irregular and not self.clock.clocked and not self.model.points
+
+    @property
+    def input_step(self) -> float:
+        """The input step the grid is chosen for (s): the clock's period when clocked, else the median."""
+        steps = self.steps
+        assert steps is not None
+        return self.clock.period(steps.median) if self.clock.clocked else steps.median
+
+    def box_width(self) -> float:
+        """Averaging window (s) of a grid value: 0 = the signal at the grid point, else its mean over that much time
+        before it. Point samples: up-sampled (T < d), the mean over the grid cell; blocks (T = k·d), the mean over
+        T − d (the k samples of the block); T = d, the sample itself. Interval means: the whole cell when T spans
+        several samples, else the sample covering the grid point."""
+        assert self.steps is not None
+        d, step = self.input_step, self.steps.step
+        if self.means:
+            return step if step > d * (1.0 + REL_EPS) else 0.0
+        if step < d * (1.0 - REL_EPS):
+            return step
+        return step - d if step > d * (1.0 + REL_EPS) else 0.0
+
+    def spec(self) -> GridSpec:
+        assert self.steps is not None
+        means, step = self.means, self.steps.step
+        return step, self.box_width(), means, not means and step < self.input_step * (1.0 - REL_EPS)
+
+    # -- the stage ---------------------------------------------------------------------------------
+    def run(self, x: list[Row6], dt: list[float]) -> TimelineBlock:
+        out = TimelineBlock()
+        clock, model = self.clock, self.model
+        for k, (xk, d) in enumerate(zip(x, dt, strict=True)):
+            w = (xk[3], xk[4], xk[5])
+            hole = switched = False
+            start = not self._started
+            if start:
+                self._start(d)
+                t = 0.0
+            else:
+                steps = self.steps
+                assert steps is not None
+                gap = self.restart_gap
+                if gap > 0.0 and d > gap and d > HOLE_STEPS * steps.median:
+                    hole = True
+                    out.holes.append(Hole(k, d, self._w_prev, w))
+                else:
+                    clock.push(d)
+                    switched = steps.push(d, clock.period(steps.median) if clock.clocked else None, clock.clocked)
+                t = clock.advance(float(round(d * 1e9)), clock.clocked and not hole, steps.median)
+            if hole:
+                model.clear_window()
+            model.push(t, w, self.forced is None and self.irregular and not clock.clocked)
+            self._w_prev = w
+            out.t.append(t)
+            out.spec.append(self.spec())
+            out.start.append(start)
+            out.switched.append(switched)
+        return out
+
+    def _start(self, dt: float) -> None:
+        """The first sample after a reset or a gap: the rate tracker starts at its step (or keeps its estimate)."""
+        d = dt if DT_MIN * 0.01 < dt < 10.0 else DEFAULT_DT
+        if self.steps is None:
+            self.steps = StepTracker(d)
+        self.clock.start()
+        self._started = True
+
+    def diagnostics(self) -> dict[str, str]:
+        if self.steps is None:
+            return {}
+        model = "interval means" if self.means else "point samples"
+        return {
+            "network rate (Hz)": f"{1.0 / self.steps.step:.1f}",
+            "input model": model if self.forced is None else model + " (set)",
+            "input stamps": "regular clock + delivery jitter" if self.clock.clocked else "sample times",
+        }

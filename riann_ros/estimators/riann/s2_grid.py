@@ -1,0 +1,221 @@
+"""Stage 2, the grid: the input samples resampled causally onto the network's constant-step grid (ROS-free).
+
+The network runs on grid points ``tau_m = anchor + m·T`` (``T`` and how to read the samples from stage 1). The
+recent samples are held as a signal over time (:class:`SignalHistory`): piecewise linear through point samples,
+or piecewise constant over ``(t_{k-1}, t_k]`` for interval means; up-sampled point samples are read *curved*
+(the parabola through the newest three samples: at 25–50 Hz a line cuts the corners of fast rotations). A grid
+point becomes a row as soon as a sample at or after it has arrived, from the samples up to that stamp only: the
+resampling is causal. A grid value is the signal at the grid point, or its mean over the box width before it.
+Each sample also gets the raw gyro means the carry stage (5) turns into rotations. After a hole the grid goes on
+across it (the rows in the hole are interpolated: the *bridge*) and marks where a fresh network starts.
+
+:class:`DirectRows` is the grid's stand-in with ``rate_adaptation`` off: every sample is one row with its own dt.
+docs/riann.md, stage 2.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+
+from riann_ros.estimators.riann.s1a_rate import REL_EPS
+from riann_ros.estimators.riann.stage import Cause, GridBlock, Row6, TimelineBlock
+
+TIME_EPS_NS = 1000.0  # a grid point this close after the newest stamp counts as reached (1 µs)
+CURVE_MIN_RATIO = 0.5  # the curved signal model needs neighbouring sample steps less than 2x apart
+ZERO3 = (0.0, 0.0, 0.0)
+
+Sample = Sequence[float]
+
+
+class Grid:
+    """Stage 2 (see the module docstring)."""
+
+    NAME = "grid"
+
+    def __init__(self) -> None:
+        self._clear()
+
+    def _clear(self) -> None:
+        self.hist = SignalHistory()
+        self._anchor = 0.0  # ns; grid point m is at anchor + m * T
+        self._m = 0
+        self._t_net = 0.0  # ns of the last grid point made a row
+        self._t = 0.0  # ns of the newest sample
+
+    def restart(self, cause: Cause) -> None:
+        self._clear()  # GAP and RESET alike: the next sample starts a new grid (holes are bridged in run)
+
+    def run(self, x: list[Row6], tl: TimelineBlock) -> GridBlock:
+        out = GridBlock()
+        hist = self.hist
+        holes = {h.index for h in tl.holes}
+        rows = out.rows
+        for k, xk in enumerate(x):
+            T, width, means, curved = tl.spec[k]
+            if tl.start[k]:
+                self._anchor = -T * 1e9  # the first grid point on the first sample
+                self._m = 0
+                self._t_net = self._anchor
+                t_prev = 0.0
+            else:
+                t_prev = self._t
+                if tl.switched[k]:
+                    self._anchor = self._t_net
+                    self._m = 0
+            t = self._t = tl.t[k]
+            hist.append(t, xk)
+            if t > t_prev:
+                out.g_delta.append(tuple(hist.mean(t_prev, t, means, 3, 6)))  # type: ignore[arg-type]
+                out.s_delta.append((t - t_prev) * 1e-9)
+            else:
+                out.g_delta.append(ZERO3)
+                out.s_delta.append(0.0)
+            out.r0.append(len(rows))
+            self._emit(out, t, T, width, means, curved)
+            out.r1.append(len(rows))
+            if k in holes:
+                out.forks.append((len(rows), T))
+            if t > self._t_net + TIME_EPS_NS:
+                out.g_carry.append(tuple(hist.mean(self._t_net, t, means, 3, 6)))  # type: ignore[arg-type]
+                out.s_carry.append((t - self._t_net) * 1e-9)
+            else:
+                out.g_carry.append(ZERO3)
+                out.s_carry.append(0.0)
+            hist.trim(self._t_net - max(width * 1e9, T * 1e9) - 1.0)
+        return out
+
+    def _emit(self, out: GridBlock, t: float, T: float, width: float, means: bool, curved: bool) -> None:
+        """Append every grid row up to the newest stamp ``t``."""
+        T_ns = T * 1e9
+        w_ns = width * 1e9
+        hist = self.hist
+        while True:
+            tau = self._anchor + (self._m + 1) * T_ns
+            if tau > t + TIME_EPS_NS:
+                return
+            v = hist.mean(tau - w_ns, tau, means, curved=curved) if w_ns > 0.0 else hist.value(tau, means)
+            out.rows.append(v)  # type: ignore[arg-type]
+            out.steps.append(T)
+            self._m += 1
+            self._t_net = tau
+
+    def diagnostics(self) -> dict[str, str]:
+        return {}
+
+
+class DirectRows:
+    """``rate_adaptation`` off: every sample is one network row with its own dt (no grid, no holes)."""
+
+    NAME = "grid"
+
+    def restart(self, cause: Cause) -> None:
+        pass
+
+    def run(self, x: list[Row6], dt: list[float]) -> GridBlock:
+        n = len(x)
+        idx = list(range(n))
+        return GridBlock(rows=x, steps=dt, forks=[], r0=idx, r1=[i + 1 for i in idx],
+                         g_delta=[(r[3], r[4], r[5]) for r in x], s_delta=dt,
+                         g_carry=[ZERO3] * n, s_carry=[0.0] * n)
+
+    def diagnostics(self) -> dict[str, str]:
+        return {}
+
+
+class SignalHistory:
+    """Recent samples ``(t, x)`` (t in ns as float, x a 6-vector) read as a continuous signal.
+
+    ``means=False``: linear between samples; ``means=True``: sample k holds over ``(t_{k-1}, t_k]``.
+    Before the first sample the signal holds the first value, after the last the last one.
+    """
+
+    def __init__(self) -> None:
+        self.t: deque[float] = deque()
+        self.x: deque[Sample] = deque()
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def append(self, t: float, x: Sample) -> None:
+        self.t.append(t)
+        self.x.append(x)
+
+    def clear(self) -> None:
+        self.t.clear()
+        self.x.clear()
+
+    def trim(self, before: float) -> None:
+        """Drop samples no window starting at ``before`` or later can need (keeps two before it: the
+        curved model of the interval around ``before`` reads the sample before that interval)."""
+        t = self.t
+        while len(t) > 3 and t[2] <= before:
+            t.popleft()
+            self.x.popleft()
+
+    def value(self, tau: float, means: bool) -> list[float]:
+        """The signal at ``tau``."""
+        t, x = self.t, self.x
+        n = len(t)
+        k = n - 1
+        while k > 0 and t[k - 1] >= tau:  # k = first sample at or after tau (or the last)
+            k -= 1
+        if means or k == 0 or t[k] <= tau:
+            return list(x[k])
+        t0, t1 = t[k - 1], t[k]
+        s = (tau - t0) / (t1 - t0)
+        return [a + s * (b - a) for a, b in zip(x[k - 1], x[k], strict=True)]
+
+    def mean(self, a: float, b: float, means: bool, lo: int = 0, hi: int = 6, curved: bool = False) -> list[float]:
+        """Mean of channels ``lo:hi`` over ``(a, b]``; the value at ``b`` when the window is empty (``b <= a``,
+        e.g. a width that rounds away next to a stamp in ns)."""
+        if not b > a:
+            return self.value(b, means)[lo:hi]
+        t, x = self.t, self.x
+        acc = [0.0] * (hi - lo)
+        if a < t[0]:  # before the first sample: its value held
+            _add(acc, x[0], lo, min(b, t[0]) - a)
+        for k in range(len(t) - 1, 0, -1):
+            if t[k] <= a:
+                break
+            self._add_interval(acc, k, a, b, means, lo, curved)
+        if b > t[-1]:  # after the last sample: its value held
+            _add(acc, x[-1], lo, b - max(a, t[-1]))
+        w = b - a
+        return [v / w for v in acc]
+
+    def _add_interval(self, acc: list[float], k: int, a: float, b: float, means: bool, lo: int,
+                      curved: bool = False) -> None:
+        """Add the integral over ``(a, b] ∩ (t_{k-1}, t_k]`` of the signal model to ``acc``. ``curved``: point
+        samples as the parabola through samples k-2, k-1, k (causal: k is the newest sample the interval
+        needs) instead of the line through k-1, k, where the three are about evenly spaced."""
+        t0, t1 = self.t[k - 1], self.t[k]
+        s0, s1 = max(a, t0), min(b, t1)
+        if s1 <= s0:
+            return
+        x0, x1 = self.x[k - 1], self.x[k]
+        span = s1 - s0
+        if means:
+            _add(acc, x1, lo, span)
+            return
+        h1 = t1 - t0
+        m = 0.5 * ((s0 - t0) + (s1 - t0)) / h1
+        for j in range(len(acc)):
+            acc[j] += (x0[lo + j] + m * (x1[lo + j] - x0[lo + j])) * span
+        if not curved or k < 2:
+            return
+        h0 = t0 - self.t[k - 2]
+        lo_ratio = CURVE_MIN_RATIO * (1.0 + REL_EPS)  # a margin: steps exactly 2x apart (10/20 ms) must not
+        if not lo_ratio * h1 < h0 < h1 / lo_ratio:  # flip with the rounding of a stamp sum (chunked = whole)
+            return  # across a hole or a rate change: no curvature to read
+        # p(u) = line + c·u·(u − h1), u = t − t_{k-1}, c fixed by p(−h0) = x_{k-2}
+        u0, u1 = s0 - t0, s1 - t0
+        w = ((u1**3 - u0**3) / 3.0 - 0.5 * h1 * (u1**2 - u0**2)) / (h0 * (h0 + h1))
+        xm = self.x[k - 2]
+        for j in range(len(acc)):
+            acc[j] += w * (xm[lo + j] - x0[lo + j] + (x1[lo + j] - x0[lo + j]) * h0 / h1)
+
+
+def _add(acc: list[float], x: Sample, lo: int, span: float) -> None:
+    for j in range(len(acc)):
+        acc[j] += x[lo + j] * span

@@ -1,0 +1,87 @@
+"""Stage 3, the gyro bias: VQF's bias estimator on the network's rows, the bias known before each row removed
+(ROS-free).
+
+RIANN was trained on gyros without a large bias; a MEMS gyro starts with several °/s. The front end
+(:class:`~riann_ros.estimators.bias.GyroBiasFrontEnd`, shared with Madgwick and Mahony) runs on the same rows the
+network gets, at the grid step (rebuilt, keeping its estimate, when the grid step switches), and each row's gyro
+loses the bias known before it: causal, and the network's output never feeds back. The carry stage (5) uses the
+same estimate. With ``rate_adaptation`` off the rows are the samples, at the first sample's step, each scaled by
+its own dt. docs/riann.md, stage 3.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from riann_ros.estimators.bias import GyroBiasFrontEnd
+from riann_ros.estimators.common import BIAS_KEY, bias_text
+from riann_ros.estimators.riann.s1_timeline import DEFAULT_DT
+from riann_ros.estimators.riann.s1a_rate import DT_MIN
+from riann_ros.estimators.riann.stage import Cause, Row6, Vec
+
+Row7 = tuple[float, float, float, float, float, float, float]
+BATCH_ROWS = 8  # from this many rows on, VQF takes them in one call (the same numbers as one at a time)
+ZERO3: Vec = (0.0, 0.0, 0.0)
+
+
+class Bias:
+    """Stage 3 (see the module docstring). ``fixed_step``: the rows' steps vary (``rate_adaptation`` off): the
+    estimator keeps the first row's step and scales each row's gyro by its own."""
+
+    NAME = "bias"
+
+    def __init__(self, on: bool, clip: float, sigma_init: float, fixed_step: bool = False) -> None:
+        self.on, self.clip, self.sigma_init, self.fixed_step = on, clip, sigma_init, fixed_step
+        self.fe: GyroBiasFrontEnd | None = None
+
+    def restart(self, cause: Cause) -> None:
+        if cause is Cause.RESET:
+            self.fe = None
+
+    @property
+    def bias(self) -> Vec:
+        """The estimate now (rad/s): the bias known before the next row."""
+        return self.fe.bias if self.fe is not None else ZERO3
+
+    def run(self, rows: list[Row6], steps: list[float]) -> tuple[list[Row7], list[Vec]]:
+        """The rows with the bias removed (acc, gyr, dt), and the bias before each row and after the last (M + 1)."""
+        before: list[Vec] = []
+        if self.on and rows:
+            i = 0
+            while i < len(rows):  # runs of rows at one step
+                j = i + 1
+                if not self.fixed_step:
+                    while j < len(rows) and steps[j] == steps[i]:
+                        j += 1
+                else:
+                    j = len(rows)
+                before += self._run(rows[i:j], steps[i:j])
+                i = j
+        else:
+            before = [self.bias] * len(rows)
+        out = [(r[0], r[1], r[2], r[3] - b[0], r[4] - b[1], r[5] - b[2], s)
+               for r, b, s in zip(rows, before, steps, strict=True)]
+        before.append(self.bias)
+        return out, before
+
+    def _run(self, rows: list[Row6], steps: list[float]) -> list[Vec]:
+        """Rows at one step (or at any, ``fixed_step``) through the front end; the bias before each."""
+        step = steps[0]
+        if self.fe is None:
+            ts = step if DT_MIN * 0.01 < step < 10.0 else DEFAULT_DT
+            self.fe = GyroBiasFrontEnd(ts, self.clip, self.sigma_init)
+        elif not self.fixed_step and step != self.fe.ts:
+            self.fe.set_ts(step)  # the grid step switched: VQF rebuilt for it, the estimate kept
+        fe = self.fe
+        if len(rows) < BATCH_ROWS:
+            out = []
+            for r, s in zip(rows, steps, strict=True):
+                out.append(fe.bias)
+                fe.update(r[0:3], r[3:6], s)
+            return out
+        x = np.asarray(rows, dtype=float)
+        b = fe.update_batch(x[:, 0:3], x[:, 3:6], np.asarray(steps, dtype=float))
+        return [tuple(v) for v in b.tolist()]
+
+    def diagnostics(self) -> dict[str, str]:
+        return {BIAS_KEY: bias_text(self.fe.bias)} if self.fe is not None else {}

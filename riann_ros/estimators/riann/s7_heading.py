@@ -1,0 +1,129 @@
+"""Stage 7, the heading: RIANN's inclination with a heading that follows the gyro, and the field when there is one
+(ROS-free).
+
+RIANN estimates inclination (roll, pitch) only; its yaw is not meaningful. The output is ``Rz(ψ) ⊗ q_c``: ``q_c``
+the carried (and handed-over) network attitude fixes roll and pitch, and the heading ``ψ`` starts at zero and
+follows the bias-corrected gyro: each output is the gyro prediction from the previous one, corrected by the
+smallest rotation about a horizontal axis that gives it the network's gravity direction (``ψ`` grows by the twist
+of ``q_prev ⊗ δ ⊗ q_c⁻¹``). From the first sample with a field on, the magnetic heading (:mod:`.s7a_mag`)
+adds a correction about the vertical, so the inclination is the same with and without a field. docs/riann.md,
+stage 7, and docs/magnetometer.md.
+
+Blocks of up to :data:`~.s5_carry.SCALAR_MAX` samples run in plain floats, longer ones vectorised up to the first
+field; the two give the same numbers (test_riann_stages).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from riann_ros import quaternion as quat
+from riann_ros.estimators.base import Array
+from riann_ros.estimators.riann.s5_carry import SCALAR_MAX
+from riann_ros.estimators.riann.s7a_mag import MagHeading
+from riann_ros.estimators.riann.stage import Cause, Quat, Vec
+from riann_ros.rotations import about_z, conj, qmul, twist
+
+TWO_PI = 2.0 * math.pi
+
+
+class Heading:
+    """Stage 7 (see the module docstring)."""
+
+    NAME = "heading"
+
+    def __init__(self, mag: MagHeading) -> None:
+        self.mag = mag
+        self.psi = 0.0  # heading of the output (rad)
+        self.q_prev: Quat | None = None  # the previous sample's carried network attitude
+
+    def restart(self, cause: Cause) -> None:
+        if cause is Cause.RESET:
+            self.psi, self.q_prev = 0.0, None
+            self.mag.reset()
+        elif cause is Cause.GAP:
+            self.mag.reacquire()  # no bridge over a gap
+        # a hole: the magnetic heading re-acquires in run(), where the hole is
+
+    def run(self, qc: list[Quat], delta: list[Quat], dt: list[float], mag: list[Vec | None] | None,
+            bridges: dict[int, float], tilt_sd: list[float]) -> Array:
+        """The output attitudes (n, 4), w >= 0. ``mag``: per sample its field or None; ``bridges``: samples that end
+        a hole → the uncertainty of the bridge over it (deg); ``tilt_sd``: each sample's inclination uncertainty
+        after a hole (deg, 0: converged)."""
+        if len(qc) <= SCALAR_MAX:
+            return np.array([self._one(qc[i], delta[i], dt[i], None if mag is None else mag[i], bridges.get(i),
+                                       tilt_sd[i]) for i in range(len(qc))])
+        return self._vector(qc, delta, dt, mag, bridges, tilt_sd)
+
+    def _one(self, qc: Quat, delta: Quat, dt: float, mag: Vec | None, bridge: float | None, tilt_sd: float
+             ) -> tuple[float, float, float, float]:
+        if bridge is not None:
+            self.mag.reacquire(bridge)
+        if self.q_prev is None:
+            self.psi = -2.0 * math.atan2(qc[3], qc[0])  # the output starts at zero heading
+        else:
+            self.psi = math.remainder(self.psi + twist(qmul(qmul(self.q_prev, delta), conj(qc))), TWO_PI)
+        self.q_prev = qc
+        if mag is not None or self.mag.started:
+            qo = qmul(about_z(self.psi), qc)
+            self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), TWO_PI)
+        w, x, y, z = qmul(about_z(self.psi), qc)
+        n = math.sqrt(w * w + x * x + y * y + z * z)
+        if w < 0.0:  # sign convention: w >= 0
+            n = -n
+        return (w / n, x / n, y / n, z / n)
+
+    def _vector(self, qc_l: list[Quat], delta: list[Quat], dt: list[float], mag: list[Vec | None] | None,
+                bridges: dict[int, float], tilt_sd: list[float]) -> Array:
+        qc = np.asarray(qc_l)
+        n = len(qc)
+        prev = np.vstack([np.asarray(self.q_prev or qc_l[0])[None, :], qc[:-1]])
+        e = quat.multiply(quat.multiply(prev, np.asarray(delta)), quat.conjugate(qc))
+        tw = np.remainder(2.0 * np.arctan2(e[:, 3], e[:, 0]) + np.pi, TWO_PI) - np.pi
+        if self.q_prev is None:
+            tw[0] = -2.0 * math.atan2(qc[0, 3], qc[0, 0]) - self.psi  # the output starts at zero heading
+        first = self._first_field(mag, n)
+        psi = self.psi + np.cumsum(tw)
+        if first < n:
+            psi[first:] = self._mag_psi(float(psi[first - 1]) if first else self.psi, tw[first:], qc_l[first:],
+                                        delta[first:], dt[first:], None if mag is None else mag[first:],
+                                        {k - first: b for k, b in bridges.items() if k >= first}, tilt_sd[first:])
+        self.psi = math.remainder(float(psi[-1]), TWO_PI)
+        self.q_prev = qc_l[-1]
+        rz = np.column_stack([np.cos(0.5 * psi), np.zeros(n), np.zeros(n), np.sin(0.5 * psi)])
+        q = quat.normalize(quat.multiply(rz, qc))
+        return np.where(q[:, :1] < 0.0, -q, q)  # sign convention: w >= 0
+
+    def _first_field(self, mag: list[Vec | None] | None, n: int) -> int:
+        """The first sample that runs the magnetic heading: 0 once a field was seen, else the first with a field."""
+        if self.mag.started:
+            return 0
+        if mag is None:
+            return n
+        return next((i for i, m in enumerate(mag) if m is not None), n)
+
+    def _mag_psi(self, psi: float, tw: Array, qc: list[Quat], delta: list[Quat], dt: list[float],
+                 mag: list[Vec | None] | None, bridges: dict[int, float], tilt_sd: list[float]) -> Array:
+        """Heading angles from the first field on: the gyro increment, then the magnetic correction."""
+        out = np.empty(len(tw))
+        step = self.mag.step
+        for i, t in enumerate(tw.tolist()):
+            if i in bridges:
+                self.mag.reacquire(bridges[i])
+            psi += t
+            c, s = math.cos(0.5 * psi), math.sin(0.5 * psi)
+            q = qc[i]
+            qo = (c * q[0] - s * q[3], c * q[1] - s * q[2], c * q[2] + s * q[1], c * q[3] + s * q[0])
+            psi += step(qo, delta[i], dt[i], None if mag is None else mag[i], tilt_sd[i])
+            out[i] = psi
+        return out
+
+    def diagnostics(self) -> dict[str, str]:
+        h = self.mag
+        if not h.started:
+            return {}
+        kind = "estimated" if h.estimate_delay else "fixed"
+        return {"magnetic disturbance": "detected" if h.disturbed else "none",
+                "magnetometer latency (ms)": f"{1e3 * h.delay:.1f} ({kind})"}

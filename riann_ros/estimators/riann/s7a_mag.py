@@ -1,0 +1,201 @@
+"""Stage 7a, the magnetic heading: a heading-only correction toward the field, with disturbance rejection (ROS-free).
+
+Per sample with a field (:meth:`MagHeading.step`): the field is rotated back by the gyro over the magnetometer's
+latency (stage 7b), tilt-compensated with the output attitude (``m_w = R(q) m``; heading error
+``atan2(m_w,x, m_w,y)``, zero when the horizontal field points along +y, magnetic north in ENU), tested for
+disturbance against a reference norm and dip learned online (VQF's rules and constants: then the heading follows
+the gyro only), and the heading moves toward it with the gain ``dt / tau_mag`` (the running mean during the first
+``tau_mag`` seconds). After a hole (:meth:`MagHeading.reacquire`) it re-converges as the inverse-variance weighted
+mean of the bridged heading and each field heading since, a field weighing less while the inclination is
+uncertain (``1 / (σ_m² + tan²(dip) σ_t²)``, ``σ_m`` = :data:`MAG_HEADING_SD`). The correction is a rotation about
+the world vertical: the inclination is never changed by the field. docs/magnetometer.md has the physics.
+"""
+
+from __future__ import annotations
+
+import math
+
+from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
+from riann_ros.rotations import DEG, IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
+
+# VQF's defaults (vqf 2.1.2 VQFParams): magnetic disturbance rejection
+NORM_TH = 0.1  # relative deviation of |m| from the reference
+DIP_TH = 10.0 * DEG  # deviation of the dip angle from the reference
+CURRENT_TAU = 0.05  # s, low-pass of |m| and dip before the test
+REF_TAU = 20.0  # s, the reference follows the undisturbed field with this time constant
+MIN_UNDISTURBED = 0.5  # s in the band before the field is trusted again
+MAX_REJECT = 60.0  # s of full rejection, then the gain is divided by REJECT_FACTOR
+REJECT_FACTOR = 2.0
+NEW_TIME = 20.0  # s of a stable new field (while moving) before it becomes the reference
+NEW_MIN_GYR = 20.0 * DEG  # rad/s, only motion faster than this counts toward NEW_TIME
+GYR_LP_TAU = 0.5  # s, low-pass of |ω| for NEW_MIN_GYR
+# re-acquiring after a hole
+MAG_HEADING_SD = 5.0  # deg; one field heading's error apart from the tilt (the default mag_yaw_stddev_deg)
+BRIDGE_GATE = 3.0  # the bridge is dropped if the first field after the hole is this many standard deviations off
+
+
+
+class MagHeading:
+    """The heading correction state (see the module docstring); :meth:`step` per sample."""
+
+    def __init__(self, tau_mag: float, mag_delay: float, reject: bool, estimate_delay: bool = True) -> None:
+        self.tau_mag = tau_mag
+        self.mag_delay = mag_delay  # fixed latency, or the estimate's starting value
+        self.reject = reject
+        self.estimate_delay = estimate_delay
+        self.latency = LatencyEstimator()
+        self.reset()
+
+    @property
+    def delay(self) -> float:
+        """The latency compensated now (s)."""
+        return self.latency.delay(self.mag_delay) if self.estimate_delay else self.mag_delay
+
+    def reset(self) -> None:
+        self.started = False  # the heading has been set from a field
+        self.t = 0.0  # s since the first field
+        self.n = 0  # fields used in the start phase
+        self.norm_lp = self.dip_lp = 0.0
+        self.ref_norm = self.ref_dip = 0.0
+        self.cand_norm = self.cand_dip = 0.0
+        self.cand_t = self.undist_t = self.reject_t = 0.0
+        self.disturbed = False
+        self.gyr_lp = 0.0
+        self.hist: list[tuple[float, float, float, float]] = []  # (dt, rotation vector of the increment)
+        self.observed = False  # the last sample's heading was corrected by the field
+        self.reacq = False  # re-acquiring the heading after a hole (start phase without reference learning)
+        self.weight = 0.0  # while re-acquiring: Σ of the weights (1/deg²) of the bridge and the fields since the hole
+        self.gate = False  # the next field is tested against the bridge
+        self.latency.reset()
+
+    def reacquire(self, bridge_sd: float | None = None) -> None:
+        """A hole in the input: the rotation during it is not known well, so the heading re-converges to the
+        field as at the start (for ``tau_mag`` s, the weighted mean of the module docstring; without a bridge,
+        the first undisturbed field sets it), keeping the learned field reference and the latency estimate.
+        ``bridge_sd``: standard deviation (deg) of the heading the gyro carried across the hole; None: no
+        bridge (its weight is 0)."""
+        if self.started:
+            self.t, self.reacq = 0.0, True
+            self.weight = 1.0 / (bridge_sd * bridge_sd) if bridge_sd else 0.0
+            self.gate = self.weight > 0.0
+
+    def _delay_rotation(self, delta: Quat, dt: float) -> Quat:
+        """Sensor-frame rotation over the last :attr:`delay` s from the gyro increments (oldest partial)."""
+        rx, ry, rz = to_rotvec(delta)
+        self.hist.append((dt, rx, ry, rz))
+        r: Quat = IDENTITY
+        rem = self.delay
+        keep = 0
+        for h_dt, hx, hy, hz in reversed(self.hist):
+            if rem <= 0.0:
+                break
+            keep += 1
+            f = min(h_dt, rem) / h_dt if h_dt > 0.0 else 0.0
+            rem -= h_dt
+            r = qmul(from_rotvec(hx * f, hy * f, hz * f), r)
+        del self.hist[: len(self.hist) - max(keep, 1)]
+        return r
+
+    def step(self, q: Quat, delta: Quat, dt: float, mag: Vec | None,
+             tilt_sd: float = 0.0) -> float:
+        """The heading correction (rad, about world z) for the output ``q`` of this sample before correction;
+        ``delta`` is the sample's bias-corrected gyro increment (sensor frame), ``mag`` its field or None,
+        ``tilt_sd`` the standard deviation (deg) of ``q``'s inclination after a hole (0: converged)."""
+        self.observed = False
+        w = to_rotvec(delta)
+        rate = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / dt if dt > 0.0 else 0.0
+        self.gyr_lp += dt / (GYR_LP_TAU + dt) * (rate - self.gyr_lp)
+        if self.estimate_delay:
+            self.latency.add(delta, w, dt, None if self.disturbed else mag)
+        if self.estimate_delay or self.mag_delay > 0.0:
+            r = self._delay_rotation(delta, dt)
+            if mag is not None:
+                mag = rotate((r[0], -r[1], -r[2], -r[3]), mag)
+        if mag is None:
+            return 0.0
+        mn = math.sqrt(mag[0] * mag[0] + mag[1] * mag[1] + mag[2] * mag[2])
+        mw = rotate(q, mag)
+        if mw[0] * mw[0] + mw[1] * mw[1] <= 0.0:
+            return 0.0  # the field is vertical: no heading information
+        err = math.atan2(mw[0], mw[1])
+        dip = -math.asin(max(-1.0, min(1.0, mw[2] / mn)))
+        if not self.started:
+            self.started = True
+            self.t, self.n = 0.0, 1
+            self.norm_lp = self.ref_norm = self.cand_norm = mn
+            self.dip_lp = self.ref_dip = self.cand_dip = dip
+            self.observed = True
+            return err
+        self.t += dt
+        k = dt / self.tau_mag
+        start = self.t < self.tau_mag
+        self.reacq = self.reacq and start
+        initial = start and not self.reacq  # the first start: the field reference is learned too
+        if initial:
+            self.n += 1
+            k = max(k, 1.0 / self.n)
+        if self.reject:
+            k = self._disturbance(mn, dip, dt, k, initial)
+        if self.reacq and k > 0.0 and not self.disturbed:  # (not the half gain after a long rejection)
+            k = max(k, self._reacquire_gain(err, mw, tilt_sd))
+        self.observed = k > 0.0
+        return k * err
+
+    def _reacquire_gain(self, err: float, mw: Vec, tilt_sd: float) -> float:
+        """The weight of this field's heading (error ``err``, rad; world-frame field ``mw``) in the mean since the
+        hole; the first field after a hole also tests the bridge (module docstring)."""
+        tan_dip = abs(mw[2]) / math.sqrt(mw[0] * mw[0] + mw[1] * mw[1])
+        var = MAG_HEADING_SD * MAG_HEADING_SD + (tan_dip * tilt_sd) ** 2
+        if self.gate:  # the first field after the hole: is the bridge consistent with it?
+            self.gate = False
+            if (err / DEG) ** 2 > BRIDGE_GATE * BRIDGE_GATE * (1.0 / self.weight + var):
+                self.weight = 0.0
+        w = 1.0 / var
+        self.weight += w
+        return w / self.weight
+
+    def _disturbance(self, n: float, dip: float, dt: float, k: float, start: bool) -> float:
+        """VQF-style magnetic disturbance detection; the gain to use for this sample."""
+        c = dt / (CURRENT_TAU + dt)
+        self.norm_lp += c * (n - self.norm_lp)
+        self.dip_lp += c * (dip - self.dip_lp)
+        n, dip = self.norm_lp, self.dip_lp
+        k_ref = dt / REF_TAU
+        if start:  # the reference is the running mean of the start (assumed undisturbed)
+            kr = max(k_ref, 1.0 / self.n)
+            self.ref_norm += kr * (n - self.ref_norm)
+            self.ref_dip += kr * (dip - self.ref_dip)
+            self.cand_norm, self.cand_dip = self.ref_norm, self.ref_dip
+            return k
+        if abs(n - self.ref_norm) < NORM_TH * self.ref_norm and abs(dip - self.ref_dip) < DIP_TH:
+            self.undist_t += dt
+            if self.undist_t >= MIN_UNDISTURBED:
+                self.disturbed = False
+                self.ref_norm += k_ref * (n - self.ref_norm)
+                self.ref_dip += k_ref * (dip - self.ref_dip)
+        else:
+            self.undist_t = 0.0
+            self.disturbed = True
+        self._new_field(n, dip, dt, k_ref)
+        if self.disturbed:
+            if self.reject_t <= MAX_REJECT:
+                self.reject_t += dt
+                return 0.0
+            return k / REJECT_FACTOR
+        self.reject_t = max(self.reject_t - REJECT_FACTOR * dt, 0.0)
+        return k
+
+    def _new_field(self, n: float, dip: float, dt: float, k_ref: float) -> None:
+        """A new stable field (norm and dip steady while moving for NEW_TIME) becomes the reference."""
+        if abs(n - self.cand_norm) < NORM_TH * self.cand_norm and abs(dip - self.cand_dip) < DIP_TH:
+            if self.gyr_lp >= NEW_MIN_GYR:
+                self.cand_t += dt
+            self.cand_norm += k_ref * (n - self.cand_norm)
+            self.cand_dip += k_ref * (dip - self.cand_dip)
+            if self.disturbed and self.cand_t >= NEW_TIME:
+                self.ref_norm, self.ref_dip = self.cand_norm, self.cand_dip
+                self.disturbed = False
+                self.undist_t = MIN_UNDISTURBED
+        else:
+            self.cand_t = 0.0
+            self.cand_norm, self.cand_dip = n, dip
