@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 F32 = NDArray[np.float32]
 
 CHUNK = 4096  # rows per ONNX Runtime call (the state is carried between chunks)
+BOUND_ROWS = 4  # calls of up to this many rows run on preallocated, bound buffers (the node's path)
 PROBE_TOL = 1e-6  # the batched model must agree with the published one this closely on the probe
 PROBE_ROWS = 16
 BATCH = "batch"  # name of the symbolic batch dimension in the edited model
@@ -176,10 +177,9 @@ def batch_model(model: bytes) -> bytes:
 
 # -- the network ------------------------------------------------------------------------------------
 def _state_shape(session: ort.InferenceSession) -> tuple[int, ...]:
+    """The state of one copy: the declared shape of h0, a symbolic axis (a batch) taken as 1."""
     shape = next(i.shape for i in session.get_inputs() if i.name == "h0")
-    if not all(isinstance(d, int) for d in shape):
-        raise ValueError(f"the model's h0 must have a fixed shape, got {shape}")
-    return tuple(shape)
+    return tuple(d if isinstance(d, int) else 1 for d in shape)
 
 
 def _batchable(session: ort.InferenceSession) -> str:
@@ -189,10 +189,10 @@ def _batchable(session: ort.InferenceSession) -> str:
         return f"inputs and outputs other than input, h0, output, hn: {sorted(shapes)}"
     for name, axis in BATCH_AXES.items():
         s = shapes[name]
-        if len(s) <= axis or s[axis] != 1:
-            return f"{name} has shape {s}, not a batch of 1 on axis {axis}"
-    if len(shapes["h0"]) != 4 or shapes["hn"] != shapes["h0"]:
-        return f"h0 {shapes['h0']} / hn {shapes['hn']}: expected the same 4-axis shape"
+        if len(s) <= axis or not (s[axis] == 1 or isinstance(s[axis], str)):
+            return f"{name} has shape {s}, not a batch of 1 (or symbolic) on axis {axis}"
+    if len(shapes["h0"]) != 4 or len(shapes["hn"]) != 4:
+        return f"h0 {shapes['h0']} / hn {shapes['hn']}: expected 4 axes (layers, directions, batch, units)"
     return ""
 
 
@@ -205,10 +205,26 @@ def probe(copies: int, rows: int, seed: int = 0) -> F32:
     return x.astype(np.float32)
 
 
+class _Bound:
+    """Inputs and outputs of one-call runs of ``rows`` rows, preallocated and bound once (ONNX Runtime I/O
+    binding): a call copies the rows and states in, runs, and copies the outputs out."""
+
+    def __init__(self, session: ort.InferenceSession, copies: int, rows: int, state: tuple[int, ...]) -> None:
+        self.x = np.zeros((copies, rows, 7), np.float32)
+        self.h0 = np.zeros((state[0], state[1], copies, state[3]), np.float32)
+        self.out = np.zeros((copies, rows, 4), np.float32)
+        self.hn = np.zeros_like(self.h0)
+        self.binding = session.io_binding()
+        self.binding.bind_cpu_input("input", self.x)
+        self.binding.bind_cpu_input("h0", self.h0)
+        for name, a in (("output", self.out), ("hn", self.hn)):
+            self.binding.bind_output(name, "cpu", 0, np.float32, list(a.shape), a.ctypes.data)
+
+
 class Network:
     """``copies`` instances of the RIANN network, run together: :meth:`run` means the same as running the
-    published session once per copy (``run_per_copy``), in one ONNX Runtime call when the batched model passed
-    its load-time probe (``batched``; else ``reason`` says why not).
+    published session once per copy (:meth:`run_per_copy`), in one ONNX Runtime call when the batched model
+    passed its load-time probe (``batched``; else ``reason`` says why not). One copy runs the published model.
 
     Not thread-safe (preallocated buffers): one Network per thread."""
 
@@ -218,15 +234,17 @@ class Network:
         self.path, self.session = open_model(model_path, threads)
         self.copies = copies
         self.state_shape = _state_shape(self.session)
-        self.hidden = self.state_shape[-1]
-        self._batched: ort.InferenceSession | None = None
-        self._binding: ort.IOBinding | None = None
-        self._h0 = self._hn = np.zeros(0, np.float32)  # the batched model's h0 and hn
-        self.reason = "one copy: the published model" if copies == 1 else self._load_batched(threads)
+        self._bound: dict[int, _Bound] = {}
+        self._one: ort.InferenceSession | None = None  # the session that runs every copy in one call
+        if copies == 1:
+            self._one, self.reason = self.session, ""
+        else:
+            self.reason = self._load_batched(threads)
 
     @property
     def batched(self) -> bool:
-        return self._batched is not None
+        """Every copy runs in one call (the batched model passed its probe, or there is one copy)."""
+        return self._one is not None
 
     def _load_batched(self, threads: int) -> str:
         """Load the batched model and check it against the published one on a probe; returns '' or why not."""
@@ -234,24 +252,24 @@ class Network:
         if why:
             return why
         try:
-            self._batched = _session(batch_model(self.path.read_bytes()), threads)
+            self._one = _session(batch_model(self.path.read_bytes()), threads)
         except Exception as e:  # a graph that does not take a batch fails to load here
             return f"the model with a batch axis does not load: {e}"
-        s = self.state_shape
-        self._h0 = np.zeros((s[0], s[1], self.copies, s[3]), np.float32)
-        self._hn = np.zeros_like(self._h0)
-        x = probe(self.copies, PROBE_ROWS)
-        h = np.random.default_rng(1).uniform(-0.9, 0.9, (self.copies, *self.state_shape)).astype(np.float32)
-        self._binding = self._batched.io_binding()
+        rng = np.random.default_rng(1)
+        h = rng.uniform(-0.9, 0.9, (self.copies, *self.state_shape)).astype(np.float32)
+        err = 0.0
         try:
-            got = self.run(x, h)
+            for rows in (1, PROBE_ROWS):  # the bound path and the plain one
+                x = probe(self.copies, rows)
+                got, want = self.run(x, h), self.run_per_copy(x, h)
+                err = max(err, *(float(np.abs(g - w).max()) for g, w in zip(got, want, strict=True)))
         except Exception as e:  # a graph that does not take a batch may fail only when run
-            self._batched = self._binding = None
+            self._one = None
             return f"the model with a batch axis does not run: {e}"
-        want = self.run_per_copy(x, h)
-        err = max(float(np.abs(g - w).max()) for g, w in zip(got, want, strict=True))
+        finally:
+            self._bound.clear()
         if not err <= PROBE_TOL:
-            self._batched = self._binding = None
+            self._one = None
             return f"the model with a batch axis differs from the published one by {err:.3g} on the probe"
         return ""
 
@@ -267,31 +285,42 @@ class Network:
         return np.ascontiguousarray(x, dtype=np.float32), np.asarray(h, dtype=np.float32)
 
     def run(self, x: np.ndarray, h: np.ndarray) -> tuple[F32, F32]:
-        """Rows ``x`` (copies, T, 7) from states ``h`` (copies, *h0 shape) → outputs (copies, T, 4), next states."""
+        """Rows ``x`` (copies, T, 7) from states ``h`` (copies, *h0 shape) → outputs (copies, T, 4), next states
+        (new arrays: the arguments are not changed)."""
         x, h = self._check(x, h)
-        if self._batched is None:
+        rows = x.shape[1]
+        if self._one is None or rows == 0:
             return self.run_per_copy(x, h)
-        out = np.empty((self.copies, x.shape[1], 4), np.float32)
-        for start in range(0, x.shape[1], CHUNK):
-            h = self._run_batched(x[:, start : start + CHUNK], h, out[:, start : start + CHUNK])
-        return out, h.copy() if x.shape[1] == 0 else h
+        if rows <= BOUND_ROWS:
+            return self._run_bound(x, h)
+        out = np.empty((self.copies, rows, 4), np.float32)
+        for start in range(0, rows, CHUNK):
+            out[:, start : start + CHUNK], h = self._run_one(x[:, start : start + CHUNK], h)
+        return out, h
 
-    def _run_batched(self, x: F32, h: F32, out: F32) -> F32:
-        """One ONNX Runtime call on the batched model (I/O bound to preallocated buffers); writes ``out``."""
-        assert self._batched is not None and self._binding is not None
-        s, b = self.state_shape, self._binding
-        c = self.copies
-        np.copyto(self._h0, h.reshape(c, s[0], s[1], s[3]).transpose(1, 2, 0, 3))
-        b.bind_cpu_input("input", np.ascontiguousarray(x))
-        b.bind_cpu_input("h0", self._h0)
-        direct = out.flags.c_contiguous
-        dest = out if direct else np.empty(out.shape, np.float32)
-        b.bind_output("output", "cpu", 0, np.float32, list(dest.shape), dest.ctypes.data)
-        b.bind_output("hn", "cpu", 0, np.float32, list(self._hn.shape), self._hn.ctypes.data)
-        self._batched.run_with_iobinding(b)
-        if not direct:
-            out[...] = dest
-        return np.ascontiguousarray(self._hn.transpose(2, 0, 1, 3)).reshape(c, *s)
+    def _to_batch(self, h: F32) -> F32:
+        """States (copies, L, D, 1, H) → the batched model's h0 (L, D, copies, H)."""
+        s = self.state_shape
+        return h.reshape(self.copies, s[0], s[1], s[3]).transpose(1, 2, 0, 3)
+
+    def _from_batch(self, hn: F32) -> F32:
+        return np.ascontiguousarray(hn.transpose(2, 0, 1, 3)).reshape(self.copies, *self.state_shape)
+
+    def _run_bound(self, x: F32, h: F32) -> tuple[F32, F32]:
+        assert self._one is not None
+        b = self._bound.get(x.shape[1])
+        if b is None:
+            b = self._bound[x.shape[1]] = _Bound(self._one, self.copies, x.shape[1], self.state_shape)
+        b.x[...] = x
+        np.copyto(b.h0, self._to_batch(h))
+        self._one.run_with_iobinding(b.binding)
+        return b.out.copy(), self._from_batch(b.hn)
+
+    def _run_one(self, x: F32, h: F32) -> tuple[F32, F32]:
+        assert self._one is not None
+        feed = {"input": np.ascontiguousarray(x), "h0": np.ascontiguousarray(self._to_batch(h))}
+        out, hn = self._one.run(["output", "hn"], feed)
+        return out, self._from_batch(hn)
 
     def run_per_copy(self, x: np.ndarray, h: np.ndarray) -> tuple[F32, F32]:
         """:meth:`run` as the published session once per copy (the reference)."""
