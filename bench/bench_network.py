@@ -12,14 +12,15 @@ same meaning as the published session run once per copy):
 * ``batched run()``: the published graph with a batch axis (:func:`riann_ros.estimators.network.batch_model`),
   one ``InferenceSession.run`` for all copies;
 * ``Network.run``: :class:`riann_ros.estimators.network.Network` (the batched graph, I/O binding);
-* ``numpy GRU × 4``: the two GRU layers stepped in numpy (float32) from the file's initializers.
+* ``numpy GRU × 4``: the two GRU layers stepped in numpy (float32) from the file's initializers (timed at
+  T = ``--rows`` on a thirtieth of the calls; in the trial check on the first trial only).
 
 Timing: per call at T = 1 and 2 rows (the node's path), and per row over T = ``--rows`` (offline). Each repetition
 runs every candidate once, in turn; min and median over repetitions, the ratio to the published single copy per
 repetition (median). ONNX Runtime single-threaded. Exactness: max |difference| to the per-copy published run over
-outputs and states, on synthetic rows (T = 1 from a random state, and T = ``--rows``), and with ``--trial`` on a
-BROAD trial (its rows at the native step, four rotated copies as the ensemble feeds them: the whole trial in one
-call, and its first 3000 rows one call per row).
+outputs and states, on synthetic rows (T = 1 from a random state, and T = 2000), and with ``--trial`` on BROAD
+trials (their rows at the native step, four rotated copies as the ensemble feeds them: the whole trial in one
+call, and its first ``--steps`` rows one call per row, each against the published model called alike).
 
 Then ``RiannEstimator.update`` per sample (a 1 Hz 60° roll swing, 6000 samples, 200 Hz and 1 kHz) with one copy,
 with four copies as today, and with four copies through ``Network`` (a subclass replacing ``_net``), interleaved.
@@ -34,6 +35,7 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # numpy's BLAS single-threaded like ONNX Runtime
 
@@ -232,37 +234,56 @@ def exactness(net: nw.Network, fns: dict[str, Fn], rows: int) -> None:
         print(f"  numpy GRU with the gate order r, z, h instead of z, r, h: {max_diff(wrong(x, h), gru(x, h)):.3g}")
 
 
-def trial_rows(number: str, copies: int) -> np.ndarray | None:
-    from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad
+def trial_rows(path: Path, copies: int) -> np.ndarray:
+    """A BROAD trial's rows at its native step, in each copy's rotated frame as the ensemble feeds them."""
+    from riann_ros.datasets.broad import read_broad
 
-    d = find_broad_dir()
-    files = [p for p in broad_files(d) if p.name.startswith(number + "_")] if d else []
-    if not files:
-        print(f"\nBROAD trial {number} not found: trial exactness skipped")
-        return None
-    rec = read_broad(files[0])
+    rec = read_broad(path)
     dt = float(np.median(np.diff(rec.stamps_ns))) * 1e-9
     x = np.column_stack([rec.acc, rec.gyr, np.full(len(rec.acc), dt)])
-    print(f"\nBROAD trial {files[0].name}: {len(x)} rows at {dt * 1e3:.2f} ms")
     return np.stack([x if m == 0 else rotate_rows(x, r) for m, r in enumerate(frames(copies))]).astype(np.float32)
 
 
-def trial_exactness(net: nw.Network, fns: dict[str, Fn], x: np.ndarray, steps: int) -> None:
-    h0 = net.fresh_state()
-    want = net.run_per_copy(x, h0)
-    for k, f in fns.items():
-        if "1 copy" in k or "binding" in k or "×" in k:
-            continue
-        whole = max_diff(f(x, h0), want)
-        ha, hb, step = h0, h0, 0.0
-        for t in range(steps):
-            a, ha = f(x[:, t : t + 1], ha)
-            b, hb = net.run_per_copy(x[:, t : t + 1], hb)
-            step = max(step, max_diff((a, ha), (b, hb)))
-        print(f"  {k}: whole trial in one call {whole:.3g}; first {steps} rows one call each {step:.3g}")
-    gru = fns.get("numpy GRU × 4")
-    if gru is not None:
-        print(f"  numpy GRU × 4: whole trial {max_diff(gru(x, h0), want):.3g}")
+def trial_files(spec: str) -> list[Path]:
+    from riann_ros.datasets.broad import broad_files, find_broad_dir
+
+    d = find_broad_dir()
+    if d is None:
+        print("\nBROAD trials not found (RIANN_BROAD_DIR): trial exactness skipped")
+        return []
+    files = broad_files(d)
+    return files if spec == "all" else [p for p in files if p.name.split("_")[0] in spec.split(",")]
+
+
+def row_by_row(f: Fn, x: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    out = np.empty((len(x), x.shape[1], 4), np.float32)
+    for t in range(x.shape[1]):
+        o, h = f(x[:, t : t + 1], h)
+        out[:, t] = o[:, 0]
+    return out, h
+
+
+def trial_exactness(net: nw.Network, fns: dict[str, Fn], spec: str, steps: int) -> None:
+    """Per trial: the whole trial in one call, and its first ``steps`` rows one call each, against the published
+    model run copy by copy in the same calls; and the published model's own spread between the two."""
+    files = trial_files(spec)
+    if files:
+        print(f"\nBROAD trials, max |candidate - published per copy| (outputs and states); first {steps} rows one "
+              "call each; last column: the published model's own row-by-row outputs against its one-call outputs")
+        print("| trial | rows | candidate | whole trial, one call | row by row | published: row by row vs one call |")
+        print("|---|---:|---|---:|---:|---:|")
+    for i, path in enumerate(files):
+        x = trial_rows(path, net.copies)
+        h0 = net.fresh_state()
+        want = net.run_per_copy(x, h0)
+        want_rows = row_by_row(net.run_per_copy, x[:, :steps], h0)
+        spread = max_diff((want_rows[0],), (want[0][:, :steps],))
+        for k, f in fns.items():
+            if "1 copy" in k or "binding" in k or ("×" in k and not (k.startswith("numpy") and i == 0)):
+                continue
+            whole = max_diff(f(x, h0), want)
+            rows = max_diff(row_by_row(f, x[:, :steps], h0), want_rows)
+            print(f"| {path.name[:2]} | {x.shape[1]} | {k} | {whole:.3g} | {rows:.3g} | {spread:.3g} |")
 
 
 # -- the estimator ----------------------------------------------------------------------------------------
@@ -322,7 +343,9 @@ def main() -> int:
     ap.add_argument("--reps", type=int, default=7)
     ap.add_argument("--calls", type=int, default=300, help="calls per repetition at T = 1 and 2")
     ap.add_argument("--rows", type=int, default=10000, help="T of the throughput test")
-    ap.add_argument("--trial", default="07", help="BROAD trial number for the exactness check ('' = none)")
+    ap.add_argument("--trial", default="all", help="BROAD trials for the exactness check: 'all', numbers "
+                    "like 02,07, or '' for none")
+    ap.add_argument("--steps", type=int, default=3000, help="rows of each trial also fed one call per row")
     ap.add_argument("--samples", type=int, default=6000, help="samples per update() repetition (0 = skip)")
     ap.add_argument("--no-numpy", action="store_true", help="leave out the numpy GRU")
     a = ap.parse_args()
@@ -340,9 +363,7 @@ def main() -> int:
         print_table(f"T = {rows} rows, 4 copies ({a.reps} reps × {calls} calls)", res, "published 1 copy", per, unit)
     exactness(net, candidates(net, 1, not a.no_numpy), 2000)
     if a.trial:
-        x = trial_rows(a.trial, net.copies)
-        if x is not None:
-            trial_exactness(net, candidates(net, 1, not a.no_numpy), x, 3000)
+        trial_exactness(net, candidates(net, 1, not a.no_numpy), a.trial, a.steps)
     if a.samples:
         time_update(net, max(3, a.reps // 2), a.samples)
     print(f"load: {os.getloadavg()[0]:.1f} (1-min load average at the end)")
