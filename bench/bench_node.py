@@ -153,7 +153,12 @@ class Harness:
             time.sleep(1.5)
         finally:
             proc.send_signal(2)
-            proc.wait(10)
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:  # a node that does not end on Ctrl-C
+                print(f"{cmd[0]} did not stop within 10 s of SIGINT: killed", file=sys.stderr)
+                proc.kill()
+                proc.wait(10)
         lat = np.array([(self.arrivals[s] - t) * 1e-3 for s, t in sent.items() if s in self.arrivals])
         return {
             "rate": rate,

@@ -16,8 +16,9 @@ process, the node's ``imu/attitude`` collected here; DDS on this machine only):
    split for all messages and for the slowest 1 %, and what ran while those waited. The timing adds about 1 µs per
    timed call.
 2. **Sampling profile** (``--py-spy SECONDS``): the installed node executable, unchanged, profiled by py-spy
-   (``pip install py-spy``; not a project dependency) at 1 kHz without pausing it (``--nonblocking``, native
-   frames, idle threads included), its stacks sorted into the same categories.
+   (``pip install py-spy``; not a project dependency) at 1 kHz without pausing it (``--nonblocking``, which
+   cannot read native frames: garbage collection is not seen here, the timed run counts it), idle threads
+   included, its stacks sorted into the same categories.
 3. **EventsExecutor check** (``--check-events N``): an echo node spun by rclpy's experimental EventsExecutor and by
    the SingleThreadedExecutor gets N messages at ``--rate``; how many come back.
 
@@ -63,7 +64,7 @@ def _timed(fn: Any, rec: dict[str, int], key: str) -> Any:
     return wrapper
 
 
-def child(out: str, node_spec: str, executor: str, batched: bool) -> int:
+def child(out: str, node_spec: str, executor: str, batched: bool, freeze: bool) -> int:
     import importlib
 
     import rclpy
@@ -119,6 +120,9 @@ def child(out: str, node_spec: str, executor: str, batched: bool) -> int:
 
     rclpy.init()
     node = Timed()
+    if freeze:  # what start-up allocated (rclpy, numpy, ONNX Runtime, the node) leaves the collected generations
+        gc.collect()
+        gc.freeze()
     if executor == "events":
         from rclpy.experimental import EventsExecutor
 
@@ -155,12 +159,13 @@ def timed_run(h: Harness, args: argparse.Namespace) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / "records.npz")
         cmd = [sys.executable, __file__, "--child", out, "--node", args.node, "--executor", args.executor,
-               *(["--batched"] if args.batched else []), "--ros-args", "-p", f"nominal_rate:={args.rate}"]
+               *(["--batched"] if args.batched else []), *(["--gc-freeze"] if args.gc_freeze else []),
+               "--ros-args", "-p", f"nominal_rate:={args.rate}"]
         r = h.run(cmd, args.rate, args.duration)
         d = np.load(out)
         rows, diag, gcs = d["rows"], d["diag"], d["gc"]
     print(f"\n## timed run: {args.node}_node, {args.rate:.0f} Hz, {args.duration:.0f} s, executor {args.executor}"
-          + (", copies in one call (Network)" if args.batched else ""))
+          + (", copies in one call (Network)" if args.batched else "") + (", gc.freeze()" if args.gc_freeze else ""))
     print(f"sent {r['sent']:.0f}, received {r['received']:.0f}, dropped {r['dropped']:.0f}, e2e p50 "
           f"{r['e2e_p50_us']:.0f} µs, p99 {r['e2e_p99_us']:.0f} µs, publisher behind {r['publisher_behind']:.0f}")
     report(rows, diag, gcs, h.sent, h.arrivals, args.duration)
@@ -234,9 +239,8 @@ def report(rows: np.ndarray, diag: np.ndarray, gcs: np.ndarray, sent: dict[int, 
 
 
 # -- py-spy -----------------------------------------------------------------------------------------------------
-CATEGORIES = (  # (category, patterns in a frame); a stack goes to the first category any of its frames matches,
-    # frames checked from the leaf to the root (GC first: it runs inside whatever allocated)
-    ("garbage collection", ("gc_collect", "collect_with_callback", "gc_collect_main")),
+CATEGORIES = (  # (category, patterns in a frame); a stack goes to the first category a frame matches, frames
+    # checked from the leaf to the root
     ("network (ONNX Runtime)", ("onnxruntime", "run_with_iobinding", "_run_rows", "network.py")),
     ("composition", ("_compose_one", "combine", "_combine_row", "ensemble.py", "heading.py", "holes.py")),
     ("estimator planning", ("grid.py", "bias.py", "_plan_", "riann.py", "vqf", "madgwick.py", "mahony.py")),
@@ -251,11 +255,8 @@ CATEGORIES = (  # (category, patterns in a frame); a stack goes to the first cat
 
 
 def categorise(stack: list[str]) -> str:
-    for name, pats in CATEGORIES[:1]:
-        if any(p in f for f in stack for p in pats):
-            return name
     for f in reversed(stack):
-        for name, pats in CATEGORIES[1:]:
+        for name, pats in CATEGORIES:
             if any(p in f for p in pats):
                 return name
     return "other"
@@ -273,7 +274,7 @@ def py_spy_run(h: Harness, args: argparse.Namespace) -> None:
     def attach(pid: int) -> None:
         h.on_connected = None
         procs.append(subprocess.Popen([str(spy), "record", "--pid", str(pid), "--rate", "1000", "--nonblocking",
-                                       "--native", "--idle", "--format", "raw", "--duration", str(int(args.py_spy)),
+                                       "--idle", "--format", "raw", "--duration", str(int(args.py_spy)),
                                        "--output", str(raw)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE))
 
     h.on_connected = attach
@@ -284,17 +285,14 @@ def py_spy_run(h: Harness, args: argparse.Namespace) -> None:
             print(f"py-spy failed: {err.strip()[-400:]}")
             return
     counts: Counter[str] = Counter()
-    threads: Counter[str] = Counter()
     for line in raw.read_text().splitlines():
         stack, _, n = line.rpartition(" ")
         frames = stack.split(";")
         counts[categorise(frames)] += int(n)
-        threads[frames[0]] += int(n)
     total = sum(counts.values())
     print(f"\n## py-spy: {args.node}_node (installed), {args.rate:.0f} Hz, {args.py_spy:.0f} s sampled at 1 kHz "
-          f"(non-blocking, native, idle included); run: dropped {r['dropped']:.0f}, e2e p99 {r['e2e_p99_us']:.0f} µs")
-    main_share = threads.most_common(1)[0][1] / total * 100
-    print(f"{total} samples over {len(threads)} threads; the busiest thread {main_share:.0f} %")
+          f"(non-blocking, idle included); run: dropped {r['dropped']:.0f}, e2e p99 {r['e2e_p99_us']:.0f} µs")
+    print(f"{total} samples")
     print("| category | share of samples % |")
     print("|---|---:|")
     for k, v in counts.most_common():
@@ -345,7 +343,8 @@ def main() -> int:
     if "--child" in sys.argv:
         i = sys.argv.index("--child")
         node = NODES[sys.argv[sys.argv.index("--node") + 1]]
-        return child(sys.argv[i + 1], node, sys.argv[sys.argv.index("--executor") + 1], "--batched" in sys.argv)
+        return child(sys.argv[i + 1], node, sys.argv[sys.argv.index("--executor") + 1], "--batched" in sys.argv,
+                     "--gc-freeze" in sys.argv)
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--duration", type=float, default=30.0, help="seconds of the timed run (0 = skip it)")
@@ -353,6 +352,7 @@ def main() -> int:
     ap.add_argument("--executor", default="single", choices=("single", "events"))
     ap.add_argument("--batched", action="store_true", help="timed run: RIANN's copies in one call through "
                     "riann_ros.estimators.network.Network (the proposed _net; the node code unchanged)")
+    ap.add_argument("--gc-freeze", action="store_true", help="timed run: gc.collect(); gc.freeze() after start-up")
     ap.add_argument("--py-spy", type=float, default=0.0, help="seconds of the sampling profile (0 = skip it)")
     ap.add_argument("--check-events", type=int, default=0, help="messages of the EventsExecutor check (0 = skip)")
     args = ap.parse_args()

@@ -310,7 +310,8 @@ class Network:
         return h.reshape(self.copies, s[0], s[1], s[3]).transpose(1, 2, 0, 3)
 
     def _from_batch(self, hn: F32) -> F32:
-        return np.ascontiguousarray(hn.transpose(2, 0, 1, 3)).reshape(self.copies, *self.state_shape)
+        """The batched model's hn → states (copies, L, D, 1, H), always a new array (never a view of a bound one)."""
+        return np.array(hn.transpose(2, 0, 1, 3), dtype=np.float32, order="C").reshape(self.copies, *self.state_shape)
 
     def _run_bound(self, x: F32, h: F32) -> tuple[F32, F32]:
         assert self._one is not None
