@@ -12,13 +12,13 @@ process, the node's ``imu/attitude`` collected here; DDS on this machine only):
    network and composition, publishing, logging; the diagnostics timer) and Python's garbage collector
    (``gc.callbacks``). Publication, callback entry and exit and arrival share one clock (CLOCK_MONOTONIC), so
    each message's end-to-end latency splits into *inbound* (DDS, the executor's wait and dispatch, queueing behind
-   earlier callbacks), *callback* and *outbound* (publishing, DDS, the harness's callback). The table gives the
-   split for all messages and for the slowest 1 %, and what ran while those waited. The timing adds about 1 µs per
-   timed call.
+   earlier callbacks), *callback* and what follows the callback's exit (DDS, the harness's callback). The table
+   gives the split for all messages and for the slowest 1 %, and what ran while those waited. The timing adds
+   about 1 µs per timed call.
 2. **Sampling profile** (``--py-spy SECONDS``): the installed node executable, unchanged, profiled by py-spy
    (``pip install py-spy``; not a project dependency) at 1 kHz without pausing it (``--nonblocking``, which
-   cannot read native frames: garbage collection is not seen here, the timed run counts it), idle threads
-   included, its stacks sorted into the same categories.
+   cannot read native frames: garbage collection is not seen here, the timed run counts it), busy threads only
+   (where the CPU goes; the timed run gives the wall time), its stacks sorted into the same categories.
 3. **EventsExecutor check** (``--check-events N``): an echo node spun by rclpy's experimental EventsExecutor and by
    the SingleThreadedExecutor gets N messages at ``--rate``; how many come back.
 
@@ -193,7 +193,8 @@ def report(rows: np.ndarray, diag: np.ndarray, gcs: np.ndarray, sent: dict[int, 
         "  publish": pub * 1e-3,
         "  logging": log * 1e-3,
         "  callback other (message unpacking, timing)": (cb * 1e3 - process - pub - log) * 1e-3,
-        "outbound (publish → arrival here)": (t_arr - t_out) * 1e-3,
+        "after the callback (arrival here − callback exit; < 0: arrived before the callback returned)":
+            (t_arr - t_out) * 1e-3,
     }
     slow = e2e >= np.percentile(e2e, 99)
     t0 = t_sent[slow]
@@ -246,10 +247,9 @@ CATEGORIES = (  # (category, patterns in a frame); a stack goes to the first cat
     ("estimator planning", ("grid.py", "bias.py", "_plan_", "riann.py", "vqf", "madgwick.py", "mahony.py")),
     ("input gate and stream", ("stream.py", "mag.py")),
     ("diagnostics", ("_publish_diagnostics", "_diagnostic_level", "percentile")),
+    ("publish", ("publisher.py", "_publish")),
     ("logging", ("logging.py", "get_logger", "_log_gate_result", "_warn_throttled", "rcutils_log")),
-    ("publish", ("publisher.py", "_publish", "rmw_publish", "rcl_publish")),
     ("callback (node_base)", ("node_base.py", "frames.py", "stamps.py")),
-    ("waiting (rcl_wait, idle)", ("rcl_wait", "epoll_wait", "futex", "__wait", "pthread_cond", "sem_wait", "poll")),
     ("executor (rclpy)", ("executors.py", "task.py", "rclpy", "_rclpy")),
 )
 
@@ -274,7 +274,7 @@ def py_spy_run(h: Harness, args: argparse.Namespace) -> None:
     def attach(pid: int) -> None:
         h.on_connected = None
         procs.append(subprocess.Popen([str(spy), "record", "--pid", str(pid), "--rate", "1000", "--nonblocking",
-                                       "--idle", "--format", "raw", "--duration", str(int(args.py_spy)),
+                                       "--format", "raw", "--duration", str(int(args.py_spy)),
                                        "--output", str(raw)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE))
 
     h.on_connected = attach
@@ -291,15 +291,13 @@ def py_spy_run(h: Harness, args: argparse.Namespace) -> None:
         counts[categorise(frames)] += int(n)
     total = sum(counts.values())
     print(f"\n## py-spy: {args.node}_node (installed), {args.rate:.0f} Hz, {args.py_spy:.0f} s sampled at 1 kHz "
-          f"(non-blocking, idle included); run: dropped {r['dropped']:.0f}, e2e p99 {r['e2e_p99_us']:.0f} µs")
+          f"(non-blocking; busy threads only: the CPU); run: dropped {r['dropped']:.0f}, "
+          f"e2e p99 {r['e2e_p99_us']:.0f} µs")
     print(f"{total} samples")
     print("| category | share of samples % |")
     print("|---|---:|")
     for k, v in counts.most_common():
         print(f"| {k} | {v / total * 100:.1f} |")
-    busy = total - counts["waiting (rcl_wait, idle)"]
-    print("without waiting: " + ", ".join(f"{k} {v / busy * 100:.1f} %" for k, v in counts.most_common()
-                                          if k != "waiting (rcl_wait, idle)"))
     print(f"raw stacks: {raw}")
 
 
