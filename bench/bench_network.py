@@ -22,6 +22,9 @@ outputs and states, on synthetic rows (T = 1 from a random state, and T = 2000),
 trials (their rows at the native step, four rotated copies as the ensemble feeds them: the whole trial in one
 call, and its first ``--steps`` rows one call per row, each against the published model called alike).
 
+Then the rows of the copies from one row: ``rotate_rows`` per copy (as ``RiannEstimator._net`` does) against one
+matmul with a block-diagonal (copies, 7, 7) stack, timed, and compared on the BROAD trials.
+
 Then ``RiannEstimator.update`` per sample (a 1 Hz 60° roll swing, 6000 samples, 200 Hz and 1 kHz) with one copy,
 with four copies as today, and with four copies through ``Network`` (a subclass replacing ``_net``), interleaved.
 """
@@ -235,14 +238,14 @@ def exactness(net: nw.Network, fns: dict[str, Fn], rows: int) -> None:
         print(f"  numpy GRU with the gate order r, z, h instead of z, r, h: {max_diff(wrong(x, h), gru(x, h)):.3g}")
 
 
-def trial_rows(path: Path, copies: int) -> np.ndarray:
+def trial_rows(path: Path, copies: int, dtype: type = np.float32) -> np.ndarray:
     """A BROAD trial's rows at its native step, in each copy's rotated frame as the ensemble feeds them."""
     from riann_ros.datasets.broad import read_broad
 
     rec = read_broad(path)
     dt = float(np.median(np.diff(rec.stamps_ns))) * 1e-9
     x = np.column_stack([rec.acc, rec.gyr, np.full(len(rec.acc), dt)])
-    return np.stack([x if m == 0 else rotate_rows(x, r) for m, r in enumerate(frames(copies))]).astype(np.float32)
+    return np.stack([x if m == 0 else rotate_rows(x, r) for m, r in enumerate(frames(copies))]).astype(dtype)
 
 
 def trial_files(spec: str) -> list[Path]:
@@ -314,6 +317,46 @@ class NetworkRiann(RiannEstimator):
         self._net = network_net(self, network)  # type: ignore[method-assign]
 
 
+def rows_for_copies(rots: list[np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
+    """The copies' rows (copies, T, 7) float32 from rows (T, 7) in one matmul: block-diagonal (R, R, 1) per copy
+    (proposed instead of one ``rotate_rows`` per copy; the zero terms change no value)."""
+    r7 = np.zeros((len(rots), 7, 7))
+    for m, r in enumerate(rots):
+        r7[m, :3, :3] = r
+        r7[m, 3:6, 3:6] = r
+        r7[m, 6, 6] = 1.0
+    r7t = np.ascontiguousarray(r7.transpose(0, 2, 1))
+    return lambda x: (x[None] @ r7t).astype(np.float32)
+
+
+def rotation_check(spec: str, reps: int) -> None:
+    rots = frames(4)
+    one = rows_for_copies(rots)
+
+    def loop(x: np.ndarray) -> np.ndarray:
+        xs = np.empty((len(rots), len(x), 7), np.float32)
+        for m, r in enumerate(rots):
+            xs[m] = x if m == 0 else rotate_rows(x, r)
+        return xs
+
+    x1 = nw.probe(1, 1, seed=3)[0].astype(np.float64)
+    res: dict[str, list[float]] = {"rotate_rows per copy": [], "one matmul": []}
+    for _ in range(reps):
+        for k, f in (("rotate_rows per copy", loop), ("one matmul", one)):
+            t0 = time.perf_counter()
+            for _ in range(2000):
+                f(x1)
+            res[k].append((time.perf_counter() - t0) / 2000 * 1e6)
+    print_table("rows of the 4 copies from one row (the node's path)", res, "rotate_rows per copy", 1.0, "µs")
+    diff = n = 0
+    for path in trial_files(spec):
+        x = trial_rows(path, 1, np.float64)[0]
+        diff += int((loop(x) != one(x)).sum())
+        n += 4 * x.size
+    if n:
+        print(f"  BROAD trials: {diff} of {n} float32 values differ between the two")
+
+
 def swing(rate: float, n: int) -> tuple[np.ndarray, np.ndarray]:
     t = np.arange(1, n + 1) / rate
     a, w = math.radians(60.0), 2 * math.pi
@@ -372,6 +415,7 @@ def main() -> int:
     exactness(net, candidates(net, 1, not a.no_numpy), 2000)
     if a.trial:
         trial_exactness(net, candidates(net, 1, not a.no_numpy), a.trial, a.steps)
+    rotation_check(a.trial, a.reps)
     if a.samples:
         time_update(net, max(3, a.reps // 2), a.samples)
     print(f"load: {os.getloadavg()[0]:.1f} (1-min load average at the end)")

@@ -21,6 +21,9 @@ process, the node's ``imu/attitude`` collected here; DDS on this machine only):
    (where the CPU goes; the timed run gives the wall time), its stacks sorted into the same categories.
 3. **EventsExecutor check** (``--check-events N``): an echo node spun by rclpy's experimental EventsExecutor and by
    the SingleThreadedExecutor gets N messages at ``--rate``; how many come back.
+4. **Executor cost** (``--executor-cost N``): in this process, N messages queued for a node with a trivial callback,
+   then taken by ``SingleThreadedExecutor.spin_once`` (nodes with more or fewer entities) or directly
+   (``subscription.handle.take_message``): µs per message.
 
 The child's records are written to a temporary file and read back here.
 """
@@ -337,6 +340,71 @@ def check_events(h: Harness, args: argparse.Namespace) -> None:
               f"p99 {r['e2e_p99_us']:.0f} µs")
 
 
+# -- the executor's cost per message ------------------------------------------------------------------------------
+def executor_cost(messages: int, reps: int) -> None:
+    """Per message: SingleThreadedExecutor.spin_once with a trivial callback and the messages already queued, for
+    nodes with more or fewer entities, against taking the same messages without the executor."""
+    import rclpy
+    from rclpy.event_handler import SubscriptionEventCallbacks
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import Imu
+    from std_srvs.srv import Trigger
+
+    qos = QoSProfile(depth=messages, reliability=ReliabilityPolicy.RELIABLE)
+    src = rclpy.create_node("executor_cost_source")
+    pub = src.create_publisher(Imu, "executor_cost", qos)
+    print(f"\n## executor cost: {messages} queued messages, trivial callback, {reps} repetitions (µs per message)")
+    print("| node | entities | spin_once min | spin_once median | take without executor min | median |")
+    print("|---|---|---:|---:|---:|---:|")
+    kinds = {"bare": "one subscription, no parameter services, no QoS event handlers",
+             "default": "one subscription, parameter services (rclpy's default node)",
+             "riann_like": "+ a 1 s timer, a service, a second subscription, two publishers"}
+    for kind, what in kinds.items():
+        node = rclpy.create_node(f"executor_cost_{kind}", start_parameter_services=kind != "bare")
+        got = Counter[str]()
+        events = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)} if kind == "bare" else {}
+        sub = node.create_subscription(Imu, "executor_cost", lambda m, c=got: c.update("n"), qos, **events)
+        if kind == "riann_like":
+            node.create_timer(1.0, lambda: None)
+            node.create_service(Trigger, "~/reset", lambda req, resp: resp)
+            node.create_subscription(Imu, "executor_cost_other", lambda m: None, qos)
+            node.create_publisher(Imu, "executor_cost_a", qos)
+            node.create_publisher(Imu, "executor_cost_b", qos)
+        ex = SingleThreadedExecutor()
+        ex.add_node(node)
+        end = time.monotonic() + 10
+        while pub.get_subscription_count() == 0 and time.monotonic() < end:
+            time.sleep(0.05)
+        time.sleep(1.0)
+        spin, take = [], []
+        msg = Imu()
+        for _ in range(reps + 1):  # the first repetition warms up and is not counted
+            for _i in range(messages):
+                pub.publish(msg)
+            time.sleep(0.5)
+            got.clear()
+            t0 = time.perf_counter()
+            while got["n"] < messages and time.perf_counter() - t0 < 30:
+                ex.spin_once(timeout_sec=0.5)
+            spin.append((time.perf_counter() - t0) / max(got["n"], 1) * 1e6)
+            for _i in range(messages):
+                pub.publish(msg)
+            time.sleep(0.5)
+            k = 0
+            t0 = time.perf_counter()
+            while k < messages and time.perf_counter() - t0 < 30:
+                k += sub.handle.take_message(Imu, False) is not None
+            take.append((time.perf_counter() - t0) / max(k, 1) * 1e6)
+        spin, take = spin[1:], take[1:]
+        print(f"| {kind} | {what} | {min(spin):.0f} | {np.median(spin):.0f} | {min(take):.0f} | "
+              f"{np.median(take):.0f} |")
+        ex.remove_node(node)
+        ex.shutdown()
+        node.destroy_node()
+    src.destroy_node()
+
+
 def main() -> int:
     if "--child" in sys.argv:
         i = sys.argv.index("--child")
@@ -353,24 +421,33 @@ def main() -> int:
     ap.add_argument("--gc-freeze", action="store_true", help="timed run: gc.collect(); gc.freeze() after start-up")
     ap.add_argument("--py-spy", type=float, default=0.0, help="seconds of the sampling profile (0 = skip it)")
     ap.add_argument("--check-events", type=int, default=0, help="messages of the EventsExecutor check (0 = skip)")
+    ap.add_argument("--executor-cost", type=int, default=0, help="queued messages per repetition of the executor's "
+                    "cost per message (0 = skip)")
     args = ap.parse_args()
     signal.signal(signal.SIGTERM, signal.default_int_handler)
-    h = Harness()
     print(f"load average at start: {os.getloadavg()[0]:.1f}")
-    try:
-        if args.duration:
-            timed_run(h, args)
-        if args.py_spy:
-            py_spy_run(h, args)
-        if args.check_events:
-            check_events(h, args)
-    finally:
-        h.ex.shutdown()
-        h.spinner.join(timeout=5.0)
-        h.node.destroy_node()
-        import rclpy
+    import rclpy
 
-        rclpy.shutdown()
+    if args.executor_cost:  # first, and without the harness (its spin thread would compete for the GIL)
+        rclpy.init()
+        try:
+            executor_cost(args.executor_cost, 3)
+        finally:
+            rclpy.shutdown()
+    if args.duration or args.py_spy or args.check_events:
+        h = Harness()
+        try:
+            if args.duration:
+                timed_run(h, args)
+            if args.py_spy:
+                py_spy_run(h, args)
+            if args.check_events:
+                check_events(h, args)
+        finally:
+            h.ex.shutdown()
+            h.spinner.join(timeout=5.0)
+            h.node.destroy_node()
+            rclpy.shutdown()
     print(f"load average at the end: {os.getloadavg()[0]:.1f}")
     return 0
 
