@@ -25,6 +25,9 @@ call, and its first ``--steps`` rows one call per row, each against the publishe
 Then the rows of the copies from one row: ``rotate_rows`` per copy (as ``RiannEstimator._net`` does) against one
 matmul with a block-diagonal (copies, 7, 7) stack, timed, and compared on the BROAD trials.
 
+Then the whole estimator on the trials, today's ``_net`` against one through ``Network``: outputs of ``update_batch``
+over each trial and of ``update`` over its first ``--steps`` samples.
+
 Then ``RiannEstimator.update`` per sample (a 1 Hz 60° roll swing, 6000 samples, 200 Hz and 1 kHz) with one copy,
 with four copies as today, and with four copies through ``Network`` (a subclass replacing ``_net``), interleaved.
 """
@@ -389,6 +392,29 @@ def time_update(net: nw.Network, reps: int, samples: int) -> None:
         print(f"  outputs, Network against today: max |Δq| {dq:.3g}")
 
 
+def estimator_check(net: nw.Network, spec: str, steps: int) -> None:
+    """The whole estimator on BROAD trials, today's ``_net`` against ``Network``: ``update_batch`` over the trial
+    (timed) and ``update`` over its first ``steps`` samples."""
+    for path in trial_files(spec):
+        from riann_ros.datasets.broad import read_broad
+
+        rec = read_broad(path)
+        dt = np.diff(rec.stamps_ns, prepend=2 * rec.stamps_ns[0] - rec.stamps_ns[1]) * 1e-9
+        a, b = RiannEstimator(session=net.session), NetworkRiann(net)
+        t0 = time.perf_counter()
+        qa = a.update_batch(rec.acc, rec.gyr, dt)
+        t1 = time.perf_counter()
+        qb = b.update_batch(rec.acc, rec.gyr, dt)
+        t2 = time.perf_counter()
+        a.reset()
+        b.reset()
+        sa = np.array([a.update(rec.acc[i], rec.gyr[i], dt[i]) for i in range(min(steps, len(dt)))])
+        sb = np.array([b.update(rec.acc[i], rec.gyr[i], dt[i]) for i in range(min(steps, len(dt)))])
+        print(f"  RiannEstimator, trial {path.name[:2]}: update_batch max |Δq| {np.abs(qa - qb).max():.3g} "
+              f"({t1 - t0:.1f} s today, {t2 - t1:.1f} s with Network); update() over {len(sa)} samples max |Δq| "
+              f"{np.abs(sa - sb).max():.3g}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--reps", type=int, default=7)
@@ -416,6 +442,9 @@ def main() -> int:
     if a.trial:
         trial_exactness(net, candidates(net, 1, not a.no_numpy), a.trial, a.steps)
     rotation_check(a.trial, a.reps)
+    if a.trial:
+        print("\nthe estimator with its copies through Network against today's (outputs)")
+        estimator_check(net, a.trial, a.steps)
     if a.samples:
         time_update(net, max(3, a.reps // 2), a.samples)
     print(f"load: {os.getloadavg()[0]:.1f} (1-min load average at the end)")
