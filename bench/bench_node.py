@@ -22,6 +22,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -86,6 +87,8 @@ class Harness:
         self.pub = self.node.create_publisher(Imu, "imu/data_raw", QoSProfile(depth=1000))
         self.arrivals: dict[int, int] = {}
         self.proc_p99: list[float] = []
+        self.sent: dict[int, int] = {}
+        self.on_connected: Callable[[int], None] | None = None  # called with the node's pid once it is connected
         self.node.create_subscription(QuaternionStamped, "imu/attitude", self._on_out,
                                       QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE))
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
@@ -114,11 +117,14 @@ class Harness:
                     raise RuntimeError("node did not connect")
                 time.sleep(0.05)
             time.sleep(1.0)  # let discovery settle both ways
+            if self.on_connected is not None:
+                self.on_connected(proc.pid)
             n = int(rate * duration)
             rng = np.random.default_rng(0)
             acc = np.array([0.3, -0.2, 9.8]) + rng.normal(0, 0.3, (n, 3))
             gyr = rng.normal(0, 0.5, (n, 3))
             sent: dict[int, int] = {}
+            self.sent = sent  # stamp → perf_counter_ns at publication (CLOCK_MONOTONIC: comparable across processes)
             msg = Imu()
             msg.header.frame_id = "imu_link"
             t0_ns = 1_700_000_000_000_000_000
@@ -147,7 +153,12 @@ class Harness:
             time.sleep(1.5)
         finally:
             proc.send_signal(2)
-            proc.wait(10)
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:  # a node that does not end on Ctrl-C
+                print(f"{cmd[0]} did not stop within 10 s of SIGINT: killed", file=sys.stderr)
+                proc.kill()
+                proc.wait(10)
         lat = np.array([(self.arrivals[s] - t) * 1e-3 for s, t in sent.items() if s in self.arrivals])
         return {
             "rate": rate,
