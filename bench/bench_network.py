@@ -9,9 +9,9 @@ same meaning as the published session run once per copy):
 * ``published 1 copy``: the published session, one run (the reference of the ratios);
 * ``published × 4``: the published session once per copy (what the estimator does today);
 * ``I/O binding × 4``: the same four runs with preallocated inputs and outputs bound once (OrtValue);
-* ``batched run()``: the published graph with a batch axis (:func:`riann_ros.estimators.network.batch_model`),
+* ``batched run()``: the published graph with a batch axis (:func:`riann_ros.estimators.riann.s4b_model.batch_model`),
   one ``InferenceSession.run`` for all copies;
-* ``Network.run``: :class:`riann_ros.estimators.network.Network` (the batched graph, I/O binding);
+* ``BatchedModel.run``: :class:`riann_ros.estimators.riann.s4b_model.BatchedModel` (the batched graph, I/O binding);
 * ``numpy GRU × 4``: the two GRU layers stepped in numpy (float32) from the file's initializers (timed at
   T = ``--rows`` on a thirtieth of the calls; in the trial check on the first trial only).
 
@@ -22,36 +22,28 @@ outputs and states, on synthetic rows (T = 1 from a random state, and T = 2000),
 trials (their rows at the native step, four rotated copies as the ensemble feeds them: the whole trial in one
 call, and its first ``--steps`` rows one call per row, each against the published model called alike).
 
-Then the rows of the copies from one row: ``rotate_rows`` per copy (as ``RiannEstimator._net`` does) against one
-matmul with a block-diagonal (copies, 7, 7) stack, timed, and compared on the BROAD trials.
-
-Then the whole estimator on the trials, today's ``_net`` against one through ``Network``: outputs of ``update_batch``
-over each trial and of ``update`` over its first ``--steps`` samples.
-
-Then ``RiannEstimator.update`` per sample (a 1 Hz 60° roll swing, 6000 samples, 200 Hz and 1 kHz) with one copy,
-with four copies as today, and with four copies through ``Network`` (a subclass replacing ``_net``), interleaved.
+Then the rows of the copies from one row: ``rotate_rows`` per copy against one matmul with a block-diagonal
+(copies, 7, 7) stack (``copy_rows``, what the network stage uses), timed, and compared on the BROAD trials.
+The estimator's per-sample cost against another version: ``bench/bench_update.py``.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # numpy's BLAS single-threaded like ONNX Runtime
 
 import numpy as np
 import onnxruntime as ort
 
-from riann_ros.estimators import network as nw
-from riann_ros.estimators.ensemble import FLOAT_ROWS, combine, frames, rotate_rows
-from riann_ros.estimators.riann import RiannEstimator
+from riann_ros.estimators.riann import s4b_model as nw
+from riann_ros.estimators.riann.s4a_ensemble import copy_rows, frames, rotate_rows
 
 Fn = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
@@ -182,14 +174,14 @@ def batched_run(session: ort.InferenceSession) -> Fn:
     return run
 
 
-def candidates(net: nw.Network, rows: int, numpy: bool) -> dict[str, Fn]:
+def candidates(net: nw.BatchedModel, rows: int, numpy: bool) -> dict[str, Fn]:
     s = net.session
     batched = nw._session(nw.batch_model(net.path.read_bytes()), 1)
     out: dict[str, Fn] = {
         "published 1 copy": lambda x, h: s.run(["output", "hn"], {"input": x[:1], "h0": h[0]}),
         "published × 4": net.run_per_copy,
         "batched run()": batched_run(batched),
-        "Network.run": net.run,
+        "BatchedModel.run": net.run,
     }
     if rows <= 2:
         out["I/O binding × 4"] = BoundPerCopy(s, net.copies, rows)
@@ -224,7 +216,7 @@ def max_diff(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray])
     return max(float(np.abs(p.astype(np.float64) - q).max()) for p, q in zip(a, b, strict=True))
 
 
-def exactness(net: nw.Network, fns: dict[str, Fn], rows: int) -> None:
+def exactness(net: nw.BatchedModel, fns: dict[str, Fn], rows: int) -> None:
     print("\nexactness: max |candidate - published per copy| over outputs and states")
     rng = np.random.default_rng(5)
     h = rng.uniform(-0.9, 0.9, (net.copies, 2, 1, 1, 200)).astype(np.float32)
@@ -270,7 +262,7 @@ def row_by_row(f: Fn, x: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndar
     return out, h
 
 
-def trial_exactness(net: nw.Network, fns: dict[str, Fn], spec: str, steps: int) -> None:
+def trial_exactness(net: nw.BatchedModel, fns: dict[str, Fn], spec: str, steps: int) -> None:
     """Per trial: the whole trial in one call, and its first ``steps`` rows one call each, against the published
     model run copy by copy in the same calls; and the published model's own spread between the two."""
     files = trial_files(spec)
@@ -294,47 +286,9 @@ def trial_exactness(net: nw.Network, fns: dict[str, Fn], spec: str, steps: int) 
 
 
 # -- the estimator ----------------------------------------------------------------------------------------
-def network_net(est: RiannEstimator, network: nw.Network) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
-    """A replacement for ``est._net`` that runs the copies through ``network`` (the change proposed for
-    ``RiannEstimator._net``: the same rows, rotations and combination, one call for all copies)."""
-
-    def _net(rows: Any, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        x = np.asarray(rows, dtype=np.float64).reshape(-1, 7)
-        xs = np.empty((len(est._rots), len(x), 7), np.float32)
-        for m, r in enumerate(est._rots):
-            xs[m] = x if m == 0 else rotate_rows(x, r)
-        out, hn = network.run(xs, h)
-        outs = [o.astype(np.float64) for o in out]
-        if len(outs) == 1 or len(x) > FLOAT_ROWS:
-            outs = [q / np.linalg.norm(q, axis=-1, keepdims=True) for q in outs]
-        return combine(outs, est._rots), hn
-
-    return _net
-
-
-class NetworkRiann(RiannEstimator):
-    """RiannEstimator with its copies run through :class:`Network` (``_net`` replaced; the rest unchanged)."""
-
-    def __init__(self, network: nw.Network, **params: Any) -> None:
-        super().__init__(session=network.session, **params)
-        self._net = network_net(self, network)  # type: ignore[method-assign]
-
-
-def rows_for_copies(rots: list[np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
-    """The copies' rows (copies, T, 7) float32 from rows (T, 7) in one matmul: block-diagonal (R, R, 1) per copy
-    (proposed instead of one ``rotate_rows`` per copy; the zero terms change no value)."""
-    r7 = np.zeros((len(rots), 7, 7))
-    for m, r in enumerate(rots):
-        r7[m, :3, :3] = r
-        r7[m, 3:6, 3:6] = r
-        r7[m, 6, 6] = 1.0
-    r7t = np.ascontiguousarray(r7.transpose(0, 2, 1))
-    return lambda x: (x[None] @ r7t).astype(np.float32)
-
-
 def rotation_check(spec: str, reps: int) -> None:
     rots = frames(4)
-    one = rows_for_copies(rots)
+    one = copy_rows(rots)
 
     def loop(x: np.ndarray) -> np.ndarray:
         xs = np.empty((len(rots), len(x), 7), np.float32)
@@ -360,61 +314,6 @@ def rotation_check(spec: str, reps: int) -> None:
         print(f"  BROAD trials: {diff} of {n} float32 values differ between the two")
 
 
-def swing(rate: float, n: int) -> tuple[np.ndarray, np.ndarray]:
-    t = np.arange(1, n + 1) / rate
-    a, w = math.radians(60.0), 2 * math.pi
-    roll, rate_x = a * np.sin(w * t), a * w * np.cos(w * t)
-    acc = np.column_stack([np.zeros(n), 9.81 * np.sin(roll), 9.81 * np.cos(roll)])
-    gyr = np.column_stack([rate_x, np.zeros(n), np.zeros(n)])
-    return acc, gyr
-
-
-def time_update(net: nw.Network, reps: int, samples: int) -> None:
-    for rate in (200.0, 1000.0):
-        acc, gyr = swing(rate, samples)
-        ests = {"ensemble=1": RiannEstimator(session=net.session, ensemble=1),
-                "ensemble=4 today": RiannEstimator(session=net.session, ensemble=4),
-                "ensemble=4 Network": NetworkRiann(net, ensemble=4)}
-        outs: dict[str, np.ndarray] = {}
-        res: dict[str, list[float]] = {k: [] for k in ests}
-        for _ in range(reps):
-            for k, e in ests.items():
-                e.reset()
-                q = np.empty((samples, 4))
-                t0 = time.perf_counter()
-                for i in range(samples):
-                    q[i] = e.update(acc[i], gyr[i], 1.0 / rate)
-                res[k].append((time.perf_counter() - t0) / samples * 1e6)
-                outs[k] = q
-        print_table(f"RiannEstimator.update per sample, {rate:.0f} Hz swing, {samples} samples", res, "ensemble=1", 1.0,
-                    "µs")
-        dq = np.abs(outs["ensemble=4 Network"] - outs["ensemble=4 today"]).max()
-        print(f"  outputs, Network against today: max |Δq| {dq:.3g}")
-
-
-def estimator_check(net: nw.Network, spec: str, steps: int) -> None:
-    """The whole estimator on BROAD trials, today's ``_net`` against ``Network``: ``update_batch`` over the trial
-    (timed) and ``update`` over its first ``steps`` samples."""
-    for path in trial_files(spec):
-        from riann_ros.datasets.broad import read_broad
-
-        rec = read_broad(path)
-        dt = np.diff(rec.stamps_ns, prepend=2 * rec.stamps_ns[0] - rec.stamps_ns[1]) * 1e-9
-        a, b = RiannEstimator(session=net.session), NetworkRiann(net)
-        t0 = time.perf_counter()
-        qa = a.update_batch(rec.acc, rec.gyr, dt)
-        t1 = time.perf_counter()
-        qb = b.update_batch(rec.acc, rec.gyr, dt)
-        t2 = time.perf_counter()
-        a.reset()
-        b.reset()
-        sa = np.array([a.update(rec.acc[i], rec.gyr[i], dt[i]) for i in range(min(steps, len(dt)))])
-        sb = np.array([b.update(rec.acc[i], rec.gyr[i], dt[i]) for i in range(min(steps, len(dt)))])
-        print(f"  RiannEstimator, trial {path.name[:2]}: update_batch max |Δq| {np.abs(qa - qb).max():.3g} "
-              f"({t1 - t0:.1f} s today, {t2 - t1:.1f} s with Network); update() over {len(sa)} samples max |Δq| "
-              f"{np.abs(sa - sb).max():.3g}")
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--reps", type=int, default=7)
@@ -423,11 +322,10 @@ def main() -> int:
     ap.add_argument("--trial", default="all", help="BROAD trials for the exactness check: 'all', numbers "
                     "like 02,07, or '' for none")
     ap.add_argument("--steps", type=int, default=3000, help="rows of each trial also fed one call per row")
-    ap.add_argument("--samples", type=int, default=6000, help="samples per update() repetition (0 = skip)")
     ap.add_argument("--no-numpy", action="store_true", help="leave out the numpy GRU")
     a = ap.parse_args()
-    net = nw.Network()
-    print(f"ONNX Runtime {ort.__version__}, numpy {np.__version__}; Network batched: {net.batched} {net.reason}")
+    net = nw.BatchedModel()
+    print(f"ONNX Runtime {ort.__version__}, numpy {np.__version__}; BatchedModel batched: {net.batched} {net.reason}")
     print(f"load: {os.getloadavg()[0]:.1f} (1-min load average at start)")
     rng = np.random.default_rng(0)
     h = rng.uniform(-0.9, 0.9, (net.copies, 2, 1, 1, 200)).astype(np.float32)
@@ -442,11 +340,6 @@ def main() -> int:
     if a.trial:
         trial_exactness(net, candidates(net, 1, not a.no_numpy), a.trial, a.steps)
     rotation_check(a.trial, a.reps)
-    if a.trial:
-        print("\nthe estimator with its copies through Network against today's (outputs)")
-        estimator_check(net, a.trial, a.steps)
-    if a.samples:
-        time_update(net, max(3, a.reps // 2), a.samples)
     print(f"load: {os.getloadavg()[0]:.1f} (1-min load average at the end)")
     return 0
 

@@ -61,10 +61,11 @@ except KeyboardInterrupt:
 
 def onnx_reference() -> tuple[float, float]:
     """µs per single ONNX Runtime step, µs per sample over a whole sequence (same session)."""
-    from riann_ros.estimators.riann import HIDDEN_SHAPE, make_session
+    from riann_ros.estimators.riann import open_model
 
-    s = make_session()
-    h = np.zeros(HIDDEN_SHAPE, np.float32)
+    _, s = open_model()
+    shape = (2, 1, 1, 200)
+    h = np.zeros(shape, np.float32)
     x1 = np.array([[[0.1, 0.2, 9.8, 0.01, 0.02, 0.03, 0.005]]], np.float32)
     for _ in range(50):
         s.run(None, {"input": x1, "h0": h})
@@ -75,7 +76,7 @@ def onnx_reference() -> tuple[float, float]:
     step = (time.perf_counter() - t0) / n * 1e6
     xs = np.repeat(x1, 20000, axis=1)
     t0 = time.perf_counter()
-    s.run(None, {"input": xs, "h0": np.zeros(HIDDEN_SHAPE, np.float32)})
+    s.run(None, {"input": xs, "h0": np.zeros(shape, np.float32)})
     seq = (time.perf_counter() - t0) / 20000 * 1e6
     return step, seq
 

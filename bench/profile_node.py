@@ -67,7 +67,7 @@ def _timed(fn: Any, rec: dict[str, int], key: str) -> Any:
     return wrapper
 
 
-def child(out: str, node_spec: str, executor: str, batched: bool, freeze: bool) -> int:
+def child(out: str, node_spec: str, executor: str, freeze: bool) -> int:
     import importlib
 
     import rclpy
@@ -87,23 +87,30 @@ def child(out: str, node_spec: str, executor: str, batched: bool, freeze: bool) 
         else:
             gcs.append((gc_start[0], time.perf_counter_ns(), info["generation"]))
 
+    from riann_ros.estimators.riann import s1_timeline, s2_grid, s4_network, s5_carry, s6_handover, s7_heading
+
+    for cls, key in ((s1_timeline.Timeline, "plan"), (s2_grid.Grid, "plan"), (s4_network.Network, "network"),
+                     (s5_carry.Carry, "compose"), (s6_handover.Handover, "compose"), (s7_heading.Heading, "compose")):
+        cls.run = _timed(cls.run, rec, key)  # type: ignore[method-assign]
+
     class Timed(base):  # type: ignore[misc, valid-type]
         def __init__(self) -> None:
             super().__init__()
-            s, e = self.stream, self.stream.estimator
-            if batched:  # the proposed RiannEstimator._net: every copy in one call (bench_network.network_net)
-                from bench_network import network_net
-
-                from riann_ros.estimators.network import Network
-
-                e._net = network_net(e, Network(e.params["model_path"] or None, copies=len(e._rots)))
+            s = self.stream
             s.gate.check = _timed(s.gate.check, rec, "gate")
             s.process = _timed(s.process, rec, "process")
-            for name, key in (("_plan_grid", "plan"), ("_plan_direct", "plan"), ("_run_rows", "network"),
-                              ("_compose_one", "compose")):
-                if hasattr(e, name):
-                    setattr(e, name, _timed(getattr(e, name), rec, key))
-            self._publish = _timed(self._publish, rec, "publish")  # type: ignore[method-assign]
+            self.outputs.publish = _timed(self.outputs.publish, rec, "publish")
+            inner = self.diag.publish
+
+            def diag_publish() -> None:
+                t0 = time.perf_counter_ns()
+                inner()
+                diag.append((t0, time.perf_counter_ns()))
+
+            self.diag.publish = diag_publish  # the timer holds the bound method: re-create it
+            for timer in list(self.timers):
+                if getattr(timer, "callback", None) == inner:
+                    timer.callback = diag_publish
             for name in ("_log_gate_result", "_log_mag_state", "_warn_throttled"):
                 setattr(self, name, _timed(getattr(self, name), rec, "logging"))
 
@@ -115,11 +122,6 @@ def child(out: str, node_spec: str, executor: str, batched: bool, freeze: bool) 
             t1 = time.perf_counter_ns()
             st = msg.header.stamp
             rows.append((st.sec * 1_000_000_000 + st.nanosec, t0, t1, *rec.values()))
-
-        def _publish_diagnostics(self) -> None:
-            t0 = time.perf_counter_ns()
-            super()._publish_diagnostics()
-            diag.append((t0, time.perf_counter_ns()))
 
     rclpy.init()
     node = Timed()
@@ -162,13 +164,13 @@ def timed_run(h: Harness, args: argparse.Namespace) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = str(Path(tmp) / "records.npz")
         cmd = [sys.executable, __file__, "--child", out, "--node", args.node, "--executor", args.executor,
-               *(["--batched"] if args.batched else []), *(["--gc-freeze"] if args.gc_freeze else []),
+               *(["--gc-freeze"] if args.gc_freeze else []),
                "--ros-args", "-p", f"nominal_rate:={args.rate}"]
         r = h.run(cmd, args.rate, args.duration)
         d = np.load(out)
         rows, diag, gcs = d["rows"], d["diag"], d["gc"]
     print(f"\n## timed run: {args.node}_node, {args.rate:.0f} Hz, {args.duration:.0f} s, executor {args.executor}"
-          + (", copies in one call (Network)" if args.batched else "") + (", gc.freeze()" if args.gc_freeze else ""))
+          + (", gc.freeze()" if args.gc_freeze else ""))
     print(f"sent {r['sent']:.0f}, received {r['received']:.0f}, dropped {r['dropped']:.0f}, e2e p50 "
           f"{r['e2e_p50_us']:.0f} µs, p99 {r['e2e_p99_us']:.0f} µs, publisher behind {r['publisher_behind']:.0f}")
     report(rows, diag, gcs, h.sent, h.arrivals, args.duration)
@@ -409,15 +411,12 @@ def main() -> int:
     if "--child" in sys.argv:
         i = sys.argv.index("--child")
         node = NODES[sys.argv[sys.argv.index("--node") + 1]]
-        return child(sys.argv[i + 1], node, sys.argv[sys.argv.index("--executor") + 1], "--batched" in sys.argv,
-                     "--gc-freeze" in sys.argv)
+        return child(sys.argv[i + 1], node, sys.argv[sys.argv.index("--executor") + 1], "--gc-freeze" in sys.argv)
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--duration", type=float, default=30.0, help="seconds of the timed run (0 = skip it)")
     ap.add_argument("--node", default="riann", choices=sorted(NODES))
     ap.add_argument("--executor", default="single", choices=("single", "events"))
-    ap.add_argument("--batched", action="store_true", help="timed run: RIANN's copies in one call through "
-                    "riann_ros.estimators.network.Network (the proposed _net; the node code unchanged)")
     ap.add_argument("--gc-freeze", action="store_true", help="timed run: gc.collect(); gc.freeze() after start-up")
     ap.add_argument("--py-spy", type=float, default=0.0, help="seconds of the sampling profile (0 = skip it)")
     ap.add_argument("--check-events", type=int, default=0, help="messages of the EventsExecutor check (0 = skip)")

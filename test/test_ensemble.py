@@ -109,3 +109,15 @@ def test_ensemble_is_more_accurate_than_one_network_on_broad(broad_trial):
     one = rmse(rec, create("riann", ensemble=1).update_batch(rec.acc, rec.gyr, gate_dts(rec)))
     four = rmse(rec, create("riann").update_batch(rec.acc, rec.gyr, gate_dts(rec)))
     assert four < 0.8 * one, (four, one)
+
+
+def test_copy_rows_equals_rotate_rows_per_copy():
+    from riann_ros.estimators.riann.s4a_ensemble import copy_rows
+
+    rng = np.random.default_rng(4)
+    rows = np.column_stack([rng.normal(0, 3, (500, 6)), np.full(500, 0.005)])
+    rots = frames(MAX_COPIES)
+    got = copy_rows(rots)(rows)
+    for m, r in enumerate(rots):
+        want = (rows if m == 0 else rotate_rows(rows, r)).astype(np.float32)
+        assert np.abs(got[m].astype(np.float64) - want).max() <= 1e-6 * np.abs(want).max()

@@ -35,11 +35,11 @@ def make(name: str):
     """A fresh estimator; RIANN instances share one ONNX session (loading it dominates otherwise)."""
     global _session
     if name == "riann":
-        from riann_ros.estimators.riann import RiannEstimator, make_session
+        from riann_ros.estimators.riann import BatchedModel, RiannEstimator
 
         if _session is None:
-            _session = make_session()
-        return RiannEstimator(session=_session)
+            _session = BatchedModel(copies=4)
+        return RiannEstimator(model=_session)
     return create(name)
 
 

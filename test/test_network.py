@@ -1,4 +1,4 @@
-"""riann_ros.estimators.network: the ensemble's copies in one call mean the same as the published model run
+"""riann_ros.estimators.riann.s4b_model: the ensemble's copies in one call mean the same as the published model run
 once per copy."""
 
 from __future__ import annotations
@@ -10,13 +10,13 @@ import numpy as np
 import onnxruntime as ort
 import pytest
 
-from riann_ros.estimators import network
-from riann_ros.estimators.ensemble import frames, rotate_rows
-from riann_ros.estimators.network import (
+from riann_ros.estimators.riann import s4b_model as network
+from riann_ros.estimators.riann.s4a_ensemble import frames, rotate_rows
+from riann_ros.estimators.riann.s4b_model import (
     GRAPH_INPUT,
     GRAPH_OUTPUT,
     MODEL_GRAPH,
-    Network,
+    BatchedModel,
     _fields,
     _map,
     _session,
@@ -30,8 +30,8 @@ TOL = 1e-6
 
 
 @pytest.fixture(scope="module")
-def net() -> Network:
-    return Network()
+def net() -> BatchedModel:
+    return BatchedModel()
 
 
 def _diff(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> float:
@@ -44,7 +44,7 @@ def _session_of_the_published_model() -> ort.InferenceSession:
 
 
 def _published(x: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The published session once per copy, written out here (not through Network)."""
+    """The published session once per copy, written out here (not through BatchedModel)."""
     session = _session_of_the_published_model()
     out = np.empty((len(x), x.shape[1], 4), np.float32)
     hn = np.empty_like(h)
@@ -144,7 +144,7 @@ def test_one_row_at_a_time_carries_the_state_between_calls(net):
 
 @pytest.mark.parametrize("copies", [4, 1])
 def test_run_leaves_its_arguments_and_earlier_results_alone(copies):
-    net = Network(copies=copies)
+    net = BatchedModel(copies=copies)
     x = probe(copies, 1, seed=2)
     h = net.fresh_state()
     x0, h0 = x.copy(), h.copy()
@@ -159,7 +159,7 @@ def test_zero_rows_and_one_copy(net):
     h = np.random.default_rng(0).uniform(-0.5, 0.5, (4, 2, 1, 1, 200)).astype(np.float32)
     out, hn = net.run(np.zeros((4, 0, 7), np.float32), h)
     assert out.shape == (4, 0, 4) and np.array_equal(hn, h) and hn is not h
-    one = Network(copies=1)
+    one = BatchedModel(copies=1)
     assert one.batched
     x = probe(1, 3, seed=4)
     assert _diff(one.run(x, h[:1]), _published(x, h[:1])) <= TOL
@@ -171,19 +171,19 @@ def test_bad_shapes_and_copies_are_refused(net):
     with pytest.raises(ValueError, match="state must have shape"):
         net.run(np.zeros((4, 1, 7), np.float32), np.zeros((4, 2, 200), np.float32))
     with pytest.raises(ValueError, match="copies must be at least 1"):
-        Network(copies=0)
+        BatchedModel(copies=0)
 
 
 def test_a_missing_model_file_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="RIANN model not found"):
-        Network(tmp_path / "nope.onnx")
+        BatchedModel(tmp_path / "nope.onnx")
 
 
 def test_a_file_that_is_not_a_model_is_a_clear_error(tmp_path):
     bad = tmp_path / "bad.onnx"
     bad.write_bytes(b"this is not a protobuf")
     with pytest.raises(ValueError, match="not a loadable ONNX model"):
-        Network(bad)
+        BatchedModel(bad)
 
 
 def _rename(model: bytes, old: bytes, new: bytes) -> bytes:
@@ -202,13 +202,13 @@ def test_a_model_with_other_inputs_is_not_a_riann_model(tmp_path):
     wrong.write_bytes(_rename(raw, b"h0", b"state"))  # a valid model, with another name for its state input
     assert _session(str(wrong), 1).get_inputs()[1].name == "state"
     with pytest.raises(ValueError, match=r"is not a RIANN-compatible model: inputs \['input', 'state'\]"):
-        Network(wrong)
+        BatchedModel(wrong)
 
 
 def test_a_model_with_a_symbolic_batch_runs_batched(tmp_path):
     path = tmp_path / "batched.onnx"
     path.write_bytes(batch_model(default_model_path().read_bytes()))
-    net = Network(path)
+    net = BatchedModel(path)
     assert net.batched, net.reason
     assert net.fresh_state().shape == (4, 2, 1, 1, 200)
     x = probe(4, 3, seed=5)
@@ -220,7 +220,7 @@ def test_a_model_that_fails_the_probe_runs_copy_by_copy(monkeypatch):
     """The safety net: when the batched model does not agree with the published one on the load-time probe
     (here: a tolerance no run can meet), every call runs the published session once per copy."""
     monkeypatch.setattr(network, "PROBE_TOL", -1.0)
-    net = Network()
+    net = BatchedModel()
     assert not net.batched and "differs from the published one" in net.reason
     for rows in (1, 3):
         x = probe(4, rows, seed=rows)

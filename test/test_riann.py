@@ -85,7 +85,7 @@ def test_a_clean_stream_in_the_trained_range_gives_the_network_inclination(broad
     out, _ = sess.run(None, {"input": x, "h0": np.zeros((2, 1, 1, 200), np.float32)})
     est = create("riann", gyro_bias_estimation=False, ensemble=1)
     q = est.update_batch(rec.acc, rec.gyr, gate_dts(rec))
-    assert est.rows == len(rec)
+    assert est.network.rows == len(rec)
     ref = out[0] / np.linalg.norm(out[0], axis=1, keepdims=True)
     assert np.degrees(quat.inclination_error(ref, q)).max() < 1e-3
     # the heading is not the network's: it starts at zero (no rotation about world z)

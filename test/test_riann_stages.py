@@ -13,7 +13,8 @@ from riann_ros.estimators.riann import RiannEstimator
 from riann_ros.estimators.riann.s1_timeline import Timeline
 from riann_ros.estimators.riann.s2_grid import Grid
 from riann_ros.estimators.riann.s3_bias import BATCH_ROWS, Bias
-from riann_ros.estimators.riann.s4_network import Network, make_session
+from riann_ros.estimators.riann.s4_network import Network
+from riann_ros.estimators.riann.s4b_model import BatchedModel
 from riann_ros.estimators.riann.s5_carry import SCALAR_MAX, Carry
 from riann_ros.estimators.riann.s6_handover import Handover
 from riann_ros.estimators.riann.s7_heading import Heading
@@ -25,8 +26,8 @@ G = 9.81
 
 
 @pytest.fixture(scope="module")
-def session():
-    return make_session()
+def model():
+    return BatchedModel(copies=4)
 
 
 def _stream(n: int, seed: int = 0, jitter: bool = True) -> tuple[list[tuple[float, ...]], list[float]]:
@@ -51,8 +52,8 @@ def test_docs_show_the_restart_table_of_the_code():
     assert restart_table() in doc
 
 
-def test_every_stage_says_what_it_does_on_every_restart(session):
-    est = RiannEstimator(session=session)
+def test_every_stage_says_what_it_does_on_every_restart(model):
+    est = RiannEstimator(model=model)
     names = [s.NAME for s in est.stages]
     assert names == list(RESTARTS)
     for what in RESTARTS.values():
@@ -106,18 +107,18 @@ def test_bias_block_equals_rows():
     assert np.abs(np.array(before[-1])).max() > 0.0  # it learned something
 
 
-def test_network_block_equals_rows_across_a_fork(session):
+def test_network_block_equals_rows_across_a_fork(model):
     x, _ = _stream(300, jitter=False)
     rows = [(*r, 0.005) for r in x]
     forks = [(120, 0.005)]
-    whole = Network(session, 4, 0.0).run(rows, forks)
-    net = Network(session, 4, 0.0)
+    whole = Network(model, 0.0).run(rows, forks)
+    net = Network(model, 0.0)
     one = np.vstack([net.run(rows[k:k + 1], [(0, 0.005)] if k == 120 else []) for k in range(len(rows))])
     assert np.abs(one - whole).max() < 1e-6
     # after the fork the output is a fresh network's, from the row after the first one it ran beside the old one
-    fresh = Network(session, 4, 0.0).run(rows[120:], [])
+    fresh = Network(model, 0.0).run(rows[120:], [])
     assert np.abs(whole[121:] - fresh[1:]).max() < 1e-6
-    assert np.abs(whole[121:131] - Network(session, 4, 0.0).run(rows, [])[121:131]).max() > 1e-3
+    assert np.abs(whole[121:131] - Network(model, 0.0).run(rows, [])[121:131]).max() > 1e-3
 
 
 def _carry_input(n: int, seed: int) -> tuple[np.ndarray, GridBlock, list]:
@@ -180,23 +181,23 @@ def test_heading_plain_floats_equal_the_vectorised_form():
     assert one.mag.started
 
 
-def test_estimator_block_equals_samples(session):
+def test_estimator_block_equals_samples(model):
     x, dt = _stream(1500)
     mag = _mag(len(x))
     a = np.array([r[:3] for r in x])
     g = np.array([r[3:] for r in x])
     m = np.array([v if v is not None else (np.nan,) * 3 for v in mag])
-    whole = RiannEstimator(session=session).update_batch(a, g, dt, m)
-    est = RiannEstimator(session=session)
+    whole = RiannEstimator(model=model).update_batch(a, g, dt, m)
+    est = RiannEstimator(model=model)
     one = np.vstack([est.update(a[k], g[k], dt[k], m[k]) for k in range(len(x))])
     assert np.abs(one - whole).max() < 1e-5
     assert est.network.holes == 1
 
 
 # -- restarts ---------------------------------------------------------------------------------------------------
-def test_a_gap_keeps_bias_rate_and_heading_and_a_reset_forgets_them(session):
+def test_a_gap_keeps_bias_rate_and_heading_and_a_reset_forgets_them(model):
     x, dt = _stream(800, jitter=False)
-    est = RiannEstimator(session=session)
+    est = RiannEstimator(model=model)
     est._run([(*r[:3], r[3] + 0.05, r[4], r[5]) for r in x], dt, None)
     bias, step, psi = est.bias.bias, est.timeline.steps.step, est.heading.psi
     assert abs(bias[0]) > 1e-3
@@ -209,9 +210,9 @@ def test_a_gap_keeps_bias_rate_and_heading_and_a_reset_forgets_them(session):
     assert est.bias.bias == (0.0, 0.0, 0.0) and est.timeline.steps is None and est.heading.psi == 0.0
 
 
-def test_after_a_hole_the_stages_act_at_the_hole(session):
+def test_after_a_hole_the_stages_act_at_the_hole(model):
     x, dt = _stream(1200, jitter=False)
-    est = RiannEstimator(session=session)
+    est = RiannEstimator(model=model)
     tl = est.timeline.run(x, dt)
     assert [h.index for h in tl.holes] == [600]
     g = est.grid.run(x, tl)

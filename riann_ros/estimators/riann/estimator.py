@@ -24,7 +24,6 @@ import math
 from typing import Any
 
 import numpy as np
-import onnxruntime as ort
 from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
@@ -32,8 +31,9 @@ from riann_ros.estimators.bias import front_end_params
 from riann_ros.estimators.riann.s1_timeline import Timeline
 from riann_ros.estimators.riann.s2_grid import DirectRows, Grid
 from riann_ros.estimators.riann.s3_bias import Bias
-from riann_ros.estimators.riann.s4_network import Network, make_session
+from riann_ros.estimators.riann.s4_network import Network
 from riann_ros.estimators.riann.s4a_ensemble import MAX_COPIES
+from riann_ros.estimators.riann.s4b_model import BatchedModel
 from riann_ros.estimators.riann.s5_carry import Carry
 from riann_ros.estimators.riann.s6_handover import Handover
 from riann_ros.estimators.riann.s7_heading import Heading
@@ -89,8 +89,13 @@ class RiannEstimator(AttitudeEstimator):
     )
     USES_MAG = True
 
-    def __init__(self, session: ort.InferenceSession | None = None, **params: Any) -> None:
-        self._session = session or make_session(params.get("model_path") or None)
+    def __init__(self, model: BatchedModel | None = None, **params: Any) -> None:
+        """``model``: an already loaded model to share (its ``copies`` must equal ``ensemble``); else loaded from
+        ``model_path``."""
+        copies = int(params.get("ensemble", MAX_COPIES))
+        if model is not None and model.copies != copies:
+            raise ValueError(f"the model runs {model.copies} copies, ensemble is {copies}")
+        self.model = model or BatchedModel(params.get("model_path") or None, copies=copies)
         super().__init__(**params)
 
     # -- the chain --------------------------------------------------------------------------------
@@ -100,7 +105,7 @@ class RiannEstimator(AttitudeEstimator):
         self.timeline = Timeline(p["restart_gap"], p["input_model"]) if grid else None
         self.grid: Grid | DirectRows = Grid() if grid else DirectRows()
         self.bias = Bias(p["gyro_bias_estimation"], p["bias_clip"], p["bias_sigma_init"], fixed_step=not grid)
-        self.network = Network(self._session, int(p["ensemble"]), p["restart_warmup"])
+        self.network = Network(self.model, p["restart_warmup"])
         self.carry = Carry()
         self.handover = Handover(p["hole_blend"])
         self.heading = Heading(MagHeading(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"],

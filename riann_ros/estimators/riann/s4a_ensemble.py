@@ -10,6 +10,7 @@ Physics and measurements: docs/riann.md, stage 4.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,6 +48,18 @@ def rotate_rows(rows: Array, r: Array) -> Array:
     out[:, 0:3] = rows[:, 0:3] @ r.T
     out[:, 3:6] = rows[:, 3:6] @ r.T
     return out
+
+
+def copy_rows(rots: list[Array]) -> Callable[[Array], NDArray[np.float32]]:
+    """A function giving every copy's network rows (copies, M, 7) float32 from rows (M, 7): one matmul with the
+    block-diagonal ``(R, R, 1)`` of each copy (copy 0 the rows themselves; the zero terms change no value)."""
+    r7 = np.zeros((len(rots), 7, 7))
+    for m, r in enumerate(rots):
+        r7[m, :3, :3] = r
+        r7[m, 3:6, 3:6] = r
+        r7[m, 6, 6] = 1.0
+    r7t = np.ascontiguousarray(r7.transpose(0, 2, 1))
+    return lambda x: (x[None] @ r7t).astype(np.float32)
 
 
 def gravity_rows(q: Array) -> Array:

@@ -1,10 +1,10 @@
-"""The RIANN network's copies in one ONNX Runtime call (ROS-free).
+"""Stage 4b, the model: the published RIANN network with its copies in one ONNX Runtime call (ROS-free).
 
-The ensemble (:mod:`.ensemble`) runs ``copies`` instances of the same network on differently rotated
+The ensemble (:mod:`.s4a_ensemble`) runs ``copies`` instances of the same network on differently rotated
 inputs. The published graph (``riann.onnx`` of the ``riann`` package) declares a fixed batch of one
 (``input`` [1, T, 7], ``h0`` [2, 1, 1, 200]; ``output`` [1, T, 4], ``hn``), so the copies would be
 ``copies`` separate runs. Its operators (normalise, two ONNX ``GRU`` layers, a 1×1 ``Conv``,
-normalise) all take a batch, only the declared shapes do not. :class:`Network` therefore loads the
+normalise) all take a batch, only the declared shapes do not. :class:`BatchedModel` therefore loads the
 model twice:
 
 * the file as published (the reference, and the path whenever the batched one cannot be used);
@@ -15,7 +15,7 @@ model twice:
   RIANN-compatible ``model_path`` gets the same treatment.
 
 At load, a probe sequence run through both (every copy a different input and state) must agree within
-:data:`PROBE_TOL`, else the batched model is not used (``Network.reason`` says why) and every call runs
+:data:`PROBE_TOL`, else the batched model is not used (``BatchedModel.reason`` says why) and every call runs
 the copies one by one, as before. With the published model and ONNX Runtime 1.31 the two agree
 exactly (bit for bit: ``test/test_network.py``, ``bench/bench_network.py``).
 
@@ -226,12 +226,12 @@ class _Bound:
             self.binding.bind_output(name, "cpu", 0, np.float32, list(a.shape), a.ctypes.data)
 
 
-class Network:
+class BatchedModel:
     """``copies`` instances of the RIANN network, run together: :meth:`run` means the same as running the
     published session once per copy (:meth:`run_per_copy`), in one ONNX Runtime call when the batched model
     passed its load-time probe (``batched``; else ``reason`` says why not). One copy runs the published model.
 
-    Not thread-safe (preallocated buffers): one Network per thread."""
+    Not thread-safe (preallocated buffers): one BatchedModel per thread."""
 
     def __init__(self, model_path: str | Path | None = None, copies: int = 4, threads: int = 1) -> None:
         if copies < 1:
