@@ -3,7 +3,7 @@ move one number (a redesign, a faster network call).
 
 Usage::
 
-    .venv/bin/python bench/output_guard.py record DIR [--jobs 2] [--trials 02,07]
+    .venv/bin/python bench/output_guard.py record DIR [--jobs 2] [--trials 02,07] [--skip-existing]
     .venv/bin/python bench/output_guard.py check DIR [--jobs 2] [--tol 1e-6] [--trials 02,07]
 
 For each BROAD trial (``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``) and each of 6D (``--use-mag false``)
@@ -121,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tol", type=float, default=1e-6)
     ap.add_argument("--trials", default="", help="comma-separated trial numbers (default: all)")
     ap.add_argument("--modes", default="6d,9d")
+    ap.add_argument("--skip-existing", action="store_true", help="record: keep the files already there")
     args = ap.parse_args(argv)
     d = find_broad_dir()
     if d is None:
@@ -128,8 +129,10 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     trials = [p for p in broad_files(d) if not args.trials or p.name[:2] in args.trials.split(",")]
     args.dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(args.action, str(t), m, str(args.dir), args.tol) for t in trials for m in args.modes.split(",")]
-    with mp.get_context("forkserver").Pool(args.jobs) as pool:
+    jobs = [(args.action, str(t), m, str(args.dir), args.tol) for t in trials for m in args.modes.split(",")
+            if not (args.skip_existing and args.action == "record" and (args.dir / _file(t, m)).is_file())]
+    # a fresh process per trial: ONNX Runtime's arenas of many sessions would otherwise add up to GBs per worker
+    with mp.get_context("forkserver").Pool(args.jobs, maxtasksperchild=1) as pool:
         results = pool.map(_job, jobs, chunksize=1)
     bad = 0
     for name, worst, info in sorted(results):
