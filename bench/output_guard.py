@@ -87,10 +87,24 @@ def _file(trial: Path, mode: str) -> str:
     return f"{trial.name[:2]}-{mode}.npz"
 
 
+def _no_arena() -> None:
+    """ONNX Runtime sessions without the CPU memory arena: the evaluator keeps a RIANN estimator per condition alive
+    at once, and each arena would keep its largest call's buffers (GBs per worker). Numbers are unchanged."""
+    import onnxruntime as ort
+
+    class Options(ort.SessionOptions):
+        def __init__(self) -> None:
+            super().__init__()
+            self.enable_cpu_mem_arena = False
+
+    ort.SessionOptions = Options  # type: ignore[misc]
+
+
 def _job(args: tuple[str, str, str, str, float]) -> tuple[str, float, str]:
     import os
 
     os.environ["OMP_NUM_THREADS"] = "1"
+    _no_arena()
     action, trial, mode, out_dir, _tol = args
     out = outputs(trial, MODES[mode])
     path = Path(out_dir) / _file(Path(trial), mode)
