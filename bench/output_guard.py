@@ -29,9 +29,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench_accuracy import CONDITIONS, RATES  # noqa: E402
+from bench_accuracy import CONDITIONS, RATES
 
-from riann_ros.datasets.broad import broad_files, find_broad_dir  # noqa: E402
+from riann_ros.datasets.broad import broad_files, find_broad_dir
 
 MODES = {"6d": "false", "9d": "auto"}
 

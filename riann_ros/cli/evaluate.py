@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from riann_ros import evaluation as ev
-from riann_ros.evaluation import report
+from riann_ros.evaluation import outdir, report
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
@@ -316,9 +316,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def _check_out(args: argparse.Namespace) -> None:
     """Refuse (ValueError, exit status 2) an --out folder holding an earlier run's results, before any work."""
-    old = report.previous_results(args.out) if args.out and not args.force else []
+    old = outdir.previous_results(args.out) if args.out and not args.force else []
     if old:
-        raise ValueError(str(report.OutputExists(args.out, old)))
+        raise ValueError(str(outdir.OutputExists(args.out, old)))
 
 
 def _print_messages(rep: report.Report) -> None:
@@ -336,7 +336,7 @@ def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
     """The result files in --out; False when they could not be written."""
     try:
         figures = report.write_results(args.out, rep, plots=not args.no_plots, replace=args.force)
-    except report.OutputExists as exc:  # written meanwhile by someone else
+    except outdir.OutputExists as exc:  # written meanwhile by someone else
         _err(str(exc))
         return False
     print(f"wrote {args.out}/results.csv, results.json, report.md"
@@ -357,7 +357,7 @@ def _compare(args: argparse.Namespace) -> int:
     if args.out:
         try:
             files = cp.write_comparison(args.out, cmp, plots=not args.no_plots, replace=args.force)
-        except report.OutputExists as exc:
+        except outdir.OutputExists as exc:
             _err(str(exc))
             return 1
         print(f"wrote {', '.join(str(f) for f in files)}")

@@ -8,7 +8,9 @@ motion onset and the initial rest (:mod:`~riann_ros.evaluation.rest`) → each s
 scores them (:mod:`~riann_ros.evaluation.scoring`). Estimator specs and tuning grids:
 :mod:`~riann_ros.evaluation.specs`; statistics across sequences and tuning:
 :mod:`~riann_ros.evaluation.aggregate`; tables and files: :mod:`~riann_ros.evaluation.report`; figures:
-:mod:`~riann_ros.evaluation.plots`; two saved runs side by side: :mod:`~riann_ros.evaluation.compare`.
+:mod:`~riann_ros.evaluation.plots`; the ``--out`` folder policy: :mod:`~riann_ros.evaluation.outdir`; two saved
+runs side by side: :mod:`~riann_ros.evaluation.compare` (report and compare use plots and outdir; neither
+plots nor outdir imports them).
 Reference: docs/evaluation.md.
 """
 

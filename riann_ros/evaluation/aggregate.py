@@ -36,6 +36,11 @@ class Group:
         return asdict(self)
 
 
+def rate_label(rate: str | float) -> str:
+    """A rate key as shown in tables: ``native`` or the rate in Hz (``50``, ``12.5``)."""
+    return str(rate) if rate == NATIVE else f"{float(rate):g}"
+
+
 def rate_order(rate: str | float) -> tuple[int, float]:
     """Sort key for rate keys: native first, then ascending Hz."""
     return (0, 0.0) if rate == NATIVE else (1, float(rate))
