@@ -13,7 +13,7 @@ rosbag2 bag with ``--imu-topic`` / ``--ground-truth-topic``, or BROAD trial file
 Full reference: docs/evaluation.md. Exit status: 0 all inputs evaluated, 1 some input failed
 (named on stderr, the others are still evaluated and reported), 130 interrupted, 2 bad command line.
 This module only parses the command line and prints; the work is in :mod:`riann_ros.evaluation`
-(and :mod:`riann_ros.nodes.live` for ``--live``).
+(and :mod:`riann_ros.cli.live` for ``--live``).
 """
 
 from __future__ import annotations
@@ -255,7 +255,7 @@ def _evaluate(args: argparse.Namespace, sources: list[str], settings: ev.EvalSet
     if not args.live:
         return ev.evaluate_sources(sources, settings, args.jobs, progress)
     try:
-        from riann_ros.nodes.live import LiveRunner
+        from riann_ros.cli.live import LiveRunner
     except ImportError as exc:
         raise ev.EvalError(f"--live needs rclpy and the ROS message packages: {exc}") from exc
     topics = args.live_topics.split(",") if args.live_topics else None

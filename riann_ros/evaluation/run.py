@@ -14,7 +14,7 @@ The runner is where the estimates come from:
   :class:`riann_ros.stream.EstimatorStream` with the sequence's rate as ``nominal_rate``: the very code
   path of the ROS node, so offline scores are node scores. Its runs can be fed alternately, so one pass
   over a bag serves all scenarios.
-* :class:`riann_ros.nodes.live.LiveRunner` replays the sequences over DDS to the estimator nodes; one
+* :class:`riann_ros.cli.live.LiveRunner` replays the sequences over DDS to the estimator nodes; one
   replay at a time (a pass per scenario).
 * :class:`RecordedRunner` serves the estimates a user's own filter recorded in the bag
   (``--estimate-topic``), which the source aligned onto each chunk's samples; they exist for the recording

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from riann_ros.bagio.layout import IMU_TOPIC
 from riann_ros.bagio.topics import DEFAULT_MAX_GAP_S
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.magpair import NodePairing
 from riann_ros.evaluation.rest import GIVEN, Rest, RestDetector
 from riann_ros.recording import Recording
 
@@ -108,13 +109,13 @@ class Source:
 
         t = self.topics
         if t.plain:
-            yield from bagio.iter_imu_chunks(self.path, chunk=self.chunk)
+            yield from bagio.iter_imu_chunks(self.path, chunk=self.chunk, pair_mag=NodePairing())
             return
         from riann_ros.bagio.topics import iter_topic_chunks
 
         for rec, recorded in iter_topic_chunks(self.path, self.chunk, imu_topic=t.imu, reference_topic=t.reference,
                                                estimate_topics=t.estimates, t_offset_ns=round(t.t_offset_s * 1e9),
-                                               max_gap_ns=round(t.max_gap_s * 1e9)):
+                                               max_gap_ns=round(t.max_gap_s * 1e9), pair_mag=NodePairing()):
             yield Chunk.of(rec, recorded) if t.estimates else rec
 
 
@@ -203,7 +204,7 @@ def read_whole(path: str | os.PathLike[str], topics: BagTopics | None = None) ->
         if topics.plain:
             from riann_ros import bagio
 
-            return bagio.read_recording(p)
+            return bagio.read_recording(p, pair_mag=NodePairing())
     except Exception as exc:  # bagio.BagError, OSError, ValueError, …
         raise read_error(p, exc) from exc
     return _concat(list(Source(p, topics=topics).chunks()))
