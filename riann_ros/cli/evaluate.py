@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from riann_ros import evaluation as ev
-from riann_ros.evaluation import outdir, report
+from riann_ros.evaluation import outdir, perturb, report
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
@@ -88,8 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "/ground_truth/scored topic every sample is scored")
     p.add_argument("--perturb", "-p", action="append", default=[], metavar="CONDITION",
                    help="evaluate under this condition too: 'none', or perturbations joined with '+': "
-                   "jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, bias:random:2 (deg/s), "
-                   "dropout:0.1-0.6s@10s; repeatable, each one a condition (default: none)")
+                   f"{perturb.accepted_forms()}; repeatable, each one a condition (default: none; "
+                   "docs/evaluation.md#perturbations)")
     p.add_argument("--rest", default=None, metavar="START:END",
                    help="the initial rest, in seconds from the first sample, whose mean gyro is removed as the turn-on "
                    "bias (default: detected from the signals before the first scored sample; see docs/evaluation.md)")
