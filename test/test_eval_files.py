@@ -227,7 +227,7 @@ def two_runs(three, tmp_path_factory) -> tuple[Path, Path]:
 
 
 def test_result_rows_round_trip_through_results_json(two_runs):
-    from riann_ros.evaluation.run import ResultRow
+    from riann_ros.evaluation.results import ResultRow
 
     for d in json.loads((two_runs[0] / "results.json").read_text())["results"]:
         again = ResultRow.from_dict(d).to_dict()

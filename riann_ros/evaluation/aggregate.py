@@ -10,7 +10,8 @@ import numpy as np
 
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import NONE
-from riann_ros.evaluation.run import NATIVE, EvalSettings, Progress, ResultRow, evaluate_sources
+from riann_ros.evaluation.results import NATIVE, EvalSettings, Progress, ResultRow
+from riann_ros.evaluation.run import evaluate_sources
 from riann_ros.evaluation.scenarios import SCENARIOS
 from riann_ros.evaluation.specs import EstimatorSpec, grid_specs, make_label, parse_grid
 

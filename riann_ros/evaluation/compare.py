@@ -20,7 +20,7 @@ from riann_ros.evaluation.aggregate import rate_order, scenario_order
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.outdir import prepare_out
 from riann_ros.evaluation.perturb import NONE
-from riann_ros.evaluation.run import NATIVE, ResultRow
+from riann_ros.evaluation.results import NATIVE, ResultRow
 
 Key = tuple[str, str, str, str | float, str]  # sequence, scenario, perturbation, rate, estimator
 Group = tuple[str, str, str, str | float]  # estimator, scenario, perturbation, rate

@@ -12,7 +12,7 @@ import numpy as np
 
 from riann_ros.evaluation.aggregate import rate_label, scenario_order
 from riann_ros.evaluation.perturb import NONE
-from riann_ros.evaluation.run import REFERENCE, ResultRow
+from riann_ros.evaluation.results import REFERENCE, ResultRow
 from riann_ros.evaluation.scenarios import AS_RECORDED
 
 

@@ -24,7 +24,7 @@ from riann_ros.evaluation.outdir import prepare_out, previous_results
 from riann_ros.evaluation.perturb import DEFINITIONS as PERTURB_DEFINITIONS
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
-from riann_ros.evaluation.run import NATIVE, EvalSettings, ResultRow, SequenceResult
+from riann_ros.evaluation.results import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
 
 CSV_FIELDS = (
