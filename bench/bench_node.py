@@ -35,7 +35,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
 
-from riann_ros import stamps
+from riann_ros import defaults, stamps
 
 BIN = Path(sys.executable).parent
 ECHO = """
@@ -120,7 +120,7 @@ class Harness:
             gyr = rng.normal(0, 0.5, (n, 3))
             sent: dict[int, int] = {}
             msg = Imu()
-            msg.header.frame_id = "imu_link"
+            msg.header.frame_id = defaults.IMU_FRAME
             t0_ns = 1_700_000_000_000_000_000
             period = 1.0 / rate
             start = time.perf_counter()

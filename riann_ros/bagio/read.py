@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riann_ros import defaults
 from riann_ros.bagio.cdr import parse_imu, parse_mags, parse_quats
 from riann_ros.bagio.layout import (
     BOOL_TYPE,
@@ -287,7 +288,7 @@ class _ChunkBuffer:
             name=str(info.get("name") or self.path.stem),
             dataset=str(info.get("dataset") or ""),
             source=str(info.get("source") or ""),
-            frame_id=str(info.get("frame_id") or self.frame or "imu_link"),
+            frame_id=str(info.get("frame_id") or self.frame or defaults.IMU_FRAME),
             meta={str(k): str(v) for k, v in (info.get("meta") or {}).items()},
             mag=mag,
         )

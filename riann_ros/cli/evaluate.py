@@ -26,12 +26,12 @@ import sys
 import time
 from pathlib import Path
 
+from riann_ros import defaults
 from riann_ros import evaluation as ev
 from riann_ros.evaluation import outdir, perturb, report
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
-DEFAULT_MAX_GAP_S = 0.1  # riann_ros.bagio.topics.DEFAULT_MAX_GAP_S (as riann-bag-convert --max-gap)
 
 
 def bagio_imu_topic() -> str:
@@ -75,10 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "native rate, unperturbed. Repeatable")
     b.add_argument("--t-offset", type=float, default=0.0, metavar="SECONDS",
                    help="added to the stamps of the --estimate-topic messages before matching (default 0)")
-    b.add_argument("--max-gap", type=float, default=DEFAULT_MAX_GAP_S, metavar="SECONDS",
+    b.add_argument("--max-gap", type=float, default=defaults.MAX_GAP_S, metavar="SECONDS",
                    help="slerp a topic between two messages at most this far apart, hold the nearer one within half "
                    "of it, else the sample has none (not scored, counted as unestimated); --estimate-topic and "
-                   f"--ground-truth-topic (default {DEFAULT_MAX_GAP_S})")
+                   f"--ground-truth-topic (default {defaults.MAX_GAP_S})")
     b.add_argument("--ground-truth-topic", default=None, metavar="TOPIC",
                    help="the reference orientation for bags not written by riann-bag-convert (geometry_msgs/"
                    "PoseStamped, nav_msgs/Odometry, geometry_msgs/QuaternionStamped, sensor_msgs/Imu, …; the IMU "

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from riann_ros import defaults
 from riann_ros.bagio.layout import IMU_TOPIC
-from riann_ros.bagio.topics import DEFAULT_MAX_GAP_S
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.magpair import NodePairing
 from riann_ros.evaluation.rest import GIVEN, Rest, RestDetector
@@ -45,7 +45,7 @@ class BagTopics:
     reference: str | None = None  # None: the layout's /ground_truth/attitude
     estimates: tuple[str, ...] = ()
     t_offset_s: float = 0.0  # added to the stamps of the estimate topics
-    max_gap_s: float = DEFAULT_MAX_GAP_S  # slerp between messages at most this far apart; hold within half of it
+    max_gap_s: float = defaults.MAX_GAP_S  # slerp between messages at most this far apart; hold within half of it
 
     @property
     def plain(self) -> bool:
