@@ -119,15 +119,6 @@ class VqfEstimator(AttitudeEstimator):
         return self._mag_used and self._vqf is not None and not self._vqf.getMagDistDetected()
 
     @property
-    def initialized(self) -> bool:
-        return self._vqf is not None
-
-    @property
-    def sample_time(self) -> float | None:
-        """The ``Ts`` VQF was built with (None before the first sample)."""
-        return self._ts
-
-    @property
     def bias(self) -> Array:
         """VQF's current gyro-bias estimate (rad/s, in units of the dt-scaled gyro), zeros before start."""
         if self._vqf is None:

@@ -30,7 +30,6 @@ from riann_ros.evaluation.magpair import NodePairing
 from riann_ros.evaluation.rest import GIVEN, Rest, RestDetector
 from riann_ros.recording import Recording
 
-BAG_SUFFIXES = (".mcap", ".db3")
 BROAD_SUFFIXES = (".hdf5", ".h5", ".mat")
 STREAM_CHUNK = 100_000  # samples per chunk when a bag is read chunk by chunk
 
@@ -268,11 +267,6 @@ class Summary:
     rate_all: float  # 1 / median stamp step of the whole sequence
     rate_from_i0: float  # … of the sequence from i0 on
     rest: Rest = field(default_factory=Rest)  # the rest whose mean gyro is the turn-on bias (maybe none)
-
-    @property
-    def rest_gyr_mean(self) -> NDArray[np.float64]:
-        """The turn-on bias (rad/s): the mean gyro over the rest; zeros without one."""
-        return self.rest.bias
 
 
 class _Pass:
