@@ -78,12 +78,13 @@ def load(name: str) -> Rows:
 def trim(name: str, sources: list[Path], command: str) -> Path:
     """results.json files (of one command, or of runs that together make one) cut down to :data:`FIELDS` (RMSEs
     to 6 decimals) in docs/results/NAME.json, one row per line."""
-    rows = [r for src in sources for r in json.loads(src.read_text())["results"]]
+    rows = [{k: round(v, 6) if isinstance(v, float) else v for k, v in r.items()}
+            for src in sources for r in json.loads(src.read_text())["results"]]
     present = [f for f in FIELDS if any(f in r for r in rows)]
     # a field with one value in every row is stored once ("same")
     same = {f: rows[0].get(f) for f in present if len({json.dumps(r.get(f)) for r in rows}) == 1}
     cols = [f for f in present if f not in same]
-    out = [[round(r[c], 6) if isinstance(r.get(c), float) else r.get(c) for c in cols] for r in rows]
+    out = [[r.get(c) for c in cols] for r in rows]
     text = ('{\n  "command": ' + json.dumps(command, ensure_ascii=False) + ',\n  "same": ' + json.dumps(same)
             + ',\n  "columns": ' + json.dumps(cols) + ',\n  "rows": [\n'
             + ",\n".join("    " + json.dumps(r, ensure_ascii=False) for r in out) + "\n  ]\n}\n")

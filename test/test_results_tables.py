@@ -44,14 +44,17 @@ def test_trim_keeps_only_the_table_fields(tmp_path: Path, monkeypatch: pytest.Mo
     row = {"sequence": "01_x", "dataset": "broad", "source": "/somewhere/01_x.mat", "scenario": "as-recorded",
            "perturbation": "none", "rate": "native", "estimator": "riann", "sensors": "6D", "rmse_deg": 0.123456789,
            "max_err_deg": 2.0, "n_samples": 10}
-    (tmp_path / "results.json").write_text(json.dumps({"results": [row, {**row, "estimator": "vqf"}]}))
+    rows = [row, {**row, "estimator": "vqf"}, {**row, "scenario": "realistic", "rmse_deg": 0.5}]
+    (tmp_path / "results.json").write_text(json.dumps({"results": rows}))
     monkeypatch.setattr(rt, "RESULTS", tmp_path)
     rt.trim("x", [tmp_path / "results.json"], "riann-bag-eval x")
     data = json.loads((tmp_path / "x.json").read_text())
     assert data["command"] == "riann-bag-eval x" and "source" not in data["columns"]
-    rows = rt.load("x")
-    assert rows.where(estimator="vqf").values("vqf") == [0.123457]
-    assert rows.mean_max("riann") == "0.12 / 0.12"
+    assert data["same"] == {"perturbation": "none", "rate": "native", "sequence": "01_x", "sensors": "6D"}
+    got = rt.load("x")
+    assert got.where(estimator="vqf").values("vqf") == [0.123457]
+    assert got.where(scenario="as-recorded").mean_max("riann") == "0.12 / 0.12"
+    assert got.mean_max("riann") == "0.31 / 0.50"
 
 
 def test_no_absolute_paths_in_the_committed_results():
