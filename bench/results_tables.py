@@ -322,6 +322,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "scenarios": scenarios_table,
     "realistic-lead": realistic_lead,
     "perturbed-as-recorded": perturbed("as-recorded"),
+    "perturbed-realistic": perturbed("realistic"),
     "dropout-six": dropout_six,
     "rate-ratios": rate_ratios,
     "rates-as-recorded": rates_table("rates", ESTIMATORS),
