@@ -25,10 +25,12 @@ demo: $(BIN)/.installed
 	rm -rf demo_out
 	$(BIN)/riann-bag-eval bags/*.mcap --scenarios realistic --out demo_out
 
-# ruff (style, imports, complexity ≤ 10) on the whole tree, mypy on the package
+# ruff (style, imports, complexity ≤ 10) on the whole tree, mypy on the package, vulture (dead code: the package
+# and bench/, the tests counting as users; framework-only names in vulture_whitelist.py; pyproject [tool.vulture])
 lint: $(BIN)/.installed
 	$(BIN)/ruff check .
 	$(BIN)/mypy
+	$(BIN)/vulture
 
 # the whole suite: real DDS, BROAD accuracy, colcon (the README's second command)
 test: $(BIN)/.installed lint

@@ -4,19 +4,20 @@ Usage::
 
     .venv/bin/python bench/bench_accuracy.py [--jobs 2] [--out DIR] [--estimators SPECS]
 
-Runs ``riann-bag-eval`` twice on the BROAD trial files (``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``):
+Runs ``riann-bag-eval`` on the BROAD trial files (``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``):
 
 1. scenarios ``as-recorded`` (the recording as it is, from its first sample) and ``realistic`` (from the motion
-   onset) under the conditions ``none``, ``jitter:10/20/30ms`` (interval means), ``jitter:10/20/30ms:points``
-   and ``jitter:5-15ms:points`` (point samples at random times), ``jitter:2-8ms``, ``latency:0-10ms``,
-   ``fifo:20ms``, ``rate:50`` (stamps exactly 20 ms apart), ``bias:3,3,0``, ``bias:random:2``,
+   onset), one run each, under the conditions ``none``, ``jitter:10/20/30ms`` (interval means),
+   ``jitter:10/20/30ms:points`` and ``jitter:5-15ms:points`` (point samples at random times), ``jitter:2-8ms``,
+   ``latency:0-10ms``, ``fifo:20ms``, ``rate:50`` (stamps exactly 20 ms apart), ``bias:3,3,0``, ``bias:random:2``,
    ``dropout:0.1-0.6s@10s``, ``dropout:0.01-0.05s@1s`` (a few messages lost about once a second) and
    ``latency:0-10ms+dropout:0.01-0.05s@1s`` (the same on a stream stamped on arrival);
 2. the as-recorded scenario FFT-resampled to 25, 50, 100, 200, 500 and 1000 Hz (``--rates``).
 
-Prints markdown for README/BENCHMARKS: mean / worst RMSE (°) per condition and estimator, the dropout rows
-also on the issue's six trials (02, 07, 10, 15, 24, 27), and RIANN's per-trial ratio to its native-rate RMSE
-for every rate.
+Prints markdown: mean / worst RMSE (°) per condition and estimator, the dropout rows also on the issue's six
+trials (02, 07, 10, 15, 24, 27), and RIANN's per-trial ratio to its native-rate RMSE for every rate. The pages'
+tables (README, docs/results.md, BENCHMARKS.md) are written by ``bench/results_tables.py`` from the results.json
+files ``--out`` keeps, committed trimmed under docs/results/ (docs/results/README.md).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ CONDITIONS = ("none", "jitter:10/20/30ms", "jitter:10/20/30ms:points", "jitter:2
               "latency:0-10ms", "fifo:20ms", "rate:50", "bias:3,3,0", "bias:random:2", "dropout:0.1-0.6s@10s",
               "dropout:0.01-0.05s@1s", "latency:0-10ms+dropout:0.01-0.05s@1s")
 RATES = "25,50,100,200,500,1000"
+SCENARIOS = ("as-recorded", "realistic")
 DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")
 
 
@@ -109,8 +111,11 @@ def main() -> int:
     ests = [e.split(":")[0] if ":" not in e else e for e in args.estimators.split(",")]
     common = [*inputs, "-e", args.estimators, "--seed", str(args.seed), "--jobs", str(args.jobs)]
     t0 = time.perf_counter()
-    perturbed = run([*common, "-s", "as-recorded,realistic", *(a for c in CONDITIONS for a in ("-p", c))],
-                    out / "perturbed")
+    # one run per scenario: the same rows as one run of both, in half the memory per worker (a worker holds every
+    # condition × scenario of its trial at once)
+    perturbed = [row for scenario in SCENARIOS
+                 for row in run([*common, "-s", scenario, *(a for c in CONDITIONS for a in ("-p", c))],
+                                out / f"perturbed-{scenario}")]
     rated = run([*common, "-s", "as-recorded", "--rates", RATES], out / "rates")
     wall = time.perf_counter() - t0
     labels = list(dict.fromkeys(r["estimator"] for r in perturbed)) or ests

@@ -36,7 +36,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
 
-from riann_ros import stamps
+from riann_ros import defaults, stamps
 
 BIN = Path(sys.executable).parent
 ECHO = """
@@ -127,7 +127,7 @@ class Harness:
             sent: dict[int, int] = {}
             self.sent = sent  # stamp → perf_counter_ns at publication (CLOCK_MONOTONIC: comparable across processes)
             msg = Imu()
-            msg.header.frame_id = "imu_link"
+            msg.header.frame_id = defaults.IMU_FRAME
             t0_ns = 1_700_000_000_000_000_000
             period = 1.0 / rate
             start = time.perf_counter()

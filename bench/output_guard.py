@@ -50,13 +50,13 @@ def outputs(trial: str, use_mag: str, conditions: tuple[str, ...] = CONDITIONS,
         inner = self.run
 
         class Tap:
-            def feed(self_t: Any, rec: Any) -> list[np.ndarray]:
+            def feed(_tap: Any, rec: Any) -> list[np.ndarray]:
                 qs = inner.feed(rec)
                 key = f"{self.plan.scenario}|{self.condition.label}|{rate_now[0]}"
                 got.setdefault(key, []).append(np.asarray(qs[0], dtype=np.float32))
                 return qs
 
-            def finish(self_t: Any) -> Any:
+            def finish(_tap: Any) -> Any:
                 return inner.finish()
 
         self.run = Tap()

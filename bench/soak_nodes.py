@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from riann_ros import stamps
+from riann_ros import defaults, stamps
 
 BIN = Path(sys.executable).parent
 TOPICS = {
@@ -78,7 +78,7 @@ def publisher_main(rate: float, n: int, stamp0: int, pub_times, n_subs: int, rea
     ready.set()
     go.wait()
     msg = Imu()
-    msg.header.frame_id = "imu_link"
+    msg.header.frame_id = defaults.IMU_FRAME
     msg.orientation_covariance[0] = -1.0
     times = np.frombuffer(pub_times, dtype=np.int64)
     period_ns = 1e9 / rate

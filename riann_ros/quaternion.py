@@ -3,7 +3,7 @@
 Convention throughout the project: unit quaternions as numpy arrays ``[w, x, y, z]`` (scalar first),
 shape ``(4,)`` or ``(N, 4)``, describing the orientation of the sensor frame with respect to a world
 frame whose z axis points up (ENU, REP-103): ``v_world = q ⊗ v_sensor ⊗ q⁻¹``. ROS messages store
-``x, y, z, w``; convert only at the ROS boundary with :func:`wxyz_to_xyzw` / :func:`xyzw_to_wxyz`.
+``x, y, z, w``: the ROS layer and the bag codec read and write the fields by name.
 """
 
 from __future__ import annotations
@@ -79,16 +79,6 @@ def from_accelerometer(acc: ArrayLike) -> Array:
         return np.array([0.0, 1.0, 0.0, 0.0])
     axis = np.cross(a, ez)
     return normalize(np.array([w, axis[0], axis[1], axis[2]]))
-
-
-def wxyz_to_xyzw(q: ArrayLike) -> Array:
-    q = np.asarray(q, dtype=float)
-    return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
-
-
-def xyzw_to_wxyz(q: ArrayLike) -> Array:
-    q = np.asarray(q, dtype=float)
-    return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
 
 
 def slerp(q0: ArrayLike, q1: ArrayLike, s: ArrayLike) -> Array:

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from riann_ros import defaults
+
 
 @dataclass
 class Recording:
@@ -32,7 +34,7 @@ class Recording:
     name: str = "sequence"
     dataset: str = ""
     source: str = ""
-    frame_id: str = "imu_link"
+    frame_id: str = defaults.IMU_FRAME
     meta: dict[str, str] = field(default_factory=dict)
     mag: NDArray[np.float64] | None = None
 
@@ -61,7 +63,7 @@ class Recording:
     def dt(self) -> NDArray[np.float64]:
         """Per-sample time step in seconds; the first sample gets the median step."""
         d = np.diff(self.stamps_ns) * 1e-9
-        first = float(np.median(d)) if len(d) else 0.01
+        first = float(np.median(d)) if len(d) else defaults.FALLBACK_DT_S
         return np.concatenate([[first], d])
 
     @property

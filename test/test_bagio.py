@@ -10,6 +10,7 @@ import pytest
 
 from riann_ros import bagio
 from riann_ros.datasets.synthetic import generate
+from riann_ros.evaluation.magpair import NodePairing
 from riann_ros.mag import MagConfig, pair_fields
 from riann_ros.recording import Recording
 
@@ -446,9 +447,9 @@ def test_round_trip_property(tmp_path_factory: pytest.TempPathFactory) -> None:
 
 @pytest.mark.parametrize(("name", "storage"), [("m.mcap", "mcap"), ("mdb", "sqlite3")])
 def test_magnetometer_round_trip(tmp_path: Path, name: str, storage: str) -> None:
-    """/imu/mag (MagneticField, tesla) is written where the field is finite and read back paired with the IMU
-    stamps as the nodes pair it (newest reading at or before, within mag_timeout), whole and chunk by chunk;
-    a bag without the topic gives mag None."""
+    """/imu/mag (MagneticField, tesla) is written where the field is finite and read back at the IMU stamps
+    (the exact inverse); the evaluator's pairing (NodePairing) pairs it as the nodes do (newest reading at or
+    before, within mag_timeout), whole and chunk by chunk; a bag without the topic gives mag None."""
     rec = _rec(600)
     rng = np.random.default_rng(3)
     rec.mag = rng.normal(size=(600, 3)) * 30e-6
@@ -457,11 +458,12 @@ def test_magnetometer_round_trip(tmp_path: Path, name: str, storage: str) -> Non
     path = bagio.write_recording(tmp_path / name, rec, storage=storage)
     back = bagio.read_recording(path)
     _same(rec, back)
+    assert np.array_equal(back.mag, rec.mag, equal_nan=True)
     has = np.isfinite(rec.mag).all(axis=1)
     paired = pair_fields(rec.stamps_ns, rec.stamps_ns[has], rec.mag[has], MagConfig().timeout_ns)
     assert np.isfinite(paired[300]).all() and np.isnan(paired[440]).all()  # held, then stale
-    assert np.array_equal(back.mag, paired, equal_nan=True)
-    chunks = list(bagio.iter_imu_chunks(path, chunk=97))
+    assert np.array_equal(bagio.read_recording(path, pair_mag=NodePairing()).mag, paired, equal_nan=True)
+    chunks = list(bagio.iter_imu_chunks(path, chunk=97, pair_mag=NodePairing()))
     assert np.array_equal(np.concatenate([c.mag for c in chunks]), paired, equal_nan=True)
     info = bagio.read_info(path)
     assert info["has_mag"] is True and info["topics"]["mag"] == bagio.MAG_TOPIC

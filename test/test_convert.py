@@ -10,6 +10,7 @@ import pytest
 from riann_ros import bagio
 from riann_ros.cli.convert import main
 from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad
+from riann_ros.evaluation.magpair import NodePairing
 
 
 def _broad_dir() -> Path:
@@ -358,7 +359,10 @@ def test_cli_csv_magnetometer_columns_units_and_gaps(tmp_path: Path, capsys: pyt
     assert main([str(csv), "-o", str(out), "--mag-unit", "G", "-q"]) == 0
     rec = bagio.read_recording(out)
     assert rec.mag is not None
-    # written at its own 50 readings; read back paired with every IMU sample (newest reading at or before it)
-    assert np.isfinite(rec.mag).all()
-    np.testing.assert_allclose(rec.mag, np.tile([20e-6, 30e-6, -25e-6], (200, 1)), rtol=1e-12)
+    # written at its own 50 readings, read back at their stamps; the evaluator pairs them with every IMU sample
+    # (newest reading at or before it)
+    assert np.array_equal(np.isfinite(rec.mag).all(axis=1), np.arange(200) % 4 == 0)
+    paired = bagio.read_recording(out, pair_mag=NodePairing()).mag
+    assert paired is not None and np.isfinite(paired).all()
+    np.testing.assert_allclose(paired, np.tile([20e-6, 30e-6, -25e-6], (200, 1)), rtol=1e-12)
     assert bagio.read_info(out)["has_mag"] is True

@@ -12,7 +12,7 @@ from test_evaluation import synthetic
 
 from riann_ros.cli.convert import main as convert_main
 from riann_ros.cli.evaluate import main
-from riann_ros.evaluation import report
+from riann_ros.evaluation import outdir
 
 bagio = pytest.importorskip("riann_ros.bagio")
 
@@ -59,15 +59,15 @@ def test_an_empty_or_foreign_folder_is_fine(bag, tmp_path):
     (out / "README.txt").write_text("x")
     assert main([str(bag), "-e", "madgwick", "-s", "realistic", "--out", str(out), "--no-plots", "-q"]) == 0
     assert (out / "results.csv").is_file() and (out / "README.txt").read_text() == "x"
-    assert report.previous_results(tmp_path / "nothing_here") == []
+    assert outdir.previous_results(tmp_path / "nothing_here") == []
 
 
 def test_prepare_out_api(tmp_path):
     (tmp_path / "results.csv").write_text("old")
     (tmp_path / "keep.csv").write_text("mine")
-    with pytest.raises(report.OutputExists, match="--force"):
-        report.prepare_out(tmp_path, replace=False)
-    assert report.prepare_out(tmp_path, replace=True) == [tmp_path / "results.csv"]
+    with pytest.raises(outdir.OutputExists, match="--force"):
+        outdir.prepare_out(tmp_path, replace=False)
+    assert outdir.prepare_out(tmp_path, replace=True) == [tmp_path / "results.csv"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.csv"]
 
 
@@ -227,7 +227,7 @@ def two_runs(three, tmp_path_factory) -> tuple[Path, Path]:
 
 
 def test_result_rows_round_trip_through_results_json(two_runs):
-    from riann_ros.evaluation.run import ResultRow
+    from riann_ros.evaluation.results import ResultRow
 
     for d in json.loads((two_runs[0] / "results.json").read_text())["results"]:
         again = ResultRow.from_dict(d).to_dict()

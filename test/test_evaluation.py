@@ -321,3 +321,20 @@ def test_resample_carries_the_magnetometer():
     rec.mag[10:20] = np.nan  # holes: the latest sample at or before each new stamp, holes stay holes
     r = resample_recording(rec, 100.0)
     np.testing.assert_array_equal(r.mag[:30], rec.mag[0:60:2])
+
+
+def test_tuning_runs_with_the_evaluations_sensors(monkeypatch):
+    """--tune scores the grid as the evaluation runs (--use-mag false: 6D); in 9D Madgwick's beta is unused."""
+    import importlib
+
+    aggregate = importlib.import_module("riann_ros.evaluation.aggregate")  # the package re-exports a function so named
+    seen: list[ev.EvalSettings] = []
+
+    def capture(sources, settings, jobs=1, progress=None):
+        seen.append(settings)
+        return []
+
+    monkeypatch.setattr(aggregate, "evaluate_sources", capture)
+    with pytest.raises(ev.EvalError, match="no scores"):
+        ev.tune("madgwick", ["x"], ev.REALISTIC, 0, like=ev.EvalSettings(estimators=[], use_mag="false"))
+    assert seen[0].use_mag == "false"

@@ -8,7 +8,7 @@ import sys
 
 import riann_ros
 
-# every module but the ROS layer (riann_ros.nodes); the CLIs too (--live imports the ROS layer lazily)
+# every module but the ROS layer (riann_ros.nodes); the CLIs too (cli.live imports rclpy only when --live runs)
 CORE = sorted(
     m.name.removeprefix("riann_ros.")
     for m in pkgutil.walk_packages(riann_ros.__path__, "riann_ros.")

@@ -14,8 +14,8 @@ from std_srvs.srv import Trigger
 
 from conftest import ROOT, rmse, wait_for, wait_matched
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
+from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
-from riann_ros.nodes.live import call_service
 from riann_ros.stream import EstimatorStream, GateConfig
 
 pytestmark = pytest.mark.ros

@@ -20,9 +20,9 @@ from sensor_msgs.msg import Imu
 from conftest import wait_for, wait_matched
 from helpers_ros import imu_msg, quats, stamp_ns
 from riann_ros import frames
+from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
 from riann_ros.nodes.diagnostics import StampRateCheck
-from riann_ros.nodes.live import call_service
 from riann_ros.nodes.madgwick_node import MadgwickNode
 from riann_ros.nodes.mahony_node import MahonyNode
 from riann_ros.nodes.outputs import make_transform, rpy_topic, tf_frames_problem

@@ -27,7 +27,7 @@ def run(p: pt.Perturbation, rec: Recording, chunks: list[int] | None = None, see
     tr = p.start(np.random.default_rng(seed))
     bounds = [0, *(chunks or []), len(rec)]
     parts = [tr(rec.slice(a, b)) for a, b in itertools.pairwise(bounds)]
-    return pt._concat(*[q for q in parts if len(q)]), tr.info()
+    return pt.concat(*[q for q in parts if len(q)]), tr.info()
 
 
 def test_parse_conditions_and_errors():
@@ -201,3 +201,24 @@ def test_magnetic_offset_and_disturbance_window():
     assert run(p, no_mag)[0].mag is None
     with pytest.raises(ValueError, match="magnetic:disturb"):
         pt.parse_condition("magnetic:disturb:40@5-2s")
+
+
+def test_perturb_help_and_errors_name_every_kind():
+    """The --perturb help and the parse error are built from the definitions: every kind the parser accepts (and
+    the :points suffix) has example forms there, each of which parses, and the CLI help shows every one."""
+    from riann_ros.cli.evaluate import build_parser
+    from riann_ros.evaluation.perturb import conditions
+
+    kinds = set(conditions._PARSERS)
+    assert kinds | {"points"} == set(pt.EXAMPLES) == set(pt.DEFINITIONS) - {"seeding"}
+    help_text = " ".join(next(a.help for a in build_parser()._actions if "--perturb" in a.option_strings).split())
+    with pytest.raises(ValueError) as err:
+        pt.parse_perturbation("nonsense:1")
+    for kind, forms in pt.EXAMPLES.items():
+        assert forms, kind
+        for form in forms:
+            text = form.split(" (")[0]  # without the unit note
+            p = pt.parse_perturbation(text)
+            assert text.startswith(p.kind) and (kind == "points") == text.endswith(":points")
+            assert form in help_text and form in str(err.value)
+    assert {f.split(":")[0] for forms in pt.EXAMPLES.values() for f in forms} == kinds

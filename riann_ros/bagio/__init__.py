@@ -52,7 +52,16 @@ from riann_ros.bagio.layout import (
     dataset_info,
     typestore,
 )
-from riann_ros.bagio.read import bag_compression, bag_storage, concat, iter_imu_chunks, read_info, read_recording
+from riann_ros.bagio.read import (
+    MagPairer,
+    bag_compression,
+    bag_storage,
+    concat,
+    exact_stamps,
+    iter_imu_chunks,
+    read_info,
+    read_recording,
+)
 from riann_ros.bagio.write import write_estimates, write_recording
 
 __all__ = [
@@ -72,10 +81,12 @@ __all__ = [
     "STRING_TYPE",
     "WORLD_FRAME",
     "BagError",
+    "MagPairer",
     "bag_compression",
     "bag_storage",
     "concat",
     "dataset_info",
+    "exact_stamps",
     "imu_messages",
     "iter_imu_chunks",
     "mag_messages",

@@ -75,7 +75,7 @@ class _AtomicBag:
             shutil.rmtree(self.tmp, ignore_errors=True)
             self.tmp = None
 
-    def __exit__(self, exc_type, exc, tb) -> Literal[False]:
+    def __exit__(self, exc_type, exc, _tb) -> Literal[False]:
         try:
             if exc_type is not None:
                 with suppress(Exception):

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
 import numpy as np
 
+from riann_ros import defaults
 from riann_ros.bagio.cdr import parse_imu, parse_mags, parse_quats
 from riann_ros.bagio.layout import (
     BOOL_TYPE,
@@ -26,8 +27,24 @@ from riann_ros.bagio.layout import (
     BagError,
     typestore,
 )
-from riann_ros.mag import MagConfig, pair_fields
 from riann_ros.recording import Recording
+
+# (chunk's IMU stamps (N,), magnetometer stamps (M,) sorted, fields (M, 3)) -> (N, 3) field per sample, NaN rows
+# where none. Called once per chunk, in order, with the readings stamped at or before the chunk's last sample that
+# earlier calls did not get; a stateful pairer may carry readings across chunks.
+MagPairer = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def exact_stamps(stamps: np.ndarray, mag_stamps: np.ndarray, mag: np.ndarray) -> np.ndarray:
+    """The default :data:`MagPairer`: a reading stamped exactly like the sample, NaN rows elsewhere (the inverse
+    of :func:`~riann_ros.bagio.write.write_recording`, which writes the field at the samples' stamps). How an
+    estimator pairs a magnetometer with the samples is the caller's policy (the evaluator's:
+    :mod:`riann_ros.evaluation.magpair`)."""
+    out = np.full((len(stamps), 3), np.nan)
+    pos = np.searchsorted(stamps, mag_stamps)
+    ok = (pos < len(stamps)) & (stamps[np.minimum(pos, len(stamps) - 1)] == mag_stamps)
+    out[pos[ok]] = mag[ok]
+    return out
 
 
 def _open_reader(path: Path):
@@ -128,24 +145,23 @@ def _info_from(path: Path, reader) -> dict:
 
 
 def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_topic: str = IMU_TOPIC,
-                    reference: bool = True) -> Iterator[Recording]:
+                    reference: bool = True, pair_mag: MagPairer | None = None) -> Iterator[Recording]:
     """Yield the bag as consecutive :class:`Recording` chunks of at most ``chunk`` samples, in stamp order.
 
     Memory stays bounded by the chunk size. Each chunk carries its reference (NaN rows where no
     ``/ground_truth/attitude`` message has the sample's stamp; ``quat_ref=None`` when the bag has no
     reference topic, or with ``reference=False``), its score mask and the bag's name/dataset/source/frame_id/meta.
     ``imu_topic``: the ``sensor_msgs/msg/Imu`` topic of the samples (a bag not written by the converter). The
-    magnetometer (``/imu/mag``, tesla) comes in ``mag`` paired with the samples as the nodes pair it
-    (:func:`riann_ros.mag.pair_fields`: the newest field stamped at or before the sample, at most the default
-    ``mag_timeout`` older; NaN rows where none), ``None`` without the topic. Raises :class:`BagError` for
-    anything that is not a readable IMU bag.
+    magnetometer (``/imu/mag``, tesla) comes in ``mag``, paired with the samples by ``pair_mag`` (default
+    :func:`exact_stamps`: the reading with the sample's stamp, NaN rows where none), ``None`` without the topic.
+    Raises :class:`BagError` for anything that is not a readable IMU bag.
     """
     path = Path(path)
     if chunk < 1:
         raise ValueError("chunk must be >= 1")
     with _opened(path) as reader:
         try:
-            yield from _iter_chunks(path, reader, chunk, imu_topic, reference)
+            yield from _iter_chunks(path, reader, chunk, imu_topic, reference, pair_mag or exact_stamps)
         except BagError:
             raise
         except (KeyboardInterrupt, GeneratorExit):
@@ -163,7 +179,7 @@ class _ChunkBuffer:
     """
 
     def __init__(self, path: Path, info: dict, has_ref: bool, imu_ids: set, ref_ids: set,
-                 imu_topic: str = IMU_TOPIC, mag_ids: set | None = None) -> None:
+                 imu_topic: str = IMU_TOPIC, mag_ids: set | None = None, pair_mag: MagPairer = exact_stamps) -> None:
         self.path = path
         self.imu_topic = imu_topic
         self.info = info
@@ -171,12 +187,12 @@ class _ChunkBuffer:
         self.imu_ids = imu_ids
         self.ref_ids = ref_ids
         self.mag_ids = mag_ids or set()
+        self.pair_mag = pair_mag
         self.bool_deser = typestore().deserialize_cdr
         self.imu_raw: list[bytes] = []
         self.imu_log: list[int] = []
         self.ref_raw: list[bytes] = []
         self.mag_raw: list[bytes] = []
-        self.mag_carry: tuple[np.ndarray, np.ndarray] = (np.empty(0, np.int64), np.empty((0, 3)))
         self.events: list[tuple[int, bool]] = []
         self.mask = True  # score mask value in force
         self.last: int | None = None  # stamp of the last sample
@@ -227,17 +243,14 @@ class _ChunkBuffer:
         return self._recording(stamps, acc, gyr, quat, mask, mag)
 
     def _paired_mag(self, stamps: np.ndarray, last: int) -> np.ndarray:
-        """The field paired with each of the chunk's samples; keeps the newest reading at or before ``last``
-        for the next chunk and the readings stamped after ``last``."""
+        """The field paired with each of the chunk's samples by ``pair_mag``, given the readings stamped at or
+        before ``last`` (in stamp order); keeps the readings stamped after ``last`` for later chunks."""
         ts, vals = parse_mags(self.mag_raw)
-        order = np.argsort(ts, kind="stable")
-        ts = np.concatenate([self.mag_carry[0], ts[order]])
-        vals = np.concatenate([self.mag_carry[1], vals[order].reshape(-1, 3)])
-        out = pair_fields(stamps, ts, vals, MagConfig().timeout_ns)
-        done = ts <= last
-        k = int(np.count_nonzero(done))
-        self.mag_carry = (ts[max(k - 1, 0):k], vals[max(k - 1, 0):k])
-        self.mag_raw[:] = [r for r, t in zip(self.mag_raw, parse_mags(self.mag_raw)[0], strict=True) if t > last]
+        vals = vals.reshape(-1, 3)
+        now = ts <= last
+        order = np.argsort(ts[now], kind="stable")
+        out = self.pair_mag(stamps, ts[now][order], vals[now][order])
+        self.mag_raw[:] = [r for r, keep in zip(self.mag_raw, ~now, strict=True) if keep]
         return out
 
     def _check_increasing(self, stamps: np.ndarray, first: int) -> None:
@@ -275,7 +288,7 @@ class _ChunkBuffer:
             name=str(info.get("name") or self.path.stem),
             dataset=str(info.get("dataset") or ""),
             source=str(info.get("source") or ""),
-            frame_id=str(info.get("frame_id") or self.frame or "imu_link"),
+            frame_id=str(info.get("frame_id") or self.frame or defaults.IMU_FRAME),
             meta={str(k): str(v) for k, v in (info.get("meta") or {}).items()},
             mag=mag,
         )
@@ -294,7 +307,7 @@ def _at_stamps(raws: list[bytes], parse, width: int, stamps: np.ndarray, last: i
 
 
 def _iter_chunks(path: Path, reader, chunk: int, imu_topic: str = IMU_TOPIC,
-                 reference: bool = True) -> Iterator[Recording]:
+                 reference: bool = True, pair_mag: MagPairer = exact_stamps) -> Iterator[Recording]:
     c_imu = _topic_connections(path, reader, imu_topic, IMU_TYPE, required=True)
     c_ref = _topic_connections(path, reader, REF_TOPIC, QUAT_TYPE, required=False) if reference else []
     c_scored = _topic_connections(path, reader, SCORED_TOPIC, BOOL_TYPE, required=False)
@@ -302,7 +315,7 @@ def _iter_chunks(path: Path, reader, chunk: int, imu_topic: str = IMU_TOPIC,
     c_mag = [c for c in reader.connections if c.topic == MAG_TOPIC and c.msgtype == MAG_TYPE]
     info = _info_from(path, reader)
     buf = _ChunkBuffer(path, info, bool(c_ref), {c.id for c in c_imu}, {c.id for c in c_ref}, imu_topic,
-                       {c.id for c in c_mag})
+                       {c.id for c in c_mag}, pair_mag)
     for conn, t, raw in reader.messages(connections=[*c_imu, *c_ref, *c_scored, *c_mag]):
         if buf.complete(chunk, t):
             yield buf.flush(chunk)
@@ -334,6 +347,8 @@ def concat(chunks: list[Recording]) -> Recording:
     )
 
 
-def read_recording(path: str | os.PathLike[str]) -> Recording:
-    """Read a whole bag (the exact inverse of :func:`write_recording`)."""
-    return concat(list(iter_imu_chunks(path, chunk=100_000)))  # chunks keep the raw-bytes buffer small
+def read_recording(path: str | os.PathLike[str], pair_mag: MagPairer | None = None) -> Recording:
+    """Read a whole bag (the exact inverse of :func:`write_recording`; ``pair_mag`` as in
+    :func:`iter_imu_chunks`)."""
+    # chunks keep the raw-bytes buffer small
+    return concat(list(iter_imu_chunks(path, chunk=100_000, pair_mag=pair_mag)))

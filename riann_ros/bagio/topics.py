@@ -26,10 +26,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from riann_ros import defaults
 from riann_ros import quaternion as quat
 from riann_ros.bagio.cdr import _f64_cols, _stamps_of, _uniform_rows
 from riann_ros.bagio.layout import IMU_TOPIC, IMU_TYPE, BagError, typestore
-from riann_ros.bagio.read import _opened, iter_imu_chunks
+from riann_ros.bagio.read import MagPairer, _opened, iter_imu_chunks
 from riann_ros.recording import Recording
 from riann_ros.stamps import to_ns
 
@@ -41,7 +42,6 @@ ORIENTATION_TYPES: dict[str, tuple[str, ...]] = {
     "geometry_msgs/msg/PoseWithCovarianceStamped": ("pose", "pose", "orientation"),
     "nav_msgs/msg/Odometry": ("pose", "pose", "orientation"),
 }
-DEFAULT_MAX_GAP_S = 0.1  # as riann-bag-convert's --max-gap for EuRoC ground truth
 READ_BATCH = 4096  # messages parsed at a time
 _MARK = (1.0 + 1 / 1024 + 3e-13, 1.0 + 2 / 1024 + 5e-13, 1.0 + 3 / 1024 + 7e-13, 1.0 + 4 / 1024 + 11e-13,
          1.0 + 5 / 1024 + 13e-13)
@@ -176,7 +176,7 @@ class Aligner:
     as far as needed and forgetting those no later sample can use."""
 
     def __init__(self, batches: Iterator[tuple[NDArray[np.int64], NDArray[np.float64]]], offset_ns: int = 0,
-                 max_gap_ns: int = round(DEFAULT_MAX_GAP_S * 1e9)) -> None:
+                 max_gap_ns: int = round(defaults.MAX_GAP_S * 1e9)) -> None:
         self.batches = batches
         self.offset = int(offset_ns)
         self.gap = int(max_gap_ns)
@@ -230,12 +230,13 @@ class Aligner:
 
 def iter_topic_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_topic: str = IMU_TOPIC,
                       reference_topic: str | None = None, estimate_topics: Sequence[str] = (), t_offset_ns: int = 0,
-                      max_gap_ns: int = round(DEFAULT_MAX_GAP_S * 1e9),
+                      max_gap_ns: int = round(defaults.MAX_GAP_S * 1e9), pair_mag: MagPairer | None = None,
                       ) -> Iterator[tuple[Recording, dict[str, NDArray[np.float64]]]]:
     """The IMU samples of ``imu_topic`` in chunks, each with the orientations of ``estimate_topics`` at its samples
     (stamps + ``t_offset_ns``) and, with ``reference_topic``, that topic as its reference (instead of the layout's
-    ``/ground_truth/attitude``). The score mask is the layout's ``/ground_truth/scored`` if present, else all scored.
-    BagError for missing topics or topics without an orientation."""
+    ``/ground_truth/attitude``). The score mask is the layout's ``/ground_truth/scored`` if present, else all scored;
+    the magnetometer is paired by ``pair_mag`` (:func:`~riann_ros.bagio.read.iter_imu_chunks`). BagError for missing
+    topics or topics without an orientation."""
     path = Path(path)
     topics = [t for t in (reference_topic, *estimate_topics) if t]
     with _opened(path) as reader:
@@ -244,7 +245,8 @@ def iter_topic_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu
     ref = Aligner(iter_orientations(path, reference_topic), 0, max_gap_ns) if reference_topic else None
     ests = {t: Aligner(iter_orientations(path, t), t_offset_ns, max_gap_ns) for t in estimate_topics}
     try:
-        for rec in iter_imu_chunks(path, chunk, imu_topic=imu_topic, reference=reference_topic is None):
+        for rec in iter_imu_chunks(path, chunk, imu_topic=imu_topic, reference=reference_topic is None,
+                                   pair_mag=pair_mag):
             if ref is not None:
                 rec.quat_ref = ref.at(rec.stamps_ns)
             yield rec, {t: a.at(rec.stamps_ns) for t, a in ests.items()}

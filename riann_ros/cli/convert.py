@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from riann_ros import bagio
+from riann_ros import bagio, defaults
 from riann_ros.datasets import FORMATS, detect_format, read_any
 from riann_ros.datasets.csvfile import (
     ACC_UNITS,
@@ -94,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("none", "zstd"),
         help="zstd | none (default: zstd for mcap storage (MCAP chunk compression), none for sqlite3)",
     )
-    p.add_argument("--frame-id", default="imu_link", help="IMU frame_id (default imu_link)")
+    p.add_argument("--frame-id", default=defaults.IMU_FRAME, help=f"IMU frame_id (default {defaults.IMU_FRAME})")
     p.add_argument("--name", help="sequence name (default: from the input)")
     p.add_argument("--force", action="store_true", help="replace existing output bags")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
@@ -138,7 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
         choices=tuple(TIME_UNITS),
         help="ground-truth time unit (default: from the column name, e.g. time(ns); else ns, s for TUM)",
     )
-    e.add_argument("--max-gap", type=float, default=0.1, help="no reference across ground-truth gaps > s (0.1)")
+    e.add_argument("--max-gap", type=float, default=defaults.MAX_GAP_S,
+                   help=f"no reference across ground-truth gaps > s ({defaults.MAX_GAP_S:g})")
     e.add_argument(
         "--imu-to-body",
         type=_quat,
@@ -146,15 +147,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     s = p.add_argument_group("synthetic")
-    s.add_argument("--rate", type=float, default=200.0, help="Hz (default 200)")
-    s.add_argument("--duration", type=float, default=60.0, help="s (default 60)")
-    s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    s.add_argument("--motion", choices=MOTIONS, default="combined", help="default combined")
-    s.add_argument("--bias", type=_bias, default=0.01, help="gyro bias rad/s: magnitude or 'bx,by,bz' (0.01)")
-    s.add_argument("--gyr-noise", type=float, default=0.004, help="gyro white noise std, rad/s (0.004)")
-    s.add_argument("--acc-noise", type=float, default=0.03, help="accelerometer white noise std, m/s² (0.03)")
-    s.add_argument("--max-tilt", type=float, default=60.0, help="roll/pitch amplitude scale, deg (60)")
-    s.add_argument("--speed", type=float, default=1.0, help="motion frequency scale (1)")
+    syn = defaults.SYNTHETIC
+    s.add_argument("--rate", type=float, default=syn.rate, help=f"Hz (default {syn.rate:g})")
+    s.add_argument("--duration", type=float, default=syn.duration, help=f"s (default {syn.duration:g})")
+    s.add_argument("--seed", type=int, default=syn.seed, help=f"random seed (default {syn.seed})")
+    s.add_argument("--motion", choices=MOTIONS, default=syn.motion, help=f"default {syn.motion}")
+    s.add_argument("--bias", type=_bias, default=syn.bias,
+                   help=f"gyro bias rad/s: magnitude or 'bx,by,bz' ({syn.bias:g})")
+    s.add_argument("--gyr-noise", type=float, default=syn.gyr_noise,
+                   help=f"gyro white noise std, rad/s ({syn.gyr_noise:g})")
+    s.add_argument("--acc-noise", type=float, default=syn.acc_noise,
+                   help=f"accelerometer white noise std, m/s² ({syn.acc_noise:g})")
+    s.add_argument("--max-tilt", type=float, default=syn.max_tilt_deg,
+                   help=f"roll/pitch amplitude scale, deg ({syn.max_tilt_deg:g})")
+    s.add_argument("--speed", type=float, default=syn.speed, help=f"motion frequency scale ({syn.speed:g})")
     return p
 
 

@@ -13,7 +13,7 @@ rosbag2 bag with ``--imu-topic`` / ``--ground-truth-topic``, or BROAD trial file
 Full reference: docs/evaluation.md. Exit status: 0 all inputs evaluated, 1 some input failed
 (named on stderr, the others are still evaluated and reported), 130 interrupted, 2 bad command line.
 This module only parses the command line and prints; the work is in :mod:`riann_ros.evaluation`
-(and :mod:`riann_ros.nodes.live` for ``--live``).
+(and :mod:`riann_ros.cli.live` for ``--live``).
 """
 
 from __future__ import annotations
@@ -26,12 +26,12 @@ import sys
 import time
 from pathlib import Path
 
+from riann_ros import defaults
 from riann_ros import evaluation as ev
-from riann_ros.evaluation import report
+from riann_ros.evaluation import outdir, perturb, report
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
-DEFAULT_MAX_GAP_S = 0.1  # riann_ros.bagio.topics.DEFAULT_MAX_GAP_S (as riann-bag-convert --max-gap)
 
 
 def bagio_imu_topic() -> str:
@@ -75,10 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "native rate, unperturbed. Repeatable")
     b.add_argument("--t-offset", type=float, default=0.0, metavar="SECONDS",
                    help="added to the stamps of the --estimate-topic messages before matching (default 0)")
-    b.add_argument("--max-gap", type=float, default=DEFAULT_MAX_GAP_S, metavar="SECONDS",
+    b.add_argument("--max-gap", type=float, default=defaults.MAX_GAP_S, metavar="SECONDS",
                    help="slerp a topic between two messages at most this far apart, hold the nearer one within half "
                    "of it, else the sample has none (not scored, counted as unestimated); --estimate-topic and "
-                   f"--ground-truth-topic (default {DEFAULT_MAX_GAP_S})")
+                   f"--ground-truth-topic (default {defaults.MAX_GAP_S})")
     b.add_argument("--ground-truth-topic", default=None, metavar="TOPIC",
                    help="the reference orientation for bags not written by riann-bag-convert (geometry_msgs/"
                    "PoseStamped, nav_msgs/Odometry, geometry_msgs/QuaternionStamped, sensor_msgs/Imu, …; the IMU "
@@ -88,8 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "/ground_truth/scored topic every sample is scored")
     p.add_argument("--perturb", "-p", action="append", default=[], metavar="CONDITION",
                    help="evaluate under this condition too: 'none', or perturbations joined with '+': "
-                   "jitter:10/20/30ms, jitter:8-32ms, rate:50, bias:3,3,0, bias:random:2 (deg/s), "
-                   "dropout:0.1-0.6s@10s; repeatable, each one a condition (default: none)")
+                   f"{perturb.accepted_forms()}; repeatable, each one a condition (default: none; "
+                   "docs/evaluation.md#perturbations)")
     p.add_argument("--rest", default=None, metavar="START:END",
                    help="the initial rest, in seconds from the first sample, whose mean gyro is removed as the turn-on "
                    "bias (default: detected from the signals before the first scored sample; see docs/evaluation.md)")
@@ -255,7 +255,7 @@ def _evaluate(args: argparse.Namespace, sources: list[str], settings: ev.EvalSet
     if not args.live:
         return ev.evaluate_sources(sources, settings, args.jobs, progress)
     try:
-        from riann_ros.nodes.live import LiveRunner
+        from riann_ros.cli.live import LiveRunner
     except ImportError as exc:
         raise ev.EvalError(f"--live needs rclpy and the ROS message packages: {exc}") from exc
     topics = args.live_topics.split(",") if args.live_topics else None
@@ -316,9 +316,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def _check_out(args: argparse.Namespace) -> None:
     """Refuse (ValueError, exit status 2) an --out folder holding an earlier run's results, before any work."""
-    old = report.previous_results(args.out) if args.out and not args.force else []
+    old = outdir.previous_results(args.out) if args.out and not args.force else []
     if old:
-        raise ValueError(str(report.OutputExists(args.out, old)))
+        raise ValueError(str(outdir.OutputExists(args.out, old)))
 
 
 def _print_messages(rep: report.Report) -> None:
@@ -336,7 +336,7 @@ def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
     """The result files in --out; False when they could not be written."""
     try:
         figures = report.write_results(args.out, rep, plots=not args.no_plots, replace=args.force)
-    except report.OutputExists as exc:  # written meanwhile by someone else
+    except outdir.OutputExists as exc:  # written meanwhile by someone else
         _err(str(exc))
         return False
     print(f"wrote {args.out}/results.csv, results.json, report.md"
@@ -357,7 +357,7 @@ def _compare(args: argparse.Namespace) -> int:
     if args.out:
         try:
             files = cp.write_comparison(args.out, cmp, plots=not args.no_plots, replace=args.force)
-        except report.OutputExists as exc:
+        except outdir.OutputExists as exc:
             _err(str(exc))
             return 1
         print(f"wrote {', '.join(str(f) for f in files)}")

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riann_ros import defaults
 from riann_ros.recording import Recording
 
 TIME_UNITS = {"s": 10**9, "ms": 10**6, "us": 10**3, "µs": 10**3, "ns": 1}
@@ -311,7 +312,7 @@ def read_csv(
     mask_col: str | None = None,
     delimiter: str | None = None,
     name: str | None = None,
-    frame_id: str = "imu_link",
+    frame_id: str = defaults.IMU_FRAME,
     mag_cols: Sequence[str] | None = None,
     mag_unit: str = "uT",
 ) -> Recording:

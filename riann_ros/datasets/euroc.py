@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riann_ros import defaults
 from riann_ros import quaternion as quat
 from riann_ros.datasets.csvfile import (
     InputError,
@@ -203,7 +204,8 @@ def _check_overlap(gt_path: Path, gt_ns: np.ndarray, stamps: np.ndarray, quat_re
     )
 
 
-def interpolate(gt_ns: np.ndarray, gt_q: np.ndarray, stamps_ns: np.ndarray, max_gap_s: float = 0.1) -> np.ndarray:
+def interpolate(gt_ns: np.ndarray, gt_q: np.ndarray, stamps_ns: np.ndarray,
+                max_gap_s: float = defaults.MAX_GAP_S) -> np.ndarray:
     """Slerp ``gt_q`` onto ``stamps_ns``; NaN outside [gt_ns[0], gt_ns[-1]] and across gaps > max_gap_s."""
     out = np.full((len(stamps_ns), 4), np.nan)
     if len(gt_ns) == 0:
@@ -229,9 +231,9 @@ def read_euroc(
     gt_cols: Sequence[str] | None = None,
     gt_time_unit: str | None = None,
     imu_to_body: np.ndarray | None = None,
-    max_gap_s: float = 0.1,
+    max_gap_s: float = defaults.MAX_GAP_S,
     name: str | None = None,
-    frame_id: str = "imu_link",
+    frame_id: str = defaults.IMU_FRAME,
 ) -> Recording:
     """Read an EuRoC/ASL folder (see module docstring)."""
     path = Path(path)

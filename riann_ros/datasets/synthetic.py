@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from riann_ros import defaults
 from riann_ros import quaternion as quat
 from riann_ros.recording import Recording
 
@@ -119,18 +120,18 @@ def euler_to_quat(euler: np.ndarray) -> np.ndarray:
 
 def generate(
     *,
-    rate: float = 200.0,
-    duration: float = 60.0,
-    seed: int = 0,
-    motion: str = "combined",
-    bias: float | tuple[float, float, float] = 0.01,
-    gyr_noise: float = 0.004,
-    acc_noise: float = 0.03,
-    max_tilt_deg: float = 60.0,
-    speed: float = 1.0,
+    rate: float = defaults.SYNTHETIC.rate,
+    duration: float = defaults.SYNTHETIC.duration,
+    seed: int = defaults.SYNTHETIC.seed,
+    motion: str = defaults.SYNTHETIC.motion,
+    bias: float | tuple[float, float, float] = defaults.SYNTHETIC.bias,
+    gyr_noise: float = defaults.SYNTHETIC.gyr_noise,
+    acc_noise: float = defaults.SYNTHETIC.acc_noise,
+    max_tilt_deg: float = defaults.SYNTHETIC.max_tilt_deg,
+    speed: float = defaults.SYNTHETIC.speed,
     start_s: float = 0.0,
     name: str | None = None,
-    frame_id: str = "imu_link",
+    frame_id: str = defaults.IMU_FRAME,
 ) -> Recording:
     """A synthetic recording (see module docstring).
 

@@ -42,12 +42,6 @@ def sanitize_arrays(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> tuple[Arra
     return acc, gyr, dt
 
 
-def sanitize(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> tuple[list, list, list]:
-    """:func:`sanitize_arrays` as nested lists of Python floats, for the per-sample loops."""
-    a, g, h = sanitize_arrays(acc, gyr, dt)
-    return a.tolist(), g.tolist(), h.tolist()
-
-
 def initialise(q: Quat | None, acc: list, out: list
                ) -> tuple[Quat | None, int]:
     """Until the first usable accelerometer sample sets the attitude, output the identity.

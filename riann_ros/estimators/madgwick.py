@@ -81,12 +81,6 @@ def enu_to_nwu(q: Quat) -> Quat:
     return _C * (w + z), _C * (x + y), _C * (y - x), _C * (z - w)
 
 
-def nwu_to_enu(q: Quat) -> Quat:
-    """``C ⊗ q``: a sensor → NWU attitude as sensor → ENU."""
-    w, x, y, z = q
-    return _C * (w - z), _C * (x - y), _C * (y + x), _C * (z + w)
-
-
 def _madgwick_run(q: Quat | None, acc: list, gyr: list, dt: list, beta: float) -> tuple[Quat | None, list]:
     """Run the filter from state ``q`` (None = not initialised) over the samples; (new q, outputs)."""
     out: list = []
@@ -260,10 +254,6 @@ class MadgwickEstimator(AttitudeEstimator):
         self._marg: tuple[Quat, Quat] | None = None
         self._observed = False
         self._fe = FrontEndSlot(self.params)
-
-    @property
-    def initialized(self) -> bool:
-        return self._q is not None
 
     def diagnostics(self) -> dict[str, str]:
         return {BIAS_KEY: bias_text(self._fe.bias)} if self._fe.on else {}

@@ -231,10 +231,6 @@ class MahonyEstimator(AttitudeEstimator):
         self._fe = FrontEndSlot(self.params)
 
     @property
-    def initialized(self) -> bool:
-        return self._q is not None
-
-    @property
     def bias(self) -> Array:
         """Current gyro-bias estimate (rad/s, sensor frame): the front end's plus the integral term's."""
         return np.array(self._b) + np.array(self._fe.bias)

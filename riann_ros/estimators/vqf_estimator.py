@@ -19,7 +19,7 @@ The C++ implementation of the ``vqf`` package (MIT) does the work; this class on
   so it equals ``quat6D`` exactly, and after the magnetometer stops the heading continues without a jump.
 * **dt** — VQF is built for a fixed sampling time ``Ts`` given at construction. The filter is created at
   the first sample with ``Ts`` = that sample's dt (the stream gives the first sample ``1/nominal_rate``;
-  ``DEFAULT_TS`` if that dt is not positive). Every sample's gyroscope reading is then scaled by
+  ``riann_ros.defaults.FALLBACK_DT_S`` if that dt is not positive). Every sample's gyroscope reading is then scaled by
   ``dt / Ts`` before it goes in, so VQF's strapdown integration (angle = |ω|·Ts) integrates over the
   sample's true dt, also across jitter and short gaps. The accelerometer low-pass and the rest
   detector still count time in samples of ``Ts``: if the real rate differs persistently from the first
@@ -42,10 +42,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 from vqf import VQF
 
+from riann_ros import defaults
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.common import BIAS_KEY, bias_text, sanitize_arrays
-
-DEFAULT_TS = 0.01  # s, used only when the first sample's dt is not positive
 
 # defaults of vqf 2.1.2 (VQFParams)
 DEFAULT_TAU_ACC = 3.0
@@ -120,15 +119,6 @@ class VqfEstimator(AttitudeEstimator):
         return self._mag_used and self._vqf is not None and not self._vqf.getMagDistDetected()
 
     @property
-    def initialized(self) -> bool:
-        return self._vqf is not None
-
-    @property
-    def sample_time(self) -> float | None:
-        """The ``Ts`` VQF was built with (None before the first sample)."""
-        return self._ts
-
-    @property
     def bias(self) -> Array:
         """VQF's current gyro-bias estimate (rad/s, in units of the dt-scaled gyro), zeros before start."""
         if self._vqf is None:
@@ -150,7 +140,7 @@ class VqfEstimator(AttitudeEstimator):
     def _ensure(self, first_dt: float) -> tuple[VQF, float]:
         """The filter and its Ts, built at the first sample."""
         if self._vqf is None or self._ts is None:
-            self._ts = float(first_dt) if first_dt > 0.0 else DEFAULT_TS
+            self._ts = float(first_dt) if first_dt > 0.0 else defaults.FALLBACK_DT_S
             self._vqf = VQF(
                 self._ts,
                 tauAcc=float(self.params["tau_acc"]),

@@ -5,10 +5,13 @@ recorded in the bag aligned onto them (:mod:`~riann_ros.evaluation.sources`) →
 motion onset and the initial rest (:mod:`~riann_ros.evaluation.rest`) → each scenario transforms the chunks
 (:mod:`~riann_ros.evaluation.scenarios`) → a runner gives the estimates (in-process through the node's
 ``EstimatorStream``, live over DDS, or recorded in the bag) → one accumulator per scenario × estimator
-scores them (:mod:`~riann_ros.evaluation.scoring`). Estimator specs and tuning grids:
+scores them (:mod:`~riann_ros.evaluation.scoring`). The runners: :mod:`~riann_ros.evaluation.runners`; settings
+and result rows: :mod:`~riann_ros.evaluation.results`. Estimator specs and tuning grids:
 :mod:`~riann_ros.evaluation.specs`; statistics across sequences and tuning:
 :mod:`~riann_ros.evaluation.aggregate`; tables and files: :mod:`~riann_ros.evaluation.report`; figures:
-:mod:`~riann_ros.evaluation.plots`; two saved runs side by side: :mod:`~riann_ros.evaluation.compare`.
+:mod:`~riann_ros.evaluation.plots`; the ``--out`` folder policy: :mod:`~riann_ros.evaluation.outdir`; two saved
+runs side by side: :mod:`~riann_ros.evaluation.compare` (report and compare use plots and outdir; neither
+plots nor outdir imports them).
 Reference: docs/evaluation.md.
 """
 
@@ -16,19 +19,17 @@ from riann_ros.evaluation.aggregate import ALL_DATASETS, Group, aggregate, best_
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import Condition, parse_condition, parse_perturbation
 from riann_ros.evaluation.rest import NO_REST_WARNING, Rest, parse_rest
-from riann_ros.evaluation.run import (
+from riann_ros.evaluation.results import (
     NATIVE,
     RECORDED,
     EvalSettings,
-    OfflineRunner,
-    RecordedRunner,
     ResultRow,
     RunStats,
     SequenceResult,
-    evaluate_source,
-    evaluate_sources,
     recorded_spec,
 )
+from riann_ros.evaluation.run import evaluate_source, evaluate_sources
+from riann_ros.evaluation.runners import OfflineRunner, RecordedRunner
 from riann_ros.evaluation.scenarios import (
     AS_RECORDED,
     BIAS_STD_DPS,

@@ -10,7 +10,8 @@ import numpy as np
 
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.perturb import NONE
-from riann_ros.evaluation.run import NATIVE, EvalSettings, Progress, ResultRow, evaluate_sources
+from riann_ros.evaluation.results import NATIVE, EvalSettings, Progress, ResultRow
+from riann_ros.evaluation.run import evaluate_sources
 from riann_ros.evaluation.scenarios import SCENARIOS
 from riann_ros.evaluation.specs import EstimatorSpec, grid_specs, make_label, parse_grid
 
@@ -34,6 +35,11 @@ class Group:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+def rate_label(rate: str | float) -> str:
+    """A rate key as shown in tables: ``native`` or the rate in Hz (``50``, ``12.5``)."""
+    return str(rate) if rate == NATIVE else f"{float(rate):g}"
 
 
 def rate_order(rate: str | float) -> tuple[int, float]:
@@ -98,13 +104,14 @@ def tune(text: str, sources: Sequence[str], scenario: str, seed: int, jobs: int 
          progress: Progress | None = None, like: EvalSettings | None = None) -> tuple[dict[str, Any], EstimatorSpec]:
     """Grid-search the estimator of tuning spec ``text`` (``"madgwick"``, ``"mahony:kp=0.5/1:ki=0/0.3"``) for the
     lowest mean RMSE on ``sources`` in ``scenario``: (the grid's results, the best spec labelled ``… tuned``).
-    ``like``: the evaluation's settings, whose bag topics, rest and chunk size the tuning reads the inputs with."""
+    ``like``: the evaluation's settings, whose bag topics, rest, chunk size and ``use_mag`` (6D or 9D) the tuning
+    uses."""
     name, grid = parse_grid(text)
     specs = grid_specs(name, grid)
     settings = EvalSettings(estimators=specs, scenarios=[scenario], seed=seed)
     if like is not None:
         settings.topics = replace(like.topics, estimates=())
-        settings.rest, settings.chunk = like.rest, like.chunk
+        settings.rest, settings.chunk, settings.use_mag = like.rest, like.chunk, like.use_mag
     results = evaluate_sources(sources, settings, jobs, progress)
     best = best_of([r for res in results if not res.error for r in res.rows], specs, scenario)
     best["estimator"] = name

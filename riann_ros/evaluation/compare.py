@@ -15,10 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from riann_ros.evaluation import plots as pl
 from riann_ros.evaluation.aggregate import rate_order, scenario_order
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.outdir import prepare_out
 from riann_ros.evaluation.perturb import NONE
-from riann_ros.evaluation.run import NATIVE, ResultRow
+from riann_ros.evaluation.results import NATIVE, ResultRow
 
 Key = tuple[str, str, str, str | float, str]  # sequence, scenario, perturbation, rate, estimator
 Group = tuple[str, str, str, str | float]  # estimator, scenario, perturbation, rate
@@ -198,18 +200,22 @@ def write_csv(path: Path, cmp: Comparison) -> None:
             w.writerow([seq, scn, prt, rate, est, f"{p.a:.6f}", f"{p.b:.6f}", f"{p.diff:.6f}"])
 
 
+def differences(cmp: Comparison) -> dict[tuple[str, str, str | float, str], list[float]]:
+    """(scenario, perturbation, rate, estimator) -> the per-sequence differences B − A, in table order."""
+    return {(g.scenario, g.perturbation, g.rate, g.estimator):
+            [p.diff for p in cmp.pairs if p.key[1:] == (g.scenario, g.perturbation, g.rate, g.estimator)]
+            for g in cmp.groups()}
+
+
 def write_comparison(out: Path, cmp: Comparison, plots: bool = True, replace: bool = False) -> list[Path]:
     """compare.csv and (``plots``) compare_rmse.png/.svg in ``out`` (the --out policy of
-    :func:`~riann_ros.evaluation.report.prepare_out`); returns the files written."""
-    from riann_ros.evaluation import plots as pl
-    from riann_ros.evaluation.report import prepare_out
-
+    :func:`~riann_ros.evaluation.outdir.prepare_out`); returns the files written."""
     prepare_out(out, replace)
     written = [out / "compare.csv"]
     try:
         write_csv(written[0], cmp)
         if plots:
-            written += pl.plot_comparison(cmp, out)
+            written += pl.plot_differences(differences(cmp), cmp.a.label, cmp.b.label, out)
     except BaseException:
         for f in written:
             f.unlink(missing_ok=True)

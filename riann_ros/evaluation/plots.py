@@ -6,17 +6,14 @@ import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from riann_ros.evaluation.aggregate import scenario_order
+from riann_ros.evaluation.aggregate import rate_label, scenario_order
 from riann_ros.evaluation.perturb import NONE
-from riann_ros.evaluation.run import REFERENCE, ResultRow
+from riann_ros.evaluation.results import REFERENCE, ResultRow
 from riann_ros.evaluation.scenarios import AS_RECORDED
-
-if TYPE_CHECKING:
-    from riann_ros.evaluation.compare import Comparison
 
 
 def _plt():
@@ -232,15 +229,14 @@ def plot_attitude(series: dict[str, Any], out_dir: Path, scenario: str | None = 
     return _save(fig, out_dir, attitude_stem(series["sequence"]))
 
 
-def plot_comparison(cmp: Comparison, out_dir: Path, stem: str = "compare_rmse") -> list[Path]:
+def plot_differences(diffs: dict[tuple[str, str, str | float, str], list[float]], a_label: str, b_label: str,
+                     out_dir: Path, stem: str = "compare_rmse") -> list[Path]:
     """``--compare``: per scenario (× perturbation × rate), the RMSE difference B − A of every sequence per
-    estimator as points, their mean as a bar, and zero (below zero: B is better); linear axis in degrees."""
-    from riann_ros.evaluation.report import rate_label
-
+    estimator as points, their mean as a bar, and zero (below zero: B is better); linear axis in degrees.
+    ``diffs`` maps (scenario, perturbation, rate, estimator) to the per-sequence differences, in display order."""
     plt = _plt()
-    groups = cmp.groups()
-    panels = list(dict.fromkeys((g.scenario, g.perturbation, g.rate) for g in groups))
-    ests = list(dict.fromkeys(g.estimator for g in groups))
+    panels = list(dict.fromkeys(k[:3] for k in diffs))
+    ests = list(dict.fromkeys(k[3] for k in diffs))
     colors = plt.get_cmap("tab10").colors
     fig, axes = plt.subplots(1, len(panels), figsize=(max(3.6, 0.9 * len(ests) + 1.2) * len(panels), 4.2),
                              squeeze=False, sharey=True)
@@ -248,7 +244,7 @@ def plot_comparison(cmp: Comparison, out_dir: Path, stem: str = "compare_rmse") 
         ax.axhline(0.0, color="k", lw=0.8)
         ticks = []
         for j, est in enumerate(ests):
-            d = [p.diff for p in cmp.pairs if p.key[1:] == (scn, prt, rate, est)]
+            d = diffs.get((scn, prt, rate, est), [])
             ticks.append(f"{est}\n(n={len(d)})")
             if not d:
                 continue
@@ -261,7 +257,7 @@ def plot_comparison(cmp: Comparison, out_dir: Path, stem: str = "compare_rmse") 
         extra = ("" if prt == NONE else f", {prt}") + ("" if rate == "native" else f", {rate_label(rate)} Hz")
         ax.set_title(scn + extra)
         ax.grid(axis="y", alpha=0.3)
-    axes[0, 0].set_ylabel(f"RMSE e_α B − A (°) per sequence\n(B = {cmp.b.label}, A = {cmp.a.label})")
+    axes[0, 0].set_ylabel(f"RMSE e_α B − A (°) per sequence\n(B = {b_label}, A = {a_label})")
     fig.suptitle("below 0: B better; bar: mean over the sequences", fontsize="small", y=1.0)
     fig.tight_layout()
     return _save(fig, out_dir, stem)

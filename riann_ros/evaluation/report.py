@@ -18,11 +18,13 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from riann_ros.evaluation.aggregate import Group, aggregate, rate_order, scenario_order
+from riann_ros.evaluation import plots as pl
+from riann_ros.evaluation.aggregate import Group, aggregate, rate_label, rate_order, scenario_order
+from riann_ros.evaluation.outdir import prepare_out, previous_results
 from riann_ros.evaluation.perturb import DEFINITIONS as PERTURB_DEFINITIONS
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
-from riann_ros.evaluation.run import NATIVE, EvalSettings, ResultRow, SequenceResult
+from riann_ros.evaluation.results import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
 
 CSV_FIELDS = (
@@ -52,10 +54,6 @@ METRIC = (
     "RMSE of e_alpha = 2 acos(sqrt(w^2+z^2)) of q_ref * conj(q_est), deg, over score mask & reference present & "
     "estimate present"
 )
-PLOT_STEMS = ("rmse_boxplots", "error_over_time", "rmse_vs_rate", "compare_rmse")
-PLOT_PATTERNS = ("roll_pitch_*",)  # one figure per sequence
-RESULT_FILES = ("results.csv", "results.json", "report.md", "compare.csv")
-PLOT_EXTS = ("png", "svg")
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -84,10 +82,6 @@ class Progress:
         else:
             self.stream.write(line + "\n")
         self.stream.flush()
-
-
-def rate_label(rate: str | float) -> str:
-    return str(rate) if rate == NATIVE else f"{float(rate):g}"
 
 
 def _cells(agg: Sequence[Group]) -> tuple[list[str], list[list[str]]]:
@@ -350,44 +344,9 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
     return "\n".join(lines)
 
 
-def previous_results(out: Path) -> list[Path]:
-    """The result files of an earlier run in ``out``: results.csv/json, report.md, compare.csv and every plot
-    riann-bag-eval writes (``rmse_boxplots``, ``error_over_time``, ``rmse_vs_rate``, ``compare_rmse``,
-    ``roll_pitch_*``; .png and .svg). Nothing else in ``out`` is a result file."""
-    if not out.is_dir():
-        return []
-    found = [out / f for f in RESULT_FILES] + [out / f"{s}.{e}" for s in PLOT_STEMS for e in PLOT_EXTS]
-    found += [p for pat in PLOT_PATTERNS for e in PLOT_EXTS for p in sorted(out.glob(f"{pat}.{e}"))]
-    return [p for p in found if p.is_file()]
-
-
-class OutputExists(FileExistsError):
-    """``--out`` holds the results of an earlier run and replacing them was not asked for."""
-
-    def __init__(self, out: Path, files: Sequence[Path]) -> None:
-        names = ", ".join(p.name for p in files[:4]) + (", …" if len(files) > 4 else "")
-        super().__init__(f"{out} already holds the results of an earlier run ({names}); not overwriting them: use "
-                         "--force to replace them (only riann-bag-eval's result files are removed, nothing else in "
-                         "the folder) or choose another --out")
-
-
-def prepare_out(out: Path, replace: bool) -> list[Path]:
-    """Make ``out`` ready for a run's files: :class:`OutputExists` when it holds an earlier run's result files and
-    not ``replace``; with ``replace`` those files (only those) are removed. Returns the files removed."""
-    old = previous_results(out)
-    if old and not replace:
-        raise OutputExists(out, old)
-    for p in old:
-        p.unlink(missing_ok=True)
-    out.mkdir(parents=True, exist_ok=True)
-    return old
-
-
 def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
     """The figures: boxplots, error over time (the first sequence with series), roll/pitch per sequence (that one,
     or every sequence with ``--plot-sequence all``), RMSE vs rate."""
-    from riann_ros.evaluation import plots as pl
-
     figures = pl.plot_boxes(rows, out)
     with_series = [r.series for r in report.results if r.series and not r.error]
     if with_series:
@@ -400,7 +359,8 @@ def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
 def write_results(out: Path, report: Report, plots: bool = True, replace: bool = False) -> list[Path]:
     """results.csv, results.json, report.md and (``plots``) the figures in ``out``; returns the plot files.
 
-    An earlier run's result files in ``out`` are removed first with ``replace``, else :class:`OutputExists`
+    An earlier run's result files in ``out`` are removed first with ``replace``, else
+    :class:`~riann_ros.evaluation.outdir.OutputExists`
     (:func:`prepare_out`): a folder never mixes two runs. If anything stops it half-way (Ctrl-C included), the
     files of this call are removed again."""
     prepare_out(out, replace)

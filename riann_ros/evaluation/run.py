@@ -10,41 +10,49 @@ the one-chunk case of the same code, so streamed and whole evaluations cannot di
 
 The runner is where the estimates come from:
 
-* :class:`OfflineRunner` (default) runs every estimator in-process through
+* :class:`~riann_ros.evaluation.runners.OfflineRunner` (default) runs every estimator in-process through
   :class:`riann_ros.stream.EstimatorStream` with the sequence's rate as ``nominal_rate``: the very code
   path of the ROS node, so offline scores are node scores. Its runs can be fed alternately, so one pass
   over a bag serves all scenarios.
-* :class:`riann_ros.nodes.live.LiveRunner` replays the sequences over DDS to the estimator nodes; one
+* :class:`riann_ros.cli.live.LiveRunner` replays the sequences over DDS to the estimator nodes; one
   replay at a time (a pass per scenario).
-* :class:`RecordedRunner` serves the estimates a user's own filter recorded in the bag
+* :class:`~riann_ros.evaluation.runners.RecordedRunner` serves the estimates a user's own filter recorded in the bag
   (``--estimate-topic``), which the source aligned onto each chunk's samples; they exist for the recording
   as it is only, so they join the as-recorded scenario, unperturbed, at the native rate, beside the other
   runner's estimators.
+
+What a run is asked and gives (settings, rows): :mod:`~riann_ros.evaluation.results`.
 """
 
 from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.evaluation.errors import EvalError
-from riann_ros.evaluation.perturb import NONE, Condition, Transform
+from riann_ros.evaluation.perturb import Condition, Transform
 from riann_ros.evaluation.rest import NO_REST_WARNING, Rest
-from riann_ros.evaluation.scenarios import AS_RECORDED, PAPER_SCENARIOS, ScenarioPlan, sequence_seed
+from riann_ros.evaluation.results import (
+    NATIVE,
+    RECORDED,
+    REFERENCE,
+    SERIES_POINTS,
+    EvalSettings,
+    Progress,
+    ResultRow,
+    RunStats,
+    SequenceResult,
+)
+from riann_ros.evaluation.runners import Joined, OfflineRunner, RecordedRunner, Run, Runner
+from riann_ros.evaluation.scenarios import AS_RECORDED, ScenarioPlan, sequence_seed
 from riann_ros.evaluation.scoring import Accumulator, Score, error_deg, roll_pitch_deg
 from riann_ros.evaluation.sources import (
     BROAD_SUFFIXES,
-    STREAM_CHUNK,
-    BagTopics,
-    Chunk,
     Source,
     Summary,
     open_source,
@@ -52,244 +60,10 @@ from riann_ros.evaluation.sources import (
     summarise,
 )
 from riann_ros.evaluation.specs import EstimatorSpec
-from riann_ros.mag import MagConfig
 from riann_ros.recording import Recording
-from riann_ros.stream import EstimatorStream, GateConfig
-
-NATIVE = "native"  # rate key of rows at the recording's own rate
-LIVE_KEYS = ("published", "received", "lost", "unexpected")  # RunStats.live columns
-RECORDED = "recorded"  # estimator name and mode of estimates recorded in a bag
-SERIES_POINTS = 6000  # points per curve kept for the error-over-time and roll/pitch plots
-REFERENCE = "reference"  # key of the reference's roll/pitch in a series
+from riann_ros.stream import GateConfig
 
 
-@dataclass
-class EvalSettings:
-    estimators: list[EstimatorSpec]
-    scenarios: list[str] = field(default_factory=lambda: list(PAPER_SCENARIOS))
-    seed: int = 0
-    rates: list[float | None] = field(default_factory=lambda: [None])  # None = the recording's own rate
-    conditions: list[Condition] = field(default_factory=lambda: [Condition()])  # perturbations; () = none
-    with_heading: bool = False  # heading and total error also for 6D runs (heading drift); 9D runs always have them
-    use_mag: str = "auto"  # as the nodes' use_mag: auto/true = 9D where the recording has a magnetometer
-    series_for: str | None = None  # sequence whose series are plotted: a name, "*" (the first) or "all"
-    series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
-    keep_estimates: bool = False  # return the estimates of the first scenario (for --write-estimates)
-    chunk: int = STREAM_CHUNK  # samples per bag chunk
-    rest: tuple[float, float] | None = None  # the initial rest by hand (s from the first sample); None: detect it
-    topics: BagTopics = field(default_factory=BagTopics)  # which topics of the bags; recorded estimates
-
-    @property
-    def recorded(self) -> list[EstimatorSpec]:
-        """The estimates recorded in the bags (``topics.estimates``) as specs labelled by their topic."""
-        return [recorded_spec(t) for t in self.topics.estimates]
-
-
-@dataclass
-class RunStats:
-    """What a runner reports about one estimator's run besides its estimates."""
-
-    seconds: float = 0.0  # wall time in the estimator (offline) or of the replay (live)
-    cpu_seconds: float = float("nan")
-    rejected: dict[str, int] = field(default_factory=dict)  # input-gate rejections per reason
-    resets: dict[str, int] = field(default_factory=dict)  # estimator restarts per cause
-    live: dict[str, int] | None = None  # live replays: published, received, lost, unexpected
-    mag_samples: int = 0  # samples the estimator got with a magnetic field (> 0: a 9D run)
-
-
-@dataclass
-class ResultRow:
-    """One estimator on one sequence in one scenario at one rate."""
-
-    sequence: str
-    dataset: str
-    source: str
-    scenario: str
-    rate: str | float  # NATIVE or the resampled rate (Hz)
-    rate_hz: float
-    resampled: bool
-    estimator: str  # label
-    estimator_name: str
-    mode: str
-    score: Score
-    sensors: str = "6D"  # 9D: the estimator used the magnetometer (its heading is scored as absolute)
-    perturbation: str = NONE  # the condition's label
-    stats: RunStats = field(default_factory=RunStats)
-
-    @property
-    def rmse_deg(self) -> float:
-        """The inclination RMSE (the metric everything ranks by)."""
-        return self.score.rmse_deg
-
-    def to_dict(self) -> dict[str, Any]:
-        """The flat row of results.csv / results.json."""
-        d: dict[str, Any] = {
-            k: getattr(self, k)
-            for k in ("sequence", "dataset", "source", "scenario", "perturbation", "rate", "rate_hz", "resampled",
-                      "estimator", "estimator_name", "mode", "sensors")
-        }
-        d["seconds"] = self.stats.seconds
-        d.update((k, v) for k, v in asdict(self.score).items() if v is not None)
-        d.update({f"rejected_{k}": v for k, v in self.stats.rejected.items()})
-        d.update({f"reset_{k}": v for k, v in self.stats.resets.items()})
-        d.update(self.stats.live or {})
-        d["cpu_seconds"] = self.stats.cpu_seconds
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> ResultRow:
-        """A row back from :meth:`to_dict` (a row of results.json, where NaN is null); KeyError names a missing
-        column."""
-        def num(v: Any) -> float:
-            return float("nan") if v is None else float(v)
-
-        score = Score(n_samples=int(d["n_samples"]), n_scored=int(d["n_scored"]),
-                      n_unestimated=int(d["n_unestimated"]), rmse_deg=num(d["rmse_deg"]),
-                      max_err_deg=num(d["max_err_deg"]), heading_rmse_deg=d.get("heading_rmse_deg"),
-                      total_rmse_deg=d.get("total_rmse_deg"))
-        live = {k: int(d[k]) for k in LIVE_KEYS if k in d}
-        stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
-                         rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},
-                         resets={k[len("reset_"):]: int(v) for k, v in d.items() if k.startswith("reset_")},
-                         live=live or None)
-        rate = d["rate"]
-        return cls(sequence=str(d["sequence"]), dataset=str(d["dataset"]), source=str(d.get("source", "")),
-                   scenario=str(d["scenario"]), rate=rate if rate == NATIVE else float(rate),
-                   rate_hz=num(d["rate_hz"]), resampled=bool(d["resampled"]), estimator=str(d["estimator"]),
-                   estimator_name=str(d.get("estimator_name", d["estimator"])), mode=str(d.get("mode", "")),
-                   score=score, perturbation=str(d.get("perturbation", NONE)), stats=stats,
-                   sensors=str(d.get("sensors", "6D")))
-
-
-@dataclass
-class SequenceResult:
-    source: str
-    name: str = ""
-    dataset: str = ""
-    error: str | None = None
-    rows: list[ResultRow] = field(default_factory=list)
-    scenarios: dict[str, Any] = field(default_factory=dict)  # scenario → ScenarioInfo dict
-    perturbations: dict[str, Any] = field(default_factory=dict)  # condition → scenario → what each part did
-    series: dict[str, Any] | None = None
-    estimates: dict[str, Any] | None = None  # first scenario: {"scenario", "stamps", "quats": {label: (N, 4)}}
-    seconds: float = 0.0
-    cpu_seconds: float = 0.0  # reading + scenarios + runs + scoring, in the worker
-    citation: str = ""
-    warnings: list[str] = field(default_factory=list)  # "<sequence>: <what>", for stderr and results.json
-
-
-# ---------------------------------------------------------------------------------------------------
-# runners
-# ---------------------------------------------------------------------------------------------------
-class Run(Protocol):
-    """One scenario sequence through a set of estimators, fed chunk by chunk."""
-
-    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
-        """The estimates (N, 4) of each estimator for this piece (NaN rows: no estimate)."""
-        ...
-
-    def finish(self) -> list[RunStats]: ...
-
-
-class Runner(Protocol):
-    mode: str
-    interleaved: bool  # whether several runs may be fed alternately (one pass serves all scenarios)
-
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run: ...
-
-
-_ESTIMATORS: dict[tuple[EstimatorSpec, int], AttitudeEstimator] = {}  # reused across sequences in a worker
-
-
-class _OfflineRun:
-    def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int, use_mag: str = "auto") -> None:
-        self.streams = []
-        for spec in specs:
-            est = _ESTIMATORS.get((spec, slot))
-            if est is None:
-                est = _ESTIMATORS[(spec, slot)] = spec.create()
-            est.reset()
-            self.streams.append(EstimatorStream(est, gate, MagConfig(use_mag=use_mag)))
-        self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
-
-    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
-        out = []
-        for stream, stats in zip(self.streams, self.stats, strict=True):
-            t, cpu = time.perf_counter(), time.process_time()
-            q, _accepted = stream.process_batch(rec.stamps_ns, rec.acc, rec.gyr, rec.mag)
-            stats.seconds += time.perf_counter() - t
-            stats.cpu_seconds += time.process_time() - cpu
-            out.append(q)
-        return out
-
-    def finish(self) -> list[RunStats]:
-        for stream, stats in zip(self.streams, self.stats, strict=True):
-            stats.rejected = {k: int(v) for k, v in stream.gate.rejected.items()}
-            stats.resets = {k: int(v) for k, v in stream.gate.resets.items()}
-            stats.mag_samples = stream.mag.samples_with_field
-        return self.stats
-
-
-class OfflineRunner:
-    """Every estimator in-process through the node's :class:`EstimatorStream`."""
-
-    mode = "offline"
-    interleaved = True
-
-    def __init__(self, use_mag: str = "auto") -> None:
-        self.use_mag = use_mag
-
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
-        return _OfflineRun(specs, gate, slot, self.use_mag)
-
-
-def recorded_spec(topic: str) -> EstimatorSpec:
-    """The spec of an estimate recorded on ``topic``: labelled by the topic, served by :class:`RecordedRunner`."""
-    return EstimatorSpec(RECORDED, (("topic", topic),), topic)
-
-
-class _RecordedRun:
-    def __init__(self, specs: list[EstimatorSpec]) -> None:
-        self.topics = [dict(s.params)["topic"] for s in specs]
-        self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
-
-    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
-        recorded = rec.recorded if isinstance(rec, Chunk) else {}
-        none = np.full((len(rec), 4), np.nan)
-        return [recorded.get(t, none) for t in self.topics]
-
-    def finish(self) -> list[RunStats]:
-        return self.stats
-
-
-class RecordedRunner:
-    """The estimates a user recorded in the bag from their own filter: served per chunk from the source's
-    :class:`~riann_ros.evaluation.sources.Chunk` (aligned onto the samples there); none in a piece that has
-    none (they exist only for the recording as it is)."""
-
-    mode = RECORDED
-    interleaved = True
-
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
-        return _RecordedRun(specs)
-
-
-class _Joined:
-    """Several runs fed together as one: their estimates and stats in turn."""
-
-    def __init__(self, runs: list[Run]) -> None:
-        self.runs = runs
-
-    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
-        return [q for run in self.runs for q in run.feed(rec)]
-
-    def finish(self) -> list[RunStats]:
-        return [st for run in self.runs for st in run.finish()]
-
-
-# ---------------------------------------------------------------------------------------------------
-# the pipeline
-# ---------------------------------------------------------------------------------------------------
 class _ScenarioRun:
     """One condition × scenario of one sequence at one rate: the scenario plan, the condition's transforms, the
     runner's run and one accumulator per estimator."""
@@ -323,7 +97,7 @@ class _ScenarioRun:
     def begin(self, runner: Runner) -> None:
         runs = [runner.start(self.own, self.gate, self.slot)] if self.own else []
         runs += [RecordedRunner().start(self.recorded, self.gate, self.slot)] if self.recorded else []
-        self.run = runs[0] if len(runs) == 1 else _Joined(runs)
+        self.run = runs[0] if len(runs) == 1 else Joined(runs)
 
     def feed(self, chunk: Recording, offset: int) -> None:
         rec = self.plan.apply(chunk, offset)
@@ -506,9 +280,6 @@ def _init_worker() -> None:
     # one core per worker: ONNX Runtime and BLAS would otherwise fight over the cores
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
-
-
-Progress = Callable[[int, int, SequenceResult], None]
 
 
 def evaluate_sources(sources: Sequence[str], settings: EvalSettings, jobs: int = 1,

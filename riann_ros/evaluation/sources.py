@@ -23,13 +23,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from riann_ros import defaults
 from riann_ros.bagio.layout import IMU_TOPIC
-from riann_ros.bagio.topics import DEFAULT_MAX_GAP_S
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.magpair import NodePairing
 from riann_ros.evaluation.rest import GIVEN, Rest, RestDetector
 from riann_ros.recording import Recording
 
-BAG_SUFFIXES = (".mcap", ".db3")
 BROAD_SUFFIXES = (".hdf5", ".h5", ".mat")
 STREAM_CHUNK = 100_000  # samples per chunk when a bag is read chunk by chunk
 
@@ -44,7 +44,7 @@ class BagTopics:
     reference: str | None = None  # None: the layout's /ground_truth/attitude
     estimates: tuple[str, ...] = ()
     t_offset_s: float = 0.0  # added to the stamps of the estimate topics
-    max_gap_s: float = DEFAULT_MAX_GAP_S  # slerp between messages at most this far apart; hold within half of it
+    max_gap_s: float = defaults.MAX_GAP_S  # slerp between messages at most this far apart; hold within half of it
 
     @property
     def plain(self) -> bool:
@@ -108,13 +108,13 @@ class Source:
 
         t = self.topics
         if t.plain:
-            yield from bagio.iter_imu_chunks(self.path, chunk=self.chunk)
+            yield from bagio.iter_imu_chunks(self.path, chunk=self.chunk, pair_mag=NodePairing())
             return
         from riann_ros.bagio.topics import iter_topic_chunks
 
         for rec, recorded in iter_topic_chunks(self.path, self.chunk, imu_topic=t.imu, reference_topic=t.reference,
                                                estimate_topics=t.estimates, t_offset_ns=round(t.t_offset_s * 1e9),
-                                               max_gap_ns=round(t.max_gap_s * 1e9)):
+                                               max_gap_ns=round(t.max_gap_s * 1e9), pair_mag=NodePairing()):
             yield Chunk.of(rec, recorded) if t.estimates else rec
 
 
@@ -203,7 +203,7 @@ def read_whole(path: str | os.PathLike[str], topics: BagTopics | None = None) ->
         if topics.plain:
             from riann_ros import bagio
 
-            return bagio.read_recording(p)
+            return bagio.read_recording(p, pair_mag=NodePairing())
     except Exception as exc:  # bagio.BagError, OSError, ValueError, …
         raise read_error(p, exc) from exc
     return _concat(list(Source(p, topics=topics).chunks()))
@@ -267,11 +267,6 @@ class Summary:
     rate_all: float  # 1 / median stamp step of the whole sequence
     rate_from_i0: float  # … of the sequence from i0 on
     rest: Rest = field(default_factory=Rest)  # the rest whose mean gyro is the turn-on bias (maybe none)
-
-    @property
-    def rest_gyr_mean(self) -> NDArray[np.float64]:
-        """The turn-on bias (rad/s): the mean gyro over the rest; zeros without one."""
-        return self.rest.bias
 
 
 class _Pass:

@@ -1,6 +1,6 @@
 """Live evaluation: replay scenario sequences over DDS to the estimator nodes (``riann-bag-eval --live``).
 
-:class:`LiveRunner` is a runner of the evaluation pipeline (:mod:`riann_ros.evaluation.run`): instead of
+:class:`LiveRunner` is a runner (:mod:`riann_ros.evaluation.runners`) of the evaluation pipeline: instead of
 running the estimators in-process it publishes each scenario sequence as ``sensor_msgs/Imu`` and
 collects the nodes' ``QuaternionStamped`` outputs by stamp, chunk by chunk, so the same scoring applies.
 """
@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from riann_ros import stamps
 from riann_ros.evaluation.errors import EvalError
-from riann_ros.evaluation.run import RunStats
+from riann_ros.evaluation.results import RunStats
 from riann_ros.evaluation.specs import EstimatorSpec
 from riann_ros.recording import Recording
 from riann_ros.stream import GateConfig

@@ -1,0 +1,390 @@
+"""The result tables and figures of README.md, docs/results.md and BENCHMARKS.md, written from committed results.
+
+Usage::
+
+    .venv/bin/python bench/results_tables.py             # rewrite every marked table and figure from docs/results/
+    .venv/bin/python bench/results_tables.py --check     # exit 1 when a committed page differs (test_results_tables)
+    .venv/bin/python bench/results_tables.py trim NAME RUN/results.json [RUN2/results.json …] --command "…"
+
+``docs/results/*.json`` are ``riann-bag-eval`` results.json files trimmed to what the tables need (``trim``): the
+command that made them and per row sequence, scenario, perturbation, rate, estimator, sensors and the RMSEs
+(inclination; heading and total for 9D rows). Which run each file comes from is in docs/results/README.md.
+
+In a page, ``<!-- results:NAME -->`` … ``<!-- /results:NAME -->`` holds what :data:`TABLES` writes for NAME: a
+table (markers on their own lines) or a figure within a sentence (markers inline). Everything between the markers
+is the script's; everything outside them is the author's, who cites only figures the tables show.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import statistics
+import sys
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "docs" / "results"
+PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md")
+FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_deg", "heading_rmse_deg",
+          "total_rmse_deg")
+ESTIMATORS = ("riann", "vqf", "madgwick", "mahony")
+NAMES = {"riann": "RIANN", "vqf": "VQF", "madgwick": "Madgwick", "mahony": "Mahony"}
+DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")  # the issue's six trials with movement throughout
+MARKER = re.compile(r"<!-- results:(?P<name>[\w-]+) -->(?P<body>.*?)<!-- /results:(?P=name) -->", re.S)
+
+
+# ---------------------------------------------------------------------------------------------------
+# results
+# ---------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Rows:
+    rows: tuple[dict, ...]
+
+    def where(self, **match: object) -> Rows:
+        return Rows(tuple(r for r in self.rows if all(r.get(k) == v for k, v in match.items())))
+
+    def trials(self, trials: Iterable[str]) -> Rows:
+        keep = tuple(trials)
+        return Rows(tuple(r for r in self.rows if r["sequence"][:2] in keep))
+
+    def values(self, estimator: str, field: str = "rmse_deg") -> list[float]:
+        return [r[field] for r in self.rows if r["estimator"] == estimator]
+
+    def mean_max(self, estimator: str, field: str = "rmse_deg") -> str:
+        v = self.values(estimator, field)
+        return f"{sum(v) / len(v):.2f} / {max(v):.2f}" if v else "–"
+
+    def mean(self, estimator: str, field: str = "rmse_deg") -> float:
+        v = self.values(estimator, field)
+        return sum(v) / len(v)
+
+    def ordered(self, key: str) -> list:
+        return list(dict.fromkeys(r[key] for r in self.rows))
+
+    def estimators(self) -> list[str]:
+        return self.ordered("estimator")
+
+
+def load(name: str) -> Rows:
+    data = json.loads((RESULTS / f"{name}.json").read_text())
+    cols, same = data["columns"], data.get("same", {})
+    return Rows(tuple({**same, **dict(zip(cols, row, strict=True))} for row in data["rows"]))
+
+
+def trim(name: str, sources: list[Path], command: str) -> Path:
+    """results.json files (of one command, or of runs that together make one) cut down to :data:`FIELDS` (RMSEs
+    to 6 decimals) in docs/results/NAME.json, one row per line."""
+    rows = [{k: round(v, 6) if isinstance(v, float) else v for k, v in r.items()}
+            for src in sources for r in json.loads(src.read_text())["results"]]
+    present = [f for f in FIELDS if any(f in r for r in rows)]
+    # a field with one value in every row is stored once ("same")
+    same = {f: rows[0].get(f) for f in present if len({json.dumps(r.get(f)) for r in rows}) == 1}
+    cols = [f for f in present if f not in same]
+    out = [[r.get(c) for c in cols] for r in rows]
+    text = ('{\n  "command": ' + json.dumps(command, ensure_ascii=False) + ',\n  "same": ' + json.dumps(same)
+            + ',\n  "columns": ' + json.dumps(cols) + ',\n  "rows": [\n'
+            + ",\n".join("    " + json.dumps(r, ensure_ascii=False) for r in out) + "\n  ]\n}\n")
+    dst = RESULTS / f"{name}.json"
+    dst.write_text(text)
+    return dst
+
+
+# ---------------------------------------------------------------------------------------------------
+# tables
+# ---------------------------------------------------------------------------------------------------
+def _table(header: list[str], body: list[list[str]], left: int = 1) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * left + "---:|" * (len(header) - left)]
+    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in body])
+
+
+def conditions_table(rows: Rows, estimators: Iterable[str] = ESTIMATORS) -> str:
+    """mean / worst per condition (the perturbations in run order) and estimator."""
+    ests = list(estimators)
+    return _table(["condition", *ests], [[c, *(rows.where(perturbation=c).mean_max(e) for e in ests)]
+                                         for c in rows.ordered("perturbation")])
+
+
+def perturbed(scenario: str) -> Callable[[], str]:
+    return lambda: conditions_table(load("perturbed").where(scenario=scenario))
+
+
+def dropout_six() -> str:
+    rows = load("perturbed").where(scenario="as-recorded").trials(DROPOUT_TRIALS)
+    return conditions_table(Rows(tuple(r for r in rows.rows if r["perturbation"] in ("none", "dropout:0.1-0.6s@10s"))))
+
+
+def rate_ratios() -> str:
+    """RIANN per trial at every FFT-resampled rate, with its ratio to the native-rate RMSE."""
+    native = {r["sequence"]: r["rmse_deg"] for r in load("perturbed").where(
+        scenario="as-recorded", perturbation="none", estimator="riann").rows}
+    rated = load("rates").where(estimator="riann")
+    rates = sorted(rated.ordered("rate"))
+    worst = dict.fromkeys(rates, 0.0)
+    body = []
+    for seq, base in native.items():
+        cells = []
+        for f in rates:
+            v = rated.where(sequence=seq, rate=f).values("riann")[0]
+            worst[f] = max(worst[f], v / base)
+            cells.append(f"{v:.2f} ({v / base:.2f}×)")
+        body.append([seq[:2], f"{base:.2f}", *cells])
+    body.append(["worst ratio", "", *(f"{worst[f]:.2f}×" for f in rates)])
+    return _table(["trial", "native °", *(f"{f:g} Hz" for f in rates)], body)
+
+
+def rates_table(name: str, estimators: Iterable[str]) -> Callable[[], str]:
+    def make() -> str:
+        rows = load(name)
+        ests = list(estimators)
+        return _table(["rate", *ests], [[f"{f:g} Hz", *(rows.where(rate=f).mean_max(e) for e in ests)]
+                                        for f in sorted(rows.ordered("rate"))])
+    return make
+
+
+def scenarios_table() -> str:
+    rows = load("scenarios")
+    body = []
+    for scn in rows.ordered("scenario"):
+        for est in ("riann", "madgwick", "mahony", "vqf"):
+            v = rows.where(scenario=scn).values(est)
+            body.append([scn, est, f"{sum(v) / len(v):.2f}", f"{statistics.median(v):.2f}", f"{max(v):.2f}"])
+    return _table(["scenario", "estimator", "mean °", "median °", "max °"], body, left=2)
+
+
+def tuned_table() -> str:
+    rows = load("tuned")
+    body = []
+    for est in rows.estimators():
+        v = rows.values(est)
+        label = f"{est} (never tuned)" if est == "riann" else (est if est.endswith("tuned") else f"{est} (defaults)")
+        body.append([label, f"{sum(v) / len(v):.2f}", f"{statistics.median(v):.2f}", f"{max(v):.2f}"])
+    return _table(["estimator (realistic)", "mean °", "median °", "max °"], body)
+
+
+FRONTEND_CONDITIONS = ("none", "jitter:10/20/30ms", "rate:50", "bias:3,3,0", "bias:random:2", "dropout:0.1-0.6s@10s")
+
+
+def frontend_table() -> str:
+    base = fe = load("frontend")
+    cols = [(f, s) for s in ("as-recorded", "realistic") for f in ("madgwick", "mahony")]
+    body = []
+    for c in FRONTEND_CONDITIONS:
+        cells = [f"{base.where(scenario=s, perturbation=c).mean_max(f)} → "
+                 f"{fe.where(scenario=s, perturbation=c).mean_max(f'{f}(gyro_bias_estimation=True)')}" for f, s in cols]
+        body.append([c, *cells])
+    return _table(["condition", *(f"{f} ({s})" for f, s in cols)], body)
+
+
+MAG_ROWS = (
+    ("**RIANN, defaults** (`tau_mag` 9 s, latency estimated online, four network copies)", "mag9d", "riann"),
+    ("RIANN, `estimate_mag_delay=false` (latency not compensated)", "mag9d", "riann(estimate_mag_delay=False)"),
+    ("RIANN with one network (`ensemble=1`)", "single9d", "riann(ensemble=1)"),
+    ("VQF 9D (vqf package defaults)", "mag9d", "vqf"),
+    ("Madgwick MARG (β 0.041)", "mag9d", "madgwick"),
+    ("Mahony MARG (k_P 1, k_I 0.3)", "mag9d", "mahony"),
+)
+
+
+def mag_summary() -> str:
+    body = []
+    for label, name, est in MAG_ROWS:
+        rows = load(name).where(sensors="9D")
+        h, t, i = (rows.values(est, f) for f in ("heading_rmse_deg", "total_rmse_deg", "rmse_deg"))
+        body.append([label, f"{sum(h) / len(h):.2f}", f"{max(h):.2f}", f"{sum(t) / len(t):.2f}", f"{max(t):.2f}",
+                     f"{sum(i) / len(i):.2f}"])
+    return _table(["estimator (9D)", "heading mean", "heading worst", "total mean", "total worst",
+                   "inclination mean"], body)
+
+
+def mag_trials() -> str:
+    rows = load("mag9d").where(sensors="9D")
+    ests = [("RIANN", "riann"), ("RIANN, latency not compensated", "riann(estimate_mag_delay=False)"),
+            ("VQF", "vqf"), ("Madgwick", "madgwick"), ("Mahony", "mahony")]
+    body = [[seq[:2], *(f"{rows.where(sequence=seq).values(e, 'heading_rmse_deg')[0]:.2f}" for _, e in ests)]
+            for seq in rows.ordered("sequence")]
+    return _table(["trial", *(n for n, _ in ests)], body)
+
+
+README_ROWS = (
+    ("paper's restrictive scenario (bias removed at rest)", "scenarios", {"scenario": "restrictive"}),
+    ("paper's realistic scenario (from motion onset, random bias)", "scenarios", {"scenario": "realistic"}),
+    ("as recorded, stamps jittered 10/20/30 ms", "perturbed",
+     {"scenario": "as-recorded", "perturbation": "jitter:10/20/30ms"}),
+    ("as recorded, stamped on arrival (0–10 ms late)", "perturbed",
+     {"scenario": "as-recorded", "perturbation": "latency:0-10ms"}),
+    ("as recorded, FIFO read every 20 ms, stamped on arrival", "perturbed",
+     {"scenario": "as-recorded", "perturbation": "fifo:20ms"}),
+    ("as recorded, gyro bias (3, 3, 0) °/s", "perturbed", {"scenario": "as-recorded", "perturbation": "bias:3,3,0"}),
+    ("as recorded, point samples at random times 10/20/30 ms apart", "perturbed",
+     {"scenario": "as-recorded", "perturbation": "jitter:10/20/30ms:points"}),
+    ("as recorded, dropouts of 0.1–0.6 s every ~10 s", "perturbed",
+     {"scenario": "as-recorded", "perturbation": "dropout:0.1-0.6s@10s"}),
+    ("as recorded, a few messages lost about once a second", "perturbed",
+     {"scenario": "as-recorded", "perturbation": "dropout:0.01-0.05s@1s"}),
+    ("as recorded, the same on a stream stamped on arrival (0–10 ms late)", "perturbed",
+     {"scenario": "as-recorded", "perturbation": "latency:0-10ms+dropout:0.01-0.05s@1s"}),
+    ("as recorded, resampled to 25 Hz", "rates", {"scenario": "as-recorded", "rate": 25.0}),
+)
+
+
+def readme_table() -> str:
+    body = [[label, *(load(name).where(**match).mean_max(e) for e in ESTIMATORS)]
+            for label, name, match in README_ROWS]
+    return _table(["condition", *(NAMES[e] for e in ESTIMATORS)], body)
+
+
+# ---- figures within sentences ----------------------------------------------------------------------
+def _fig(rows: Rows, est: str) -> str:
+    return rows.mean_max(est)
+
+
+def demo_figures() -> str:
+    rows = load("demo")
+    ests = sorted(rows.estimators(), key=rows.mean)
+    return ", ".join(f"{NAMES[e]} {rows.mean(e):.2f}°" for e in ests) + " mean"
+
+
+def _as_recorded(condition: str) -> Rows:
+    return load("perturbed").where(scenario="as-recorded", perturbation=condition)
+
+
+def streams_figures() -> str:
+    parts = [("native", "none"), ("stamps jittered 10/20/30 ms", "jitter:10/20/30ms"),
+             ("point samples at random times", "jitter:10/20/30ms:points"),
+             ("stamped on arrival 0–10 ms late", "latency:0-10ms"), ("a FIFO read every 20 ms", "fifo:20ms"),
+             ("a (3, 3, 0) °/s bias", "bias:3,3,0"), ("dropouts of 0.1–0.6 s", "dropout:0.1-0.6s@10s")]
+    return ", ".join(f"{text} {_fig(_as_recorded(c), 'riann')}° (VQF {_fig(_as_recorded(c), 'vqf')}°)"
+                     for text, c in parts)
+
+
+def rate_ratio_figure() -> str:
+    native = {r["sequence"]: r["rmse_deg"] for r in _as_recorded("none").where(estimator="riann").rows}
+    worst = max(r["rmse_deg"] / native[r["sequence"]] for r in load("rates").where(estimator="riann").rows)
+    return f"{worst:.2f}×"
+
+
+def ensemble_figures() -> str:
+    one = load("single6d").where(scenario="as-recorded")
+    return (f"{_fig(one, 'riann(ensemble=1)')}° → {_fig(_as_recorded('none'), 'riann')}° "
+            f"(VQF {_fig(_as_recorded('none'), 'vqf')}°)")
+
+
+def single_network_figures() -> str:
+    one = load("single6d")
+    return (f"as recorded {_fig(one.where(scenario='as-recorded'), 'riann(ensemble=1)')}, realistic "
+            f"{_fig(one.where(scenario='realistic'), 'riann(ensemble=1)')}")
+
+
+def mag_figures() -> str:
+    rows = load("mag9d").where(sensors="9D")
+    hd = "heading_rmse_deg"
+    return (f"RIANN {rows.mean_max('riann', hd)} (its magnetometer latency estimated online and compensated; "
+            f"{rows.mean_max('riann(estimate_mag_delay=False)', hd)} without), VQF {rows.mean_max('vqf', hd)}, "
+            f"Madgwick {rows.mean_max('madgwick', hd)}, Mahony {rows.mean_max('mahony', hd)}")
+
+
+def realistic_lead() -> str:
+    rows = load("scenarios").where(scenario="realistic")
+    return f"{rows.mean('riann'):.2f} vs {rows.mean('vqf'):.2f}"
+
+
+def as_recorded_pair() -> str:
+    return f"{_fig(_as_recorded('none'), 'riann')} vs {_fig(_as_recorded('none'), 'vqf')}"
+
+
+def tuned_figures() -> str:
+    rows = load("tuned")
+    tuned = {e.split("(")[0]: e for e in rows.estimators() if e.endswith("tuned")}
+    return (f"RIANN {rows.mean('riann'):.2f}° untuned; VQF {rows.mean(tuned['vqf']):.2f}°, Madgwick "
+            f"{rows.mean(tuned['madgwick']):.2f}°, Mahony {rows.mean(tuned['mahony']):.2f}° tuned")
+
+
+def realistic_rates_figures() -> str:
+    rows = load("rates_realistic")
+    means = [rows.where(rate=f).mean("riann") for f in rows.ordered("rate")]
+    native = load("scenarios").where(scenario="realistic").mean("riann")
+    return f"{min(means):.2f}–{max(means):.2f}° (native 285.7 Hz: {native:.2f}°)"
+
+
+TABLES: dict[str, Callable[[], str]] = {
+    "readme-broad": readme_table,
+    "readme-demo": demo_figures,
+    "readme-streams": streams_figures,
+    "readme-rate-ratio": rate_ratio_figure,
+    "readme-ensemble": ensemble_figures,
+    "single-network": single_network_figures,
+    "readme-9d": mag_figures,
+    "as-recorded-pair": as_recorded_pair,
+    "scenarios": scenarios_table,
+    "realistic-lead": realistic_lead,
+    "perturbed-as-recorded": perturbed("as-recorded"),
+    "perturbed-realistic": perturbed("realistic"),
+    "dropout-six": dropout_six,
+    "rate-ratios": rate_ratios,
+    "rates-as-recorded": rates_table("rates", ESTIMATORS),
+    "rates-realistic": rates_table("rates_realistic", ("riann", "vqf", "madgwick")),
+    "realistic-rates-figures": realistic_rates_figures,
+    "tuned": tuned_table,
+    "tuned-figures": tuned_figures,
+    "frontend": frontend_table,
+    "mag-summary": mag_summary,
+    "mag-trials": mag_trials,
+}
+
+
+# ---------------------------------------------------------------------------------------------------
+# pages
+# ---------------------------------------------------------------------------------------------------
+def render(text: str, made: dict[str, str] | None = None) -> str:
+    """``text`` with every marked block replaced by what its table writes (``made``: cache by name)."""
+    made = {} if made is None else made
+
+    def sub(m: re.Match[str]) -> str:
+        name = m["name"]
+        if name not in TABLES:
+            raise KeyError(f"unknown results block {name!r}; known: {', '.join(TABLES)}")
+        if name not in made:
+            made[name] = TABLES[name]()
+        inline = "\n" not in m["body"]
+        body = made[name] if inline else f"\n{made[name]}\n"
+        return f"<!-- results:{name} -->{body}<!-- /results:{name} -->"
+
+    return MARKER.sub(sub, text)
+
+
+def stale(root: Path = ROOT) -> list[str]:
+    """The pages (relative paths) whose marked blocks differ from what the tables write."""
+    made: dict[str, str] = {}
+    return [p for p in PAGES if (root / p).read_text() != render((root / p).read_text(), made)]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--check", action="store_true", help="only compare; exit 1 when a page differs")
+    sub = ap.add_subparsers(dest="cmd")
+    t = sub.add_parser("trim", help="cut results.json files down to the table fields: docs/results/NAME.json")
+    t.add_argument("name")
+    t.add_argument("sources", type=Path, nargs="+")
+    t.add_argument("--command", required=True, help="the command that made them (as the docs show it)")
+    args = ap.parse_args(argv)
+    if args.cmd == "trim":
+        print(f"wrote {trim(args.name, args.sources, args.command)}")
+        return 0
+    bad = stale()
+    if args.check:
+        for p in bad:
+            print(f"{p}: a results block differs from docs/results/ (run bench/results_tables.py)", file=sys.stderr)
+        return 1 if bad else 0
+    made: dict[str, str] = {}
+    for p in bad:
+        (ROOT / p).write_text(render((ROOT / p).read_text(), made))
+        print(f"rewrote {p}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

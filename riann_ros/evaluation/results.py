@@ -1,0 +1,144 @@
+"""What an evaluation is asked and what it gives (ROS-free): :class:`EvalSettings`, and per input a
+:class:`SequenceResult` with one :class:`ResultRow` per condition × scenario × rate × estimator (the rows of
+results.csv / results.json)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from riann_ros.evaluation.perturb import NONE, Condition
+from riann_ros.evaluation.scenarios import PAPER_SCENARIOS
+from riann_ros.evaluation.scoring import Score
+from riann_ros.evaluation.sources import STREAM_CHUNK, BagTopics
+from riann_ros.evaluation.specs import EstimatorSpec
+
+NATIVE = "native"  # rate key of rows at the recording's own rate
+LIVE_KEYS = ("published", "received", "lost", "unexpected")  # RunStats.live columns
+RECORDED = "recorded"  # estimator name and mode of estimates recorded in a bag
+SERIES_POINTS = 6000  # points per curve kept for the error-over-time and roll/pitch plots
+REFERENCE = "reference"  # key of the reference's roll/pitch in a series
+
+
+@dataclass
+class EvalSettings:
+    estimators: list[EstimatorSpec]
+    scenarios: list[str] = field(default_factory=lambda: list(PAPER_SCENARIOS))
+    seed: int = 0
+    rates: list[float | None] = field(default_factory=lambda: [None])  # None = the recording's own rate
+    conditions: list[Condition] = field(default_factory=lambda: [Condition()])  # perturbations; () = none
+    with_heading: bool = False  # heading and total error also for 6D runs (heading drift); 9D runs always have them
+    use_mag: str = "auto"  # as the nodes' use_mag: auto/true = 9D where the recording has a magnetometer
+    series_for: str | None = None  # sequence whose series are plotted: a name, "*" (the first) or "all"
+    series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
+    keep_estimates: bool = False  # return the estimates of the first scenario (for --write-estimates)
+    chunk: int = STREAM_CHUNK  # samples per bag chunk
+    rest: tuple[float, float] | None = None  # the initial rest by hand (s from the first sample); None: detect it
+    topics: BagTopics = field(default_factory=BagTopics)  # which topics of the bags; recorded estimates
+
+    @property
+    def recorded(self) -> list[EstimatorSpec]:
+        """The estimates recorded in the bags (``topics.estimates``) as specs labelled by their topic."""
+        return [recorded_spec(t) for t in self.topics.estimates]
+
+
+@dataclass
+class RunStats:
+    """What a runner reports about one estimator's run besides its estimates."""
+
+    seconds: float = 0.0  # wall time in the estimator (offline) or of the replay (live)
+    cpu_seconds: float = float("nan")
+    rejected: dict[str, int] = field(default_factory=dict)  # input-gate rejections per reason
+    resets: dict[str, int] = field(default_factory=dict)  # estimator restarts per cause
+    live: dict[str, int] | None = None  # live replays: published, received, lost, unexpected
+    mag_samples: int = 0  # samples the estimator got with a magnetic field (> 0: a 9D run)
+
+
+@dataclass
+class ResultRow:
+    """One estimator on one sequence in one scenario at one rate."""
+
+    sequence: str
+    dataset: str
+    source: str
+    scenario: str
+    rate: str | float  # NATIVE or the resampled rate (Hz)
+    rate_hz: float
+    resampled: bool
+    estimator: str  # label
+    estimator_name: str
+    mode: str
+    score: Score
+    sensors: str = "6D"  # 9D: the estimator used the magnetometer (its heading is scored as absolute)
+    perturbation: str = NONE  # the condition's label
+    stats: RunStats = field(default_factory=RunStats)
+
+    @property
+    def rmse_deg(self) -> float:
+        """The inclination RMSE (the metric everything ranks by)."""
+        return self.score.rmse_deg
+
+    def to_dict(self) -> dict[str, Any]:
+        """The flat row of results.csv / results.json."""
+        d: dict[str, Any] = {
+            k: getattr(self, k)
+            for k in ("sequence", "dataset", "source", "scenario", "perturbation", "rate", "rate_hz", "resampled",
+                      "estimator", "estimator_name", "mode", "sensors")
+        }
+        d["seconds"] = self.stats.seconds
+        d.update((k, v) for k, v in asdict(self.score).items() if v is not None)
+        d.update({f"rejected_{k}": v for k, v in self.stats.rejected.items()})
+        d.update({f"reset_{k}": v for k, v in self.stats.resets.items()})
+        d.update(self.stats.live or {})
+        d["cpu_seconds"] = self.stats.cpu_seconds
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ResultRow:
+        """A row back from :meth:`to_dict` (a row of results.json, where NaN is null); KeyError names a missing
+        column."""
+        def num(v: Any) -> float:
+            return float("nan") if v is None else float(v)
+
+        score = Score(n_samples=int(d["n_samples"]), n_scored=int(d["n_scored"]),
+                      n_unestimated=int(d["n_unestimated"]), rmse_deg=num(d["rmse_deg"]),
+                      max_err_deg=num(d["max_err_deg"]), heading_rmse_deg=d.get("heading_rmse_deg"),
+                      total_rmse_deg=d.get("total_rmse_deg"))
+        live = {k: int(d[k]) for k in LIVE_KEYS if k in d}
+        stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
+                         rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},
+                         resets={k[len("reset_"):]: int(v) for k, v in d.items() if k.startswith("reset_")},
+                         live=live or None)
+        rate = d["rate"]
+        return cls(sequence=str(d["sequence"]), dataset=str(d["dataset"]), source=str(d.get("source", "")),
+                   scenario=str(d["scenario"]), rate=rate if rate == NATIVE else float(rate),
+                   rate_hz=num(d["rate_hz"]), resampled=bool(d["resampled"]), estimator=str(d["estimator"]),
+                   estimator_name=str(d.get("estimator_name", d["estimator"])), mode=str(d.get("mode", "")),
+                   score=score, perturbation=str(d.get("perturbation", NONE)), stats=stats,
+                   sensors=str(d.get("sensors", "6D")))
+
+
+@dataclass
+class SequenceResult:
+    source: str
+    name: str = ""
+    dataset: str = ""
+    error: str | None = None
+    rows: list[ResultRow] = field(default_factory=list)
+    scenarios: dict[str, Any] = field(default_factory=dict)  # scenario → ScenarioInfo dict
+    perturbations: dict[str, Any] = field(default_factory=dict)  # condition → scenario → what each part did
+    series: dict[str, Any] | None = None
+    estimates: dict[str, Any] | None = None  # first scenario: {"scenario", "stamps", "quats": {label: (N, 4)}}
+    seconds: float = 0.0
+    cpu_seconds: float = 0.0  # reading + scenarios + runs + scoring, in the worker
+    citation: str = ""
+    warnings: list[str] = field(default_factory=list)  # "<sequence>: <what>", for stderr and results.json
+
+
+def recorded_spec(topic: str) -> EstimatorSpec:
+    """The spec of an estimate recorded on ``topic``: labelled by the topic, served by :class:`RecordedRunner`."""
+    return EstimatorSpec(RECORDED, (("topic", topic),), topic)
+
+
+Progress = Callable[[int, int, SequenceResult], None]

@@ -1,0 +1,121 @@
+"""Where the estimates come from (ROS-free): a :class:`Runner` starts one :class:`Run` per sequence × scenario,
+fed the (perturbed) chunks in order. :class:`OfflineRunner` runs the estimators in-process through the node's
+:class:`~riann_ros.stream.EstimatorStream`; :class:`RecordedRunner` serves estimates recorded in the bag; the DDS
+replay (``--live``) is :class:`riann_ros.cli.live.LiveRunner`. See :mod:`riann_ros.evaluation.run`."""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from riann_ros.estimators.base import AttitudeEstimator
+from riann_ros.evaluation.results import RECORDED, RunStats
+from riann_ros.evaluation.sources import Chunk
+from riann_ros.evaluation.specs import EstimatorSpec
+from riann_ros.mag import MagConfig
+from riann_ros.recording import Recording
+from riann_ros.stream import EstimatorStream, GateConfig
+
+
+class Run(Protocol):
+    """One scenario sequence through a set of estimators, fed chunk by chunk."""
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        """The estimates (N, 4) of each estimator for this piece (NaN rows: no estimate)."""
+        ...
+
+    def finish(self) -> list[RunStats]: ...
+
+
+class Runner(Protocol):
+    mode: str
+    interleaved: bool  # whether several runs may be fed alternately (one pass serves all scenarios)
+
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run: ...
+
+
+_ESTIMATORS: dict[tuple[EstimatorSpec, int], AttitudeEstimator] = {}  # reused across sequences in a worker
+
+
+class _OfflineRun:
+    def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int, use_mag: str = "auto") -> None:
+        self.streams = []
+        for spec in specs:
+            est = _ESTIMATORS.get((spec, slot))
+            if est is None:
+                est = _ESTIMATORS[(spec, slot)] = spec.create()
+            est.reset()
+            self.streams.append(EstimatorStream(est, gate, MagConfig(use_mag=use_mag)))
+        self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        out = []
+        for stream, stats in zip(self.streams, self.stats, strict=True):
+            t, cpu = time.perf_counter(), time.process_time()
+            q, _accepted = stream.process_batch(rec.stamps_ns, rec.acc, rec.gyr, rec.mag)
+            stats.seconds += time.perf_counter() - t
+            stats.cpu_seconds += time.process_time() - cpu
+            out.append(q)
+        return out
+
+    def finish(self) -> list[RunStats]:
+        for stream, stats in zip(self.streams, self.stats, strict=True):
+            stats.rejected = {k: int(v) for k, v in stream.gate.rejected.items()}
+            stats.resets = {k: int(v) for k, v in stream.gate.resets.items()}
+            stats.mag_samples = stream.mag.samples_with_field
+        return self.stats
+
+
+class OfflineRunner:
+    """Every estimator in-process through the node's :class:`EstimatorStream`."""
+
+    mode = "offline"
+    interleaved = True
+
+    def __init__(self, use_mag: str = "auto") -> None:
+        self.use_mag = use_mag
+
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
+        return _OfflineRun(specs, gate, slot, self.use_mag)
+
+
+class _RecordedRun:
+    def __init__(self, specs: list[EstimatorSpec]) -> None:
+        self.topics = [dict(s.params)["topic"] for s in specs]
+        self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        recorded = rec.recorded if isinstance(rec, Chunk) else {}
+        none = np.full((len(rec), 4), np.nan)
+        return [recorded.get(t, none) for t in self.topics]
+
+    def finish(self) -> list[RunStats]:
+        return self.stats
+
+
+class RecordedRunner:
+    """The estimates a user recorded in the bag from their own filter: served per chunk from the source's
+    :class:`~riann_ros.evaluation.sources.Chunk` (aligned onto the samples there); none in a piece that has
+    none (they exist only for the recording as it is)."""
+
+    mode = RECORDED
+    interleaved = True
+
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
+        return _RecordedRun(specs)
+
+
+class Joined:
+    """Several runs fed together as one: their estimates and stats in turn."""
+
+    def __init__(self, runs: list[Run]) -> None:
+        self.runs = runs
+
+    def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
+        return [q for run in self.runs for q in run.feed(rec)]
+
+    def finish(self) -> list[RunStats]:
+        return [st for run in self.runs for st in run.finish()]
