@@ -52,7 +52,6 @@ from bench_node import BIN, Harness
 
 NODES = {"riann": "riann_ros.nodes.riann_node:RiannNode", "madgwick": "riann_ros.nodes.madgwick_node:MadgwickNode",
          "mahony": "riann_ros.nodes.mahony_node:MahonyNode", "vqf": "riann_ros.nodes.vqf_node:VqfNode"}
-PARTS = ("gate", "plan", "network", "compose", "estimator other", "publish", "logging", "callback other")
 
 
 # -- the child: the node under timing ---------------------------------------------------------------------

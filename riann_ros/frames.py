@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riann_ros import quaternion as quat
+from riann_ros.rotations import Quat
 
 ENU = "enu"
 NED = "ned"
@@ -62,7 +63,6 @@ FROM_ENU_MATRIX: dict[str, NDArray[np.float64]] = {
     NWU: np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
 }
 
-Quat = tuple[float, float, float, float]
 
 
 def check_world_frame(name: str) -> str:

@@ -23,18 +23,16 @@ VQF wants a constant sample time ``Ts``; a front end fed at another step scales 
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numpy.typing import ArrayLike
 from vqf import VQF
 
+from riann_ros.defaults import FALLBACK_DT_S
 from riann_ros.estimators.base import Array
 from riann_ros.params import ParamSpec
 
 DEFAULT_CLIP = 8.0  # °/s
 DEFAULT_SIGMA_INIT = 3.0  # °/s
-FALLBACK_TS = 0.01  # s, the front end's sample time when the first dt is unusable
 
 
 def front_end_params(default_on: bool, what: str) -> tuple[ParamSpec, ...]:
@@ -65,7 +63,7 @@ class FrontEndSlot:
         if not self.on or len(gyr) == 0:
             return gyr
         if self.fe is None:
-            ts = float(dt[0]) if 0.0 < dt[0] < 1.0 else FALLBACK_TS
+            ts = float(dt[0]) if 0.0 < dt[0] < 1.0 else FALLBACK_DT_S
             self.fe = GyroBiasFrontEnd(ts, self.clip, self.sigma_init)
         return gyr - self.fe.update_batch(acc, gyr, dt)
 
@@ -117,7 +115,3 @@ class GyroBiasFrontEnd:
         b = out["bias"][-1]
         self.bias = (float(b[0]), float(b[1]), float(b[2]))
         return before
-
-    def degrees(self) -> tuple[float, float, float]:
-        """The current estimate in °/s."""
-        return tuple(math.degrees(v) for v in self.bias)  # type: ignore[return-value]

@@ -14,8 +14,8 @@ from numpy.typing import ArrayLike
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
+from riann_ros.rotations import Quat
 
-Quat = tuple[float, float, float, float]
 BIAS_KEY = "gyro bias estimate (deg/s)"
 
 

@@ -50,12 +50,12 @@ from riann_ros.estimators.common import (
     sanitize_arrays,
     sanitize_mag,
 )
+from riann_ros.rotations import Vec
 
 #: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
 DEFAULT_KP = 1.0
 DEFAULT_KI = 0.3
 
-Vec = tuple[float, float, float]
 
 
 def _mahony_run(

@@ -20,8 +20,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import Imu
 
 from riann_ros import frames
+from riann_ros.rotations import Quat
 
-Quat = tuple[float, float, float, float]
 GRAVITY = 9.80665  # m/s², what remove_gravity_vector takes out (imu_tools' value)
 TF_TOPIC = "/tf"
 TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,

@@ -24,6 +24,7 @@ from rclpy.parameter import Parameter
 from riann_ros import frames
 from riann_ros import mag as mg
 from riann_ros import stream as st
+from riann_ros.defaults import MAG_HEADING_SD_DEG
 from riann_ros.estimators import REGISTRY, estimator_class
 from riann_ros.nodes import imu_tools
 from riann_ros.params import ParamSpec
@@ -44,8 +45,8 @@ NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("yaw_stddev_deg", 180.0, "deg; standard deviation written to the yaw entry of the orientation "
               "covariance while the heading is not tied to a magnetometer (it is unobservable: gyro drift only).",
               min=0.0, max=1.0e6, runtime=True),
-    ParamSpec("mag_yaw_stddev_deg", 5.0, "deg; standard deviation of the yaw entry while the heading is corrected "
-              "by an undisturbed magnetometer field (9D).", min=0.0, max=1.0e6, runtime=True),
+    ParamSpec("mag_yaw_stddev_deg", MAG_HEADING_SD_DEG, "deg; standard deviation of the yaw entry while the heading "
+              "is corrected by an undisturbed magnetometer field (9D).", min=0.0, max=1.0e6, runtime=True),
     ParamSpec("diagnostics_period", 1.0, "s; period of /diagnostics messages.", min=0.05, max=3600.0),
     ParamSpec("world_frame", frames.ENU, "World frame of the published orientation (imu/attitude, imu/data, imu/rpy, "
               "TF): enu (x east, y north, z up; REP-103), ned (x north, y east, z down) or nwu (x north, y west, "
@@ -66,7 +67,6 @@ NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
               "linear_acceleration in imu/data, as imu_tools' remove_gravity_vector.", runtime=True),
 )
 NODE_PARAMS: tuple[ParamSpec, ...] = (*st.GATE_PARAMS, *mg.MAG_PARAMS, *NODE_ONLY_PARAMS)
-COVARIANCE_PARAMS = ("roll_pitch_stddev_deg", "yaw_stddev_deg", "mag_yaw_stddev_deg")
 
 _ROS_TYPES = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER, float: Parameter.Type.DOUBLE,
               str: Parameter.Type.STRING, tuple: Parameter.Type.DOUBLE_ARRAY}

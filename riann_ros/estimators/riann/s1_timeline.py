@@ -10,13 +10,13 @@ the :data:`~.stage.GridSpec` the grid (stage 2) reads it with. docs/riann.md, st
 
 from __future__ import annotations
 
+from riann_ros.defaults import FALLBACK_DT_S
 from riann_ros.estimators.riann.s1a_rate import DT_MIN, REL_EPS, StepTracker
 from riann_ros.estimators.riann.s1b_clock import Clock
 from riann_ros.estimators.riann.s1c_sample_model import SampleModelTest
 from riann_ros.estimators.riann.stage import Cause, GridSpec, Hole, Row6, TimelineBlock, Vec
 
 HOLE_STEPS = 4.0  # a hole is also longer than this many median input steps
-DEFAULT_DT = 0.01  # s, the first step when the stream gives none usable
 
 
 class Timeline:
@@ -117,7 +117,7 @@ class Timeline:
 
     def _start(self, dt: float) -> None:
         """The first sample after a reset or a gap: the rate tracker starts at its step (or keeps its estimate)."""
-        d = dt if DT_MIN * 0.01 < dt < 10.0 else DEFAULT_DT
+        d = dt if DT_MIN * 0.01 < dt < 10.0 else FALLBACK_DT_S
         if self.steps is None:
             self.steps = StepTracker(d)
         self.clock.start()

@@ -15,7 +15,6 @@ from bisect import bisect_left, insort
 from collections import deque
 
 DT_MIN = 0.002  # s, 500 Hz: fastest step the network was trained for
-DT_MAX = 0.020  # s, 50 Hz: slowest
 STEP_UP = 0.005  # s: slower inputs are up-sampled to a grid step of at most this (200 Hz)
 STEP_FAST = 0.005  # s: inputs faster than 500 Hz are averaged in blocks of about this
 STEP_SLACK = 0.1  # relative: the up-sampled grid step may exceed STEP_UP by this much (clock drift)

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from riann_ros.defaults import FALLBACK_DT_S
 from riann_ros.estimators.bias import GyroBiasFrontEnd
 from riann_ros.estimators.common import BIAS_KEY, bias_text
-from riann_ros.estimators.riann.s1_timeline import DEFAULT_DT
 from riann_ros.estimators.riann.s1a_rate import DT_MIN
 from riann_ros.estimators.riann.stage import Cause, Row6, Vec
 
@@ -68,7 +68,7 @@ class Bias:
         """Rows at one step (or at any, ``fixed_step``) through the front end; the bias before each."""
         step = steps[0]
         if self.fe is None:
-            ts = step if DT_MIN * 0.01 < step < 10.0 else DEFAULT_DT
+            ts = step if DT_MIN * 0.01 < step < 10.0 else FALLBACK_DT_S
             self.fe = GyroBiasFrontEnd(ts, self.clip, self.sigma_init)
         elif not self.fixed_step and step != self.fe.ts:
             self.fe.set_ts(step)  # the grid step switched: VQF rebuilt for it, the estimate kept

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 
+from riann_ros.defaults import MAG_HEADING_SD_DEG
 from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
 from riann_ros.rotations import DEG, IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
 
@@ -30,7 +31,7 @@ NEW_TIME = 20.0  # s of a stable new field (while moving) before it becomes the 
 NEW_MIN_GYR = 20.0 * DEG  # rad/s, only motion faster than this counts toward NEW_TIME
 GYR_LP_TAU = 0.5  # s, low-pass of |ω| for NEW_MIN_GYR
 # re-acquiring after a hole
-MAG_HEADING_SD = 5.0  # deg; one field heading's error apart from the tilt (the default mag_yaw_stddev_deg)
+MAG_HEADING_SD = MAG_HEADING_SD_DEG  # deg; one field heading's error apart from the tilt
 BRIDGE_GATE = 3.0  # the bridge is dropped if the first field after the hole is this many standard deviations off
 
 
