@@ -9,6 +9,8 @@ BIN := $(VENV)/bin
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export ROS_DOMAIN_ID ?= 42
 export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
+# test processes in parallel (pytest-xdist; each worker in a DDS domain of its own, test/conftest.py)
+JOBS ?= 2
 
 .PHONY: setup demo test test-fast check lint bench clean
 
@@ -34,11 +36,11 @@ lint: $(BIN)/.installed
 
 # the whole suite: real DDS, BROAD accuracy, colcon (the README's second command)
 test: $(BIN)/.installed lint
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(JOBS)
 
 # the tests that need no DDS and are not slow (well under a minute): while you work
 test-fast: $(BIN)/.installed
-	$(BIN)/python -m pytest -m "not ros and not slow" -q
+	$(BIN)/python -m pytest -m "not ros and not slow" -q -n $(JOBS)
 
 check: lint test-fast
 

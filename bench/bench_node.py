@@ -1,7 +1,12 @@
 #!/usr/bin/env python3
 """riann_node throughput and latency over real DDS, with references measured in the same run.
 
-    .venv/bin/python bench/bench_node.py [--rates 200,1000,2000,4000] [--duration 60] [--node riann_node]
+    .venv/bin/python bench/bench_node.py [--rates 200,1000,2000,4000] [--duration 60] [--node riann_node] [--pin]
+
+``--node`` takes a comma-separated list (e.g. ``riann_node,madgwick_node,mahony_node,vqf_node``). ``--pin`` runs each
+node on CPU 0 alone (``taskset``, ONNX Runtime and BLAS with one thread) and this harness on the other CPUs; the
+``cpu_share`` column is the node's CPU time (user + system, from /proc) per second of IMU stream, as a percentage of
+one core: what the node costs a robot's computer at that rate.
 
 For each input rate it starts the node (the installed executable), publishes synthetic IMU samples
 on a fixed schedule (header stamps = the schedule, like a real IMU), collects ``imu/attitude`` and
@@ -120,6 +125,7 @@ class Harness:
             time.sleep(1.0)  # let discovery settle both ways
             if self.on_connected is not None:
                 self.on_connected(proc.pid)
+            cpu0 = _cpu_seconds(proc.pid)
             n = int(rate * duration)
             rng = np.random.default_rng(0)
             acc = np.array([0.3, -0.2, 9.8]) + rng.normal(0, 0.3, (n, 3))
@@ -152,6 +158,7 @@ class Harness:
                 self.pub.publish(msg)
             achieved = n / (time.perf_counter() - start)
             time.sleep(1.5)
+            cpu = _cpu_seconds(proc.pid) - cpu0
         finally:
             proc.send_signal(2)
             try:
@@ -172,7 +179,14 @@ class Harness:
             "e2e_p99_us": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
             "node_proc_p99_us": max(self.proc_p99) if self.proc_p99 else float("nan"),
             "publisher_behind": float(behind),
+            "cpu_share": 100.0 * cpu / (n / rate),
         }
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time (s) of a process so far (its threads included)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def main() -> int:
@@ -181,18 +195,29 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=60.0, help="seconds per rate")
     ap.add_argument("--node", default="riann_node")
     ap.add_argument("--no-echo", action="store_true", help="skip the echo-node reference")
+    ap.add_argument("--pin", action="store_true", help="node alone on CPU 0 with one thread, this harness elsewhere")
     args = ap.parse_args()
+    pin: list[str] = []
+    if args.pin:
+        cpus = sorted(os.sched_getaffinity(0))
+        if len(cpus) < 2:
+            raise SystemExit("--pin needs two CPUs")
+        os.sched_setaffinity(0, set(cpus[1:]))
+        pin = ["taskset", "-c", str(cpus[0])]
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ[var] = "1"
     step, seq = onnx_reference()
     print(f"ONNX Runtime: single step {step:.1f} us, whole sequence {seq:.1f} us/sample")
     h = Harness()
     cols = ["rate", "achieved_rate", "sent", "received", "dropped", "late_over_1ms", "e2e_p50_us", "e2e_p99_us",
-            "node_proc_p99_us", "publisher_behind"]
+            "node_proc_p99_us", "publisher_behind", "cpu_share"]
     print("| what | " + " | ".join(cols) + " |")
     print("|---" * (len(cols) + 1) + "|")
     for rate in [float(r) for r in args.rates.split(",")]:
-        runs = [(args.node, [str(BIN / args.node), "--ros-args", "-p", f"nominal_rate:={rate}"])]
+        runs = [(node, [*pin, str(BIN / node), "--ros-args", "-p", f"nominal_rate:={rate}"])
+                for node in args.node.split(",")]
         if not args.no_echo:
-            runs.append(("echo (reference)", [sys.executable, "-c", ECHO]))
+            runs.append(("echo (reference)", [*pin, sys.executable, "-c", ECHO]))
         for label, cmd in runs:
             r = h.run(cmd, rate, args.duration)
             print(f"| {label} | " + " | ".join(f"{r[c]:.0f}" for c in cols) + " |", flush=True)

@@ -14,9 +14,14 @@ import pytest
 
 # DDS traffic stays on this machine and in a domain of this test session's own, so concurrent runs
 # (CI, other developers, the Makefile's demo) never see each other.
+# With pytest-xdist (make test, make check) every worker runs its tests one after another in a domain of its own:
+# the run's base (RIANN_TEST_DOMAIN_ID, else from the controlling process's pid, so that concurrent runs differ)
+# plus the worker's number.
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-os.environ.setdefault("RIANN_TEST_DOMAIN_ID", str(100 + os.getpid() % 100))
-os.environ["ROS_DOMAIN_ID"] = os.environ["RIANN_TEST_DOMAIN_ID"]
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER", "")
+_BASE = int(os.environ.get("RIANN_TEST_DOMAIN_ID") or 100 + ((os.getppid() if _WORKER else os.getpid()) % 25) * 4)
+os.environ["RIANN_TEST_DOMAIN_ID"] = str(_BASE)
+os.environ["ROS_DOMAIN_ID"] = str(_BASE + (int(_WORKER[2:]) % 4 if _WORKER[2:].isdigit() else 0))
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 
 from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad

@@ -11,6 +11,7 @@ A concrete node only names its estimator and its default output topics.
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import sys
@@ -38,6 +39,7 @@ from riann_ros.nodes.parameters import NODE_PARAMS, QOS_CHOICES, NodeParameters,
 INPUT_TOPIC = "imu/data_raw"
 MAG_TOPIC = "imu/mag"
 THROTTLE_S = 5.0  # at most one warning per rejection reason in this many seconds
+DRAIN_MAX = 64  # IMU messages already queued that one callback takes on (the executor's per-message overhead)
 
 
 def input_qos(kind: str, depth: int) -> QoSProfile:
@@ -77,12 +79,11 @@ class EstimatorNode(Node):
         self._last_warn: dict[str, float] = {}
         self.outputs = Outputs(self, self.ATTITUDE_TOPIC, self.IMU_TOPIC, p, self._warn_throttled)
         qos = input_qos(p["input_qos"], int(p["input_depth"]))
-        self.create_subscription(Imu, INPUT_TOPIC, self._on_imu, qos)
+        self._imu_sub = self.create_subscription(Imu, INPUT_TOPIC, self._on_imu_queue, qos)
         self._mag = mg.MagPairing()
         self._mag_state = ""  # the field state last logged
         uses_mag = p["use_mag"] != "false" and self.stream.estimator.USES_MAG
-        if uses_mag:
-            self.create_subscription(MagneticField, MAG_TOPIC, self._on_mag, qos)
+        self._mag_sub = self.create_subscription(MagneticField, MAG_TOPIC, self._on_mag, qos) if uses_mag else None
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.diag = Diagnostics(self, self.stream, self.ESTIMATOR, INPUT_TOPIC, MAG_TOPIC,
                                 float(p["diagnostics_period"]))
@@ -133,6 +134,38 @@ class EstimatorNode(Node):
         return SetParametersResult(successful=True)
 
     # -- data path ------------------------------------------------------------------------------
+    def _on_imu_queue(self, msg: Imu) -> None:
+        """The executor hands over one IMU message; the ones already queued behind it (up to :data:`DRAIN_MAX`) are
+        taken here too, in order, each after the field readings queued so far (so that a reading that arrived
+        before an IMU message is paired as if each message had its own callback). A burst then costs the
+        executor's wake-up once, not once per message."""
+        self._take_mag()
+        self._on_imu(msg)
+        take = self._imu_sub.handle.take_message
+        for _ in range(DRAIN_MAX):
+            try:
+                taken = take(Imu, False)
+            except Exception:  # the subscription is gone (shutting down)
+                return
+            if taken is None:
+                return
+            self._take_mag()
+            self._on_imu(taken[0])
+
+    def _take_mag(self) -> None:
+        """The field readings already queued, handed to the pairing."""
+        sub = self._mag_sub
+        if sub is None:
+            return
+        for _ in range(DRAIN_MAX):
+            try:
+                taken = sub.handle.take_message(MagneticField, False)
+            except Exception:
+                return
+            if taken is None:
+                return
+            self._on_mag(taken[0])
+
     def _on_imu(self, msg: Imu) -> None:
         t0 = time.perf_counter_ns()
         stamp = msg.header.stamp
@@ -218,6 +251,10 @@ def run(node_cls: type[EstimatorNode], args: list[str] | None = None) -> int:
         return 1
     try:
         node = node_cls(params_files=ros_args.params_files(argv), notes=notes)
+        # what start-up made (rclpy, numpy, ONNX Runtime, the node) stays out of the garbage collector's full
+        # passes, which otherwise stalled the 1 kHz data path for 28-89 ms (BENCHMARKS.md, node profile)
+        gc.collect()
+        gc.freeze()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
