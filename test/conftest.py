@@ -18,10 +18,10 @@ import pytest
 # the run's base (RIANN_TEST_DOMAIN_ID, else from the controlling process's pid, so that concurrent runs differ)
 # plus the worker's number.
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-_WORKER = os.environ.get("PYTEST_XDIST_WORKER", "")
-_BASE = int(os.environ.get("RIANN_TEST_DOMAIN_ID") or 100 + ((os.getppid() if _WORKER else os.getpid()) % 25) * 4)
-os.environ["RIANN_TEST_DOMAIN_ID"] = str(_BASE)
-os.environ["ROS_DOMAIN_ID"] = str(_BASE + (int(_WORKER[2:]) % 4 if _WORKER[2:].isdigit() else 0))
+os.environ["RIANN_TEST_DOMAIN_ID"] = os.environ.get("RIANN_TEST_DOMAIN_ID") or str(
+    100 + ((os.getppid() if os.environ.get("PYTEST_XDIST_WORKER") else os.getpid()) % 25) * 4)
+os.environ["ROS_DOMAIN_ID"] = str(int(os.environ["RIANN_TEST_DOMAIN_ID"])
+                                  + int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:] or 0) % 4)
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 
 from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad
