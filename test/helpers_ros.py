@@ -24,16 +24,25 @@ def stamp_ns(msg) -> int:
     return stamps.to_ns(msg.header.stamp)
 
 
-def publish_paced(pub, msgs: list[Imu], received, expected_out, window: int = 100, timeout: float = 120.0) -> None:
-    """Publish ``msgs`` keeping at most ``window`` in flight: ``expected_out(i)`` = outputs due after i sent."""
-    end = time.monotonic() + timeout
+def publish_paced(pub, msgs: list[Imu], received, expected_out, window: int = 100, stall: float = 60.0) -> None:
+    """Publish ``msgs`` keeping at most ``window`` in flight: ``expected_out(i)`` = outputs due after i sent. Fails
+    only when no output arrives for ``stall`` seconds (a stalled node), however long the whole takes (a loaded
+    machine is slow, not wrong: speed is measured by the benchmarks)."""
+    seen, last = len(received), time.monotonic()
+
+    def progressing() -> bool:
+        nonlocal seen, last
+        if len(received) != seen:
+            seen, last = len(received), time.monotonic()
+        return time.monotonic() - last < stall
+
     for i, m in enumerate(msgs):
         while i - len(received) >= window:
-            if time.monotonic() > end:
+            if not progressing():
                 raise AssertionError(f"node stalled: {len(received)} outputs after {i} inputs")
             time.sleep(0.0002)
         pub.publish(m)
-    while len(received) < expected_out and time.monotonic() < end:
+    while len(received) < expected_out and progressing():
         time.sleep(0.01)
 
 
