@@ -107,6 +107,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--use-mag", choices=USE_MAG_CHOICES, default="auto",
                    help="the magnetometer (/imu/mag), as the nodes' use_mag: auto (default) = every estimator runs 9D "
                    "where the recording has a field, with heading and total error in the results; false = 6D only")
+    p.add_argument("--offset-steps", type=int, default=ev.OFFSET_STEPS, metavar="STEPS",
+                   help="per estimator and sequence, find the time offset (added to the estimate stamps, like "
+                   "--t-offset) that minimises the e_α RMSE within ± STEPS steps of the stream, and the RMSE there; "
+                   f"in the as-recorded scenario, else the first (default {ev.OFFSET_STEPS}; 0: no search)")
     p.add_argument("--plot-sequence", default=None,
                    help="sequence for the error-over-time and roll/pitch plots (default: the first input); 'all': "
                    "a roll/pitch figure (roll_pitch_<sequence>) for every sequence")
@@ -171,6 +175,8 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         ev.parse_grid(t)
     if args.jobs < 1:
         raise ValueError("--jobs must be at least 1")
+    if not 0 <= args.offset_steps <= 50:
+        raise ValueError("--offset-steps must be 0 (no search) to 50")
     have = ev.available_estimators()
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
     only_recorded = spec_text.strip().lower() == "none"
@@ -189,6 +195,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         keep_estimates=args.write_estimates is not None,
         rest=ev.parse_rest(args.rest) if args.rest else None,
         topics=topics,
+        offset_steps=args.offset_steps,
     )
     _check_recorded(settings)
     return settings
@@ -291,6 +298,12 @@ def _print_summary(rep: report.Report, live: bool) -> None:
     nine = report.format_heading_table(rep.rows)
     if nine:
         print("\n" + nine)
+    for err in ev.ERRORS:
+        table = report.format_stats_table(rep.rows, err, limit=report.PRINT_ROWS)
+        if table:
+            print("\n" + table)
+    for note in rep.timing_notes:
+        print(f"\ntiming: {note}")
     rows = rep.rows
     if live and rows:
         lost: dict[str, list[int]] = {}

@@ -20,12 +20,14 @@ import numpy as np
 
 from riann_ros.evaluation import plots as pl
 from riann_ros.evaluation.aggregate import Group, aggregate, rate_label, rate_order, scenario_order
+from riann_ros.evaluation.offsets import timing_notes
 from riann_ros.evaluation.outdir import prepare_out, previous_results
 from riann_ros.evaluation.perturb import DEFINITIONS as PERTURB_DEFINITIONS
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
 from riann_ros.evaluation.results import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
+from riann_ros.evaluation.scoring import ERRORS, STATS
 
 CSV_FIELDS = (
     "sequence",
@@ -37,8 +39,25 @@ CSV_FIELDS = (
     "estimator",
     "rmse_deg",
     "max_err_deg",
+    "mean_err_deg",
+    "median_err_deg",
+    "std_err_deg",
+    "min_err_deg",
+    "best_t_offset_s",
+    "best_t_offset_rmse_deg",
+    "t_offset_step_s",
     "heading_rmse_deg",
+    "heading_mean_deg",
+    "heading_median_deg",
+    "heading_std_deg",
+    "heading_min_deg",
+    "heading_max_deg",
     "total_rmse_deg",
+    "total_mean_deg",
+    "total_median_deg",
+    "total_std_deg",
+    "total_min_deg",
+    "total_max_deg",
     "n_samples",
     "n_scored",
     "n_unestimated",
@@ -52,8 +71,12 @@ CSV_FIELDS = (
 )
 METRIC = (
     "RMSE of e_alpha = 2 acos(sqrt(w^2+z^2)) of q_ref * conj(q_est), deg, over score mask & reference present & "
-    "estimate present"
+    "estimate present; per sequence also the mean, median (log-spaced histogram, within 0.1 %), std (population), "
+    "min and max of e_alpha (heading and total error likewise where scored); best_t_offset_s: the time added to the "
+    "estimate stamps that minimises the e_alpha RMSE within +-offset_steps steps of the stream "
+    "(best_t_offset_rmse_deg: the RMSE there), searched in the as-recorded scenario (else the first)"
 )
+PRINT_ROWS = 48  # per-sequence tables longer than this are not printed (they are in report.md and results.csv)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -168,6 +191,61 @@ def format_heading_table(rows: Sequence[ResultRow], markdown_table: bool = False
     return "\n".join(lines)
 
 
+ERROR_TITLES = {"inclination": "inclination e_α", "heading": "heading", "total": "total angle"}
+
+
+def _num(v: float | None, fmt: str = ".2f") -> str:
+    return "–" if v is None or not math.isfinite(v) else format(v, fmt)
+
+
+def stats_cells(rows: Sequence[ResultRow], error: str = "inclination") -> tuple[list[str], list[list[str]]]:
+    """Headers and cells of a per-sequence statistics table (evo ape's rmse, mean, median, std, min, max of the
+    per-sample ``error``; for the inclination also the best time offset and the RMSE there). Rows without that error
+    scored are left out; perturbation and rate columns only when they vary."""
+    rows = [r for r in rows if r.score.stat(error, "rmse") is not None]
+    prt = len({r.perturbation for r in rows}) > 1
+    multi = len({r.rate for r in rows}) > 1
+    offsets = error == "inclination" and any(r.score.best_t_offset_s is not None for r in rows)
+    headers = ["sequence", "scenario", *(["perturbation"] if prt else []), *(["rate"] if multi else []),
+               "estimator", *STATS, *(["best offset ms", "rmse there"] if offsets else [])]
+    cells = []
+    for r in rows:
+        sc = r.score
+        cells.append([r.sequence, r.scenario, *([r.perturbation] if prt else []),
+                      *([rate_label(r.rate)] if multi else []), r.estimator,
+                      *(_num(sc.stat(error, st), ".3f" if st == "min" else ".2f") for st in STATS),
+                      *([_num(None if sc.best_t_offset_s is None else sc.best_t_offset_s * 1e3, "+.1f"),
+                         _num(sc.best_t_offset_rmse_deg)] if offsets else [])])
+    return headers, cells
+
+
+def format_stats_table(rows: Sequence[ResultRow], error: str = "inclination", markdown_table: bool = False,
+                       limit: int | None = None) -> str:
+    """The per-sequence statistics of ``error`` as text (or a markdown table); empty when no row has them. With
+    ``limit``, a table longer than that is replaced by a line saying where it is."""
+    headers, cells = stats_cells(rows, error)
+    if not cells:
+        return ""
+    title = f"{ERROR_TITLES[error]} error (°) per sequence: rmse, mean, median, std, min, max over its scored samples"
+    if error == "inclination" and "best offset ms" in headers:
+        title += "; the time offset added to the estimate stamps that minimises the RMSE, and the RMSE there"
+    if limit is not None and len(cells) > limit:
+        return f"{title}: {len(cells)} rows, in report.md and results.csv"
+    numeric = {*STATS, "best offset ms", "rmse there", "rate"}
+    if markdown_table:
+        return "\n".join([title + ":", "", "| " + " | ".join(headers) + " |",
+                          "|" + "".join("---:|" if h in numeric else "---|" for h in headers)]
+                         + ["| " + " | ".join(c) + " |" for c in cells])
+    widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(headers)]
+    lines = [title, "  ".join(h.rjust(w) if h in numeric else h.ljust(w) for h, w in zip(headers, widths,
+                                                                                          strict=True)),
+             "  ".join("-" * w for w in widths)]
+    lines += ["  ".join(c.rjust(w) if h in numeric else c.ljust(w) for c, w, h in zip(row, widths, headers,
+                                                                                       strict=True))
+              for row in cells]
+    return "\n".join(lines)
+
+
 # ---------------------------------------------------------------------------------------------------
 # one run
 # ---------------------------------------------------------------------------------------------------
@@ -195,6 +273,11 @@ class Report:
     def summary(self) -> list[Group]:
         return aggregate(self.rows)
 
+    @property
+    def timing_notes(self) -> list[str]:
+        """What the best time offsets say (:func:`~riann_ros.evaluation.offsets.timing_notes`)."""
+        return timing_notes(self.rows, self.settings.offset_steps)
+
     def settings_dict(self) -> dict[str, Any]:
         s = self.settings
         return {
@@ -210,6 +293,7 @@ class Report:
             "scenario_definition": {k: v for k, v in DEFINITIONS.items() if k in s.scenarios},
             "rest": None if s.rest is None else list(s.rest),
             "rest_definition": REST_DEFINITION,
+            "offset_steps": s.offset_steps,
             "perturbation_definition": PERTURB_DEFINITIONS,
             "metric": METRIC,
         }
@@ -229,6 +313,7 @@ class Report:
                 if not r.error
             ],
             "results": [row.to_dict() for row in self.rows],
+            "timing_notes": self.timing_notes,
             "tuning": self.tuning,
             "failures": self.failures,
         }
@@ -307,6 +392,18 @@ def _per_sequence(rows: Sequence[ResultRow]) -> list[str]:
     return lines
 
 
+def _timing_and_statistics(report: Report) -> list[str]:
+    """report.md's timing notes, per-sequence RMSE tables and per-sequence error statistics."""
+    notes = report.timing_notes
+    lines = ["## Timing", ""] + [f"- {n}" for n in notes] + [""] if notes else []
+    lines += ["## Per sequence", "", *_per_sequence(report.rows)]
+    for err in ERRORS:
+        table = format_stats_table(report.rows, err, markdown_table=True)
+        if table:
+            lines += [f"### Error statistics: {ERROR_TITLES[err]}", "", table, ""]
+    return lines
+
+
 def markdown(report: Report, plots: Sequence[Path]) -> str:
     """The content of report.md."""
     s = report.settings
@@ -336,7 +433,7 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
     warnings = [w for r in report.results if not r.error for w in r.warnings]
     if warnings:
         lines += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
-    lines += ["## Per sequence", "", *_per_sequence(report.rows)]
+    lines += _timing_and_statistics(report)
     if report.failures:
         lines += ["## Failed inputs", ""] + [f"- {f['error']}" for f in report.failures] + [""]
     if plots:

@@ -5,9 +5,10 @@ results.csv / results.json)."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
+from riann_ros.evaluation.offsets import STEPS as OFFSET_STEPS
 from riann_ros.evaluation.perturb import NONE, Condition
 from riann_ros.evaluation.scenarios import PAPER_SCENARIOS
 from riann_ros.evaluation.scoring import Score
@@ -19,6 +20,7 @@ LIVE_KEYS = ("published", "received", "lost", "unexpected")  # RunStats.live col
 RECORDED = "recorded"  # estimator name and mode of estimates recorded in a bag
 SERIES_POINTS = 6000  # points per curve kept for the error-over-time and roll/pitch plots
 REFERENCE = "reference"  # key of the reference's roll/pitch in a series
+_SCORE_REQUIRED = ("n_samples", "n_scored", "n_unestimated", "rmse_deg", "max_err_deg")
 
 
 @dataclass
@@ -36,6 +38,7 @@ class EvalSettings:
     chunk: int = STREAM_CHUNK  # samples per bag chunk
     rest: tuple[float, float] | None = None  # the initial rest by hand (s from the first sample); None: detect it
     topics: BagTopics = field(default_factory=BagTopics)  # which topics of the bags; recorded estimates
+    offset_steps: int = OFFSET_STEPS  # search the e_α-minimising time offset within ± this many steps (0: not)
 
     @property
     def recorded(self) -> list[EstimatorSpec]:
@@ -101,10 +104,12 @@ class ResultRow:
         def num(v: Any) -> float:
             return float("nan") if v is None else float(v)
 
+        # columns added later (error statistics, time offset) are None in older files
+        optional = {f.name: None if d.get(f.name) is None else float(d[f.name]) for f in fields(Score)
+                    if f.name not in _SCORE_REQUIRED}
         score = Score(n_samples=int(d["n_samples"]), n_scored=int(d["n_scored"]),
                       n_unestimated=int(d["n_unestimated"]), rmse_deg=num(d["rmse_deg"]),
-                      max_err_deg=num(d["max_err_deg"]), heading_rmse_deg=d.get("heading_rmse_deg"),
-                      total_rmse_deg=d.get("total_rmse_deg"))
+                      max_err_deg=num(d["max_err_deg"]), **optional)
         live = {k: int(d[k]) for k in LIVE_KEYS if k in d}
         stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
                          rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.offsets import OffsetSearch
 from riann_ros.evaluation.perturb import Condition, Transform
 from riann_ros.evaluation.rest import NO_REST_WARNING, Rest
 from riann_ros.evaluation.results import (
@@ -69,7 +70,8 @@ class _ScenarioRun:
     runner's run and one accumulator per estimator."""
 
     def __init__(self, plan: ScenarioPlan, condition: Condition, slot: int, settings: EvalSettings, name: str,
-                 series: bool, estimates: bool, recorded: list[EstimatorSpec] | None = None) -> None:
+                 series: bool, estimates: bool, recorded: list[EstimatorSpec] | None = None,
+                 offsets: bool = False) -> None:
         self.plan = plan
         self.condition = condition
         self.slot = slot
@@ -82,6 +84,9 @@ class _ScenarioRun:
         rate = plan.gate.nominal_rate
         self.gate = GateConfig.for_rate(condition.nominal_rate(rate)) if condition.parts else plan.gate
         self.acc = [Accumulator(settings.with_heading) for _ in self.specs]
+        # the time offset that minimises e_α (one scenario per sequence × condition × rate: see _plan_runs)
+        self.offsets = (OffsetSearch(len(self.specs), 1.0 / self.gate.nominal_rate, settings.offset_steps)
+                        if offsets and settings.offset_steps > 0 else None)
         self.run: Run | None = None
         self.fed = 0  # samples fed so far
         length = plan.length * (condition.nominal_rate(rate) / rate if condition.parts else 1.0)
@@ -110,6 +115,8 @@ class _ScenarioRun:
         qs = self.run.feed(rec)
         for acc, q in zip(self.acc, qs, strict=True):
             acc.add(rec.quat_ref, rec.score_mask, q)
+        if self.offsets is not None:
+            self.offsets.add(rec.stamps_ns, rec.quat_ref, rec.score_mask, qs)
         if self.series and rec.quat_ref is not None:
             self._add_series(rec, qs)
         if self.estimates is not None:
@@ -140,14 +147,19 @@ class _ScenarioRun:
             ResultRow(sequence=res.name, dataset=res.dataset, source=res.source, scenario=self.plan.scenario,
                       rate=NATIVE if rate is None else float(rate), rate_hz=rate_hz, resampled=rate is not None,
                       estimator=spec.label, estimator_name=spec.name, mode=RECORDED if spec.name == RECORDED else mode,
-                      score=self._score(spec, acc, st.mag_samples > 0), stats=st, perturbation=label,
+                      score=self._score(j, spec, acc, st.mag_samples > 0), stats=st, perturbation=label,
                       sensors="9D" if st.mag_samples > 0 else "6D")
-            for spec, acc, st in zip(self.specs, self.acc, stats, strict=True)
+            for j, (spec, acc, st) in enumerate(zip(self.specs, self.acc, stats, strict=True))
         ]
 
-    def _score(self, spec: EstimatorSpec, acc: Accumulator, nine_d: bool) -> Score:
+    def _score(self, j: int, spec: EstimatorSpec, acc: Accumulator, nine_d: bool) -> Score:
         try:
-            return acc.result(acc.with_heading or nine_d)
+            score = acc.result(acc.with_heading or nine_d)
+            off = self.offsets.result(j) if self.offsets is not None else None
+            if off is not None:
+                score.best_t_offset_s, score.best_t_offset_rmse_deg = off.offset_s, off.rmse_deg
+                score.t_offset_step_s = off.step_s
+            return score
         except EvalError as exc:
             if spec.name != RECORDED or acc.n_scored:
                 raise
@@ -185,8 +197,11 @@ class _ScenarioRun:
 
 
 def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool) -> list[_ScenarioRun]:
-    """One run per condition × scenario (series for the first condition, estimates for the very first run)."""
+    """One run per condition × scenario (series for the first condition, estimates for the very first run). The
+    time offset is searched in one scenario per condition: as-recorded when evaluated (the stamps as they are),
+    else the first (the paper's scenarios do not change the stamps)."""
     want_series = native and settings.series_for is not None and settings.series_for in ("*", "all", name)
+    offset_scenario = AS_RECORDED if AS_RECORDED in settings.scenarios else settings.scenarios[0]
     runs = []
     for c, condition in enumerate(settings.conditions):
         for s, scn in enumerate(settings.scenarios):
@@ -195,7 +210,7 @@ def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool
             recorded = settings.recorded if native and scn == AS_RECORDED and not condition.parts else []
             runs.append(_ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, name,
                                      want_series and c == 0, native and settings.keep_estimates and slot == 0,
-                                     recorded))
+                                     recorded, offsets=scn == offset_scenario))
     return [r for r in runs if r.specs]
 
 
