@@ -56,10 +56,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("inputs", nargs="*", metavar="BAG",
                    help="bags (.mcap, .db3, bag directories) or BROAD .hdf5/.mat files (CSV files and EuRoC folders: "
                    "convert them with riann-bag-convert first; the error message says how)")
-    p.add_argument("--compare", nargs=2, metavar=("A", "B"), type=Path, default=None,
+    c = p.add_argument_group("comparing saved runs (evo_res style)")
+    c.add_argument("--compare", nargs=2, metavar=("A", "B"), type=Path, default=None,
                    help="no evaluation: the difference B − A of two saved runs (results.json files or their --out "
-                   "folders) per estimator × scenario × perturbation (mean/median/max) and per sequence; with --out, "
-                   "compare.csv and the plot compare_rmse")
+                   "folders; the same run twice to compare rows of one run), paired by sequence and by every axis "
+                   "(estimator, scenario, perturbation, rate) on which A and B share a value; per group "
+                   "(mean/median/max) and per sequence; with --out, compare.csv and the plot compare_rmse")
+    c.add_argument("--select-a", action="append", default=[], metavar="FIELD=VALUE",
+                   help="--compare: only A's rows with this value (estimator, scenario, perturbation, rate, sequence, "
+                   "dataset, sensors; estimator: a table label or a spec as for -e). Repeatable")
+    c.add_argument("--select-b", action="append", default=[], metavar="FIELD=VALUE",
+                   help="--compare: only B's rows with this value (as --select-a)")
+    c.add_argument("--select", action="append", default=[], metavar="FIELD=VALUE",
+                   help="--compare: only rows with this value, on both sides")
+    c.add_argument("--metric", default="rmse",
+                   help="--compare: the per-sequence statistic compared: rmse (default), mean, median, std, min, max "
+                   "of e_α; heading_rmse, heading_mean, …, total_rmse, … where scored")
     p.add_argument("--estimators", "-e", default=None,
                    help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed); 'none': only "
                    "the --estimate-topic estimates")
@@ -73,8 +85,21 @@ def build_parser() -> argparse.ArgumentParser:
                    "truth, beside the built-in estimators; matched to the IMU samples by stamp (slerp between "
                    "messages). It is the recording as it is, so it is scored in the as-recorded scenario only, at the "
                    "native rate, unperturbed. Repeatable")
+    b.add_argument("--estimate-file", action="append", default=[], metavar="FILE[:LABEL]",
+                   help="score an estimate in a trajectory file against the input's reference, like --estimate-topic: "
+                   "a TUM file (t tx ty tz qx qy qz qw, t in seconds, no header) or a CSV with a header: a time "
+                   "column (timestamp, time or t; its unit in the name, e.g. time[s], else ns) and qw, qx, qy, qz "
+                   "(the IMU frame's orientation in a z-up world, as the reference). Labelled LABEL (default: the "
+                   "file name). With several inputs a file belongs to the input whose name starts its name "
+                   "(run1.mcap: run1_vins.tum). Repeatable")
+    b.add_argument("--estimate-cols", default=None, metavar="TIME,QW,QX,QY,QZ",
+                   help="the --estimate-file columns, for a CSV in another layout")
+    b.add_argument("--estimate-time-unit", default=None, choices=("s", "ms", "us", "ns"),
+                   help="the time unit of the --estimate-file stamps (default: from the column name; ns for a CSV, "
+                   "s for a TUM file)")
     b.add_argument("--t-offset", type=float, default=0.0, metavar="SECONDS",
-                   help="added to the stamps of the --estimate-topic messages before matching (default 0)")
+                   help="added to the stamps of the --estimate-topic and --estimate-file estimates before matching "
+                   "(default 0)")
     b.add_argument("--max-gap", type=float, default=defaults.MAX_GAP_S, metavar="SECONDS",
                    help="slerp a topic between two messages at most this far apart, hold the nearer one within half "
                    "of it, else the sample has none (not scored, counted as unestimated); --estimate-topic and "
@@ -90,6 +115,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="evaluate under this condition too: 'none', or perturbations joined with '+': "
                    f"{perturb.accepted_forms()}; repeatable, each one a condition (default: none; "
                    "docs/evaluation.md#perturbations)")
+    p.add_argument("--salvage", action="store_true",
+                   help="score the readable part of a bag cut off by a crash or a full disk (an MCAP file without its "
+                   "footer, a sqlite3 file shorter than its header says), saying how much was recovered; without it "
+                   "such a bag fails with that count (riann-bag-convert --repair writes a repaired copy)")
     p.add_argument("--rest", default=None, metavar="START:END",
                    help="the initial rest, in seconds from the first sample, whose mean gyro is removed as the turn-on "
                    "bias (default: detected from the signals before the first scored sample; see docs/evaluation.md)")
@@ -111,6 +140,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="per estimator and sequence, find the time offset (added to the estimate stamps, like "
                    "--t-offset) that minimises the e_α RMSE within ± STEPS steps of the stream, and the RMSE there; "
                    f"in the as-recorded scenario, else the first (default {ev.OFFSET_STEPS}; 0: no search)")
+    p.add_argument("--plot-perturb", action="append", default=[], metavar="CONDITION",
+                   help="plot this --perturb condition (repeatable; default: every condition, each in panels or "
+                   "figures of its own)")
     p.add_argument("--plot-sequence", default=None,
                    help="sequence for the error-over-time and roll/pitch plots (default: the first input); 'all': "
                    "a roll/pitch figure (roll_pitch_<sequence>) for every sequence")
@@ -181,8 +213,8 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
     only_recorded = spec_text.strip().lower() == "none"
     topics = _topics(args)
-    if only_recorded and not topics.estimates:
-        raise ValueError("--estimators none needs at least one --estimate-topic")
+    if only_recorded and not (topics.estimates or topics.files):
+        raise ValueError("--estimators none needs at least one --estimate-topic or --estimate-file")
     settings = ev.EvalSettings(
         estimators=[] if only_recorded else ev.parse_estimators(spec_text),
         scenarios=ev.parse_scenarios(args.scenarios or (ev.AS_RECORDED if only_recorded else "all")),
@@ -192,13 +224,28 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         with_heading=args.heading,
         use_mag=args.use_mag,
         series_for=None if args.no_plots or not args.out else (args.plot_sequence or "*"),
+        series_conditions=_plotted(args),
         keep_estimates=args.write_estimates is not None,
         rest=ev.parse_rest(args.rest) if args.rest else None,
         topics=topics,
         offset_steps=args.offset_steps,
+        salvage=args.salvage,
     )
     _check_recorded(settings)
     return settings
+
+
+def _plotted(args: argparse.Namespace) -> tuple[str, ...] | None:
+    """The condition labels of --plot-perturb (None: every condition); ValueError for one not evaluated."""
+    if not args.plot_perturb:
+        return None
+    evaluated = [ev.parse_condition(c).label for c in args.perturb] or [perturb.NONE]
+    labels = tuple(ev.parse_condition(c).label for c in args.plot_perturb)
+    unknown = [lbl for lbl in labels if lbl not in evaluated]
+    if unknown:
+        raise ValueError(f"--plot-perturb {unknown[0]} is not an evaluated condition (--perturb: "
+                         f"{', '.join(evaluated)})")
+    return labels
 
 
 def _topic(name: str) -> str:
@@ -221,14 +268,63 @@ def _topics(args: argparse.Namespace) -> ev.BagTopics:
         estimates=estimates,
         t_offset_s=args.t_offset,
         max_gap_s=args.max_gap,
+        files=_estimate_files(args, estimates),
     )
 
 
+def _file_and_label(text: str) -> tuple[str, str]:
+    """``FILE[:LABEL]`` (a path that exists as given is all path)."""
+    path, sep, label = text.rpartition(":")
+    if not sep or Path(text).exists() or "/" in label or not path:
+        path, label = text, ""
+    return path, label.strip() or Path(path).stem
+
+
+def _owner(file: str, inputs: list[str]) -> str | None:
+    """The input a file belongs to: the only one, or the one whose name (without suffix) starts the file's name
+    (the longest such); ValueError when none does."""
+    if len(inputs) <= 1:
+        return None
+    name = Path(file).name
+    owners = [i for i in inputs if name.startswith(Path(i).stem)]
+    if not owners:
+        raise ValueError(f"--estimate-file {file}: with several inputs a file belongs to the input whose name starts "
+                         f"its name (run1.mcap: run1_myfilter.tum); none of {', '.join(inputs)} does")
+    return max(owners, key=lambda i: len(Path(i).stem))
+
+
+def _estimate_files(args: argparse.Namespace, topics: tuple[str, ...]) -> tuple[ev.EstimateFile, ...]:
+    """The --estimate-file files, each read once here (ValueError: exit status 2 before any work)."""
+    cols = None
+    if args.estimate_cols:
+        cols = tuple(c.strip() for c in args.estimate_cols.split(","))
+        if len(cols) != 5 or not all(cols):
+            raise ValueError(f"--estimate-cols needs 5 column names TIME,QW,QX,QY,QZ, got {args.estimate_cols!r}")
+    files = []
+    for text in args.estimate_file:
+        path, label = _file_and_label(text)
+        f = ev.EstimateFile(path, label, _owner(path, [str(i) for i in args.inputs]), cols, args.estimate_time_unit)
+        try:
+            f.read()
+        except ev.EvalError as exc:
+            raise ValueError(str(exc)) from exc
+        files.append(f)
+    taken = [*topics, *(f.label for f in files)]
+    dup = next((lbl for lbl in taken if taken.count(lbl) > 1), None)
+    if dup is not None:
+        raise ValueError(f"estimate label {dup!r} given twice: give the files labels of their own (FILE:LABEL)")
+    return tuple(files)
+
+
 def _check_recorded(settings: ev.EvalSettings) -> None:
-    """Recorded estimates are the recording as it is: they need the as-recorded scenario, the native rate and the
-    unperturbed condition among those asked for (ValueError otherwise)."""
-    if not settings.topics.estimates:
+    """Recorded estimates (topics, files) are the recording as it is: they need the as-recorded scenario, the native
+    rate and the unperturbed condition among those asked for, and labels of their own (ValueError otherwise)."""
+    if not (settings.topics.estimates or settings.topics.files):
         return
+    clash = {s.label for s in settings.estimators} & {s.label for s in settings.recorded}
+    if clash:
+        raise ValueError(f"estimate label {sorted(clash)[0]!r} is also an estimator's: label the file "
+                         "(--estimate-file FILE:LABEL)")
     missing = []
     if ev.AS_RECORDED not in settings.scenarios:
         missing.append("the as-recorded scenario in --scenarios")
@@ -237,8 +333,8 @@ def _check_recorded(settings: ev.EvalSettings) -> None:
     if not any(not c.parts for c in settings.conditions):
         missing.append("none in --perturb")
     if missing:
-        raise ValueError("--estimate-topic estimates exist only for the recording as it is (as-recorded scenario, "
-                         f"native rate, no perturbation): add {' and '.join(missing)}")
+        raise ValueError("--estimate-topic / --estimate-file estimates exist only for the recording as it is "
+                         f"(as-recorded scenario, native rate, no perturbation): add {' and '.join(missing)}")
 
 
 def _tune(args: argparse.Namespace, sources: list[str], settings: ev.EvalSettings) -> list[dict]:
@@ -362,7 +458,15 @@ def _compare(args: argparse.Namespace) -> int:
     from riann_ros.evaluation import compare as cp
 
     try:
-        cmp = cp.compare(cp.load(args.compare[0]), cp.load(args.compare[1]))
+        both = cp.parse_selection(args.select)
+        sel_a = cp.Selection(both.items + cp.parse_selection(args.select_a).items)
+        sel_b = cp.Selection(both.items + cp.parse_selection(args.select_b).items)
+        metric = cp.parse_metric(args.metric)
+    except ValueError as exc:
+        _err(str(exc))
+        return 2
+    try:
+        cmp = cp.compare(cp.load(args.compare[0]), cp.load(args.compare[1]), sel_a, sel_b, metric)
     except ev.EvalError as exc:
         _err(str(exc))
         return 1
@@ -392,6 +496,8 @@ def _main(argv: list[str] | None) -> int:
         return _compare(args)
     if not args.inputs:
         parser.error("no input given (bags or BROAD files; or --compare A B)")
+    if args.select or args.select_a or args.select_b or args.metric != "rmse":
+        parser.error("--select, --select-a, --select-b and --metric belong to --compare A B")
     try:
         settings = _settings(args)
         _check_out(args)

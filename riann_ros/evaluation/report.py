@@ -308,7 +308,7 @@ class Report:
             "sequences": [
                 {"source": r.source, "name": r.name, "dataset": r.dataset, "seconds": r.seconds,
                  "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios, "perturbations": r.perturbations,
-                 "warnings": r.warnings}
+                 "warnings": r.warnings, **({"salvaged": r.salvaged} if r.salvaged else {})}
                 for r in self.results
                 if not r.error
             ],
@@ -443,14 +443,17 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
 
 def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
     """The figures: boxplots, error over time (the first sequence with series), roll/pitch per sequence (that one,
-    or every sequence with ``--plot-sequence all``), RMSE vs rate."""
-    figures = pl.plot_boxes(rows, out)
+    or every sequence with ``--plot-sequence all``) and perturbation condition, RMSE vs rate; every condition, or
+    those of ``--plot-perturb``."""
+    chosen = report.settings.series_conditions
+    figures = pl.plot_boxes(rows, out, conditions=chosen)
     with_series = [r.series for r in report.results if r.series and not r.error]
     if with_series:
-        figures += pl.plot_error_over_time(with_series[0], out)
+        figures += pl.plot_error_over_time(with_series[0], out, conditions=chosen)
     for series in with_series if report.settings.series_for == "all" else with_series[:1]:
-        figures += pl.plot_attitude(series, out)
-    return figures + pl.plot_rmse_vs_rate(rows, out)
+        for cond in pl.series_conditions(series, chosen):
+            figures += pl.plot_attitude(series, out, condition=cond)
+    return figures + pl.plot_rmse_vs_rate(rows, out, conditions=chosen)
 
 
 def write_results(out: Path, report: Report, plots: bool = True, replace: bool = False) -> list[Path]:
