@@ -1,4 +1,4 @@
-"""The virtual-rotation ensemble (riann_ros/estimators/ensemble.py): its frames, its combination, and the
+"""The virtual-rotation ensemble (riann_ros/estimators/riann/s4a_ensemble.py): its frames, its combination, and the
 estimator's output against the four copies of the network run directly."""
 
 from __future__ import annotations
