@@ -18,6 +18,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shlex
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -368,8 +369,11 @@ def format_comparison(cmp: Comparison) -> str:
             out.append(f"only in {name} (no partner in {'B' if name == 'A' else 'A'}): {len(rows_only)} row(s): "
                        f"{shown}")
     if cmp.only_a and cmp.only_b and "estimator" in cmp.matched:
-        out.append("rows with different labels pair when they are selected: --select-a estimator=LABEL "
-                   "--select-b estimator=OTHER")
+        la = list(dict.fromkeys(r.estimator for r in cmp.only_a))
+        lb = list(dict.fromkeys(r.estimator for r in cmp.only_b))
+        pick = (f"--select-a estimator={shlex.quote(la[0])} --select-b estimator={shlex.quote(lb[0])}"
+                if len(la) == len(lb) == 1 else "--select-a estimator=LABEL --select-b estimator=OTHER")
+        out.append(f"rows with different labels pair when they are selected: {pick}")
     if cmp.without_metric:
         out.append(f"{cmp.without_metric} pair(s) without the {_metric_text(cmp.metric)} on one side: not compared")
     return "\n".join(out)

@@ -217,11 +217,12 @@ def _group_notes(where: str, grp: Sequence, steps: int, riann_name: str) -> list
                 "what the driver's sample-time convention gives when it is read the other way (point samples at "
                 "their stamps, or means over the interval before each stamp): RIANN reads a regular stream as point "
                 "samples unless its input_model parameter says otherwise (docs/riann.md)")
-    if len(grp) > 1 and all(abs(v) / step >= 0.25 for v in offsets.values()):
+    filters = {r.estimator_name for r in grp} - {"recorded"}
+    if len(filters) > 1 and all(abs(v) / step >= 0.25 for v in offsets.values()):
         if max(offsets.values()) - min(offsets.values()) <= 0.25 * step:
             notes.append(f"{where}: every estimator fits the reference best moved by about "
-                         f"{_ms(float(np.median(list(offsets.values()))))}: the reference and the IMU stamps are "
-                         "probably not synchronised")
+                         f"{_ms(float(np.median(list(offsets.values()))))}: the reference and the IMU stamps may be "
+                         "that far apart (not synchronised), which every score here includes")
     return notes
 
 

@@ -151,6 +151,7 @@ def plot_boxes(rows: Sequence[ResultRow], out_dir: Path, stem: str = "rmse_boxpl
         if ax is panels[0] or len(datasets) > 2 or scn == scenarios[0]:
             ax.set_ylabel("RMSE e_α (°) per sequence")
         ax.set_title(_panel_title(scn, cond, conds))
+        ax.set_gid(f"panel:{scn}|{cond}")  # findable in the SVG
         ax.grid(axis="y", alpha=0.3)
         # from 0, with room for the labels above the points
         top = max([r.rmse_deg for r in (rows if len(datasets) <= 2 else sel) if r.perturbation == cond],
@@ -201,6 +202,7 @@ def plot_error_over_time(series: dict[str, Any], out_dir: Path, stem: str = "err
                 ax.plot(t, e, lw=0.8, label=label, color=colors[label], gid=f"estimator:{label}")
             ax.set_title(f"{series['sequence']} — {_panel_title(scn, cond, list(conds))} (grey: rest / not scored)",
                          fontsize="medium")
+            ax.set_gid(f"panel:{scn}|{cond}")
             ax.set_ylabel("e_α (°)")
             ax.set_ylim(bottom=0)
             ax.grid(alpha=0.3)
@@ -242,6 +244,7 @@ def plot_rmse_vs_rate(rows: Sequence[ResultRow], out_dir: Path, stem: str = "rms
             ax.set_xlabel("sampling rate (Hz)")
             ax.set_ylabel("RMSE e_α (°): mean, min–max")
             ax.set_title(_panel_title(scn, cond, conds))
+            ax.set_gid(f"panel:{scn}|{cond}")
             ax.set_ylim(bottom=0)
             ax.grid(alpha=0.3)
     fig.tight_layout()
