@@ -216,7 +216,7 @@ class _PaddedDb:
             return {}
 
     def messages(self, batch: int = 1000) -> Iterator[tuple[int, int, bytes]]:
-        """(topic id, timestamp, data) in id order, up to the first unreadable page."""
+        """(topic id, timestamp, data) in id order, up to the first unreadable page or row."""
         last = 0
         while True:
             try:
@@ -229,6 +229,8 @@ class _PaddedDb:
             if not rows:
                 return
             for i, topic_id, stamp, data in rows:
+                if topic_id is None or stamp is None or data is None:
+                    return  # a row whose record lies past the cut (a zero page reads as empty columns)
                 yield topic_id, stamp, data
                 last = i
 
