@@ -19,7 +19,6 @@ This module only parses the command line and prints; the work is in :mod:`riann_
 from __future__ import annotations
 
 import argparse
-import math
 import re
 import shlex
 import sys
@@ -28,16 +27,11 @@ from pathlib import Path
 
 from riann_ros import defaults
 from riann_ros import evaluation as ev
-from riann_ros.evaluation import outdir, perturb, report
+from riann_ros.cli import eval_inputs
+from riann_ros.evaluation import outdir, perturb, report, seq_tables
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
-
-
-def bagio_imu_topic() -> str:
-    from riann_ros.bagio.layout import IMU_TOPIC
-
-    return IMU_TOPIC
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -212,7 +206,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
     have = ev.available_estimators()
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
     only_recorded = spec_text.strip().lower() == "none"
-    topics = _topics(args)
+    topics = eval_inputs.topics(args)
     if only_recorded and not (topics.estimates or topics.files):
         raise ValueError("--estimators none needs at least one --estimate-topic or --estimate-file")
     settings = ev.EvalSettings(
@@ -231,7 +225,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         offset_steps=args.offset_steps,
         salvage=args.salvage,
     )
-    _check_recorded(settings)
+    eval_inputs.check_recorded(settings)
     return settings
 
 
@@ -246,95 +240,6 @@ def _plotted(args: argparse.Namespace) -> tuple[str, ...] | None:
         raise ValueError(f"--plot-perturb {unknown[0]} is not an evaluated condition (--perturb: "
                          f"{', '.join(evaluated)})")
     return labels
-
-
-def _topic(name: str) -> str:
-    name = name.strip()
-    if not name or name == "/":
-        raise ValueError("empty topic name")
-    return name if name.startswith("/") else "/" + name
-
-
-def _topics(args: argparse.Namespace) -> ev.BagTopics:
-    """Which bag topics to read (ValueError on bad values)."""
-    estimates = tuple(dict.fromkeys(_topic(t) for t in args.estimate_topic))
-    if not (args.max_gap > 0 and math.isfinite(args.max_gap)):
-        raise ValueError(f"--max-gap must be a positive number of seconds, got {args.max_gap:g}")
-    if not math.isfinite(args.t_offset):
-        raise ValueError("--t-offset must be a finite number of seconds")
-    return ev.BagTopics(
-        imu=_topic(args.imu_topic) if args.imu_topic else bagio_imu_topic(),
-        reference=_topic(args.ground_truth_topic) if args.ground_truth_topic else None,
-        estimates=estimates,
-        t_offset_s=args.t_offset,
-        max_gap_s=args.max_gap,
-        files=_estimate_files(args, estimates),
-    )
-
-
-def _file_and_label(text: str) -> tuple[str, str]:
-    """``FILE[:LABEL]`` (a path that exists as given is all path)."""
-    path, sep, label = text.rpartition(":")
-    if not sep or Path(text).exists() or "/" in label or not path:
-        path, label = text, ""
-    return path, label.strip() or Path(path).stem
-
-
-def _owner(file: str, inputs: list[str]) -> str | None:
-    """The input a file belongs to: the only one, or the one whose name (without suffix) starts the file's name
-    (the longest such); ValueError when none does."""
-    if len(inputs) <= 1:
-        return None
-    name = Path(file).name
-    owners = [i for i in inputs if name.startswith(Path(i).stem)]
-    if not owners:
-        raise ValueError(f"--estimate-file {file}: with several inputs a file belongs to the input whose name starts "
-                         f"its name (run1.mcap: run1_myfilter.tum); none of {', '.join(inputs)} does")
-    return max(owners, key=lambda i: len(Path(i).stem))
-
-
-def _estimate_files(args: argparse.Namespace, topics: tuple[str, ...]) -> tuple[ev.EstimateFile, ...]:
-    """The --estimate-file files, each read once here (ValueError: exit status 2 before any work)."""
-    cols = None
-    if args.estimate_cols:
-        cols = tuple(c.strip() for c in args.estimate_cols.split(","))
-        if len(cols) != 5 or not all(cols):
-            raise ValueError(f"--estimate-cols needs 5 column names TIME,QW,QX,QY,QZ, got {args.estimate_cols!r}")
-    files = []
-    for text in args.estimate_file:
-        path, label = _file_and_label(text)
-        f = ev.EstimateFile(path, label, _owner(path, [str(i) for i in args.inputs]), cols, args.estimate_time_unit)
-        try:
-            f.read()
-        except ev.EvalError as exc:
-            raise ValueError(str(exc)) from exc
-        files.append(f)
-    taken = [*topics, *(f.label for f in files)]
-    dup = next((lbl for lbl in taken if taken.count(lbl) > 1), None)
-    if dup is not None:
-        raise ValueError(f"estimate label {dup!r} given twice: give the files labels of their own (FILE:LABEL)")
-    return tuple(files)
-
-
-def _check_recorded(settings: ev.EvalSettings) -> None:
-    """Recorded estimates (topics, files) are the recording as it is: they need the as-recorded scenario, the native
-    rate and the unperturbed condition among those asked for, and labels of their own (ValueError otherwise)."""
-    if not (settings.topics.estimates or settings.topics.files):
-        return
-    clash = {s.label for s in settings.estimators} & {s.label for s in settings.recorded}
-    if clash:
-        raise ValueError(f"estimate label {sorted(clash)[0]!r} is also an estimator's: label the file "
-                         "(--estimate-file FILE:LABEL)")
-    missing = []
-    if ev.AS_RECORDED not in settings.scenarios:
-        missing.append("the as-recorded scenario in --scenarios")
-    if None not in settings.rates:
-        missing.append("native in --rates")
-    if not any(not c.parts for c in settings.conditions):
-        missing.append("none in --perturb")
-    if missing:
-        raise ValueError("--estimate-topic / --estimate-file estimates exist only for the recording as it is "
-                         f"(as-recorded scenario, native rate, no perturbation): add {' and '.join(missing)}")
 
 
 def _tune(args: argparse.Namespace, sources: list[str], settings: ev.EvalSettings) -> list[dict]:
@@ -391,11 +296,11 @@ def _write_estimates(results: list[ev.SequenceResult], out_dir: Path, force: boo
 
 def _print_summary(rep: report.Report, live: bool) -> None:
     print(report.format_table(rep.summary))
-    nine = report.format_heading_table(rep.rows)
+    nine = seq_tables.format_heading_table(rep.rows)
     if nine:
         print("\n" + nine)
     for err in ev.ERRORS:
-        table = report.format_stats_table(rep.rows, err, limit=report.PRINT_ROWS)
+        table = seq_tables.format_stats_table(rep.rows, err, limit=report.PRINT_ROWS)
         if table:
             print("\n" + table)
     for note in rep.timing_notes:
@@ -456,6 +361,7 @@ def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
 def _compare(args: argparse.Namespace) -> int:
     """``--compare A B``: print (and with --out write) the difference of two saved runs; no estimator runs."""
     from riann_ros.evaluation import compare as cp
+    from riann_ros.evaluation import compare_text
 
     try:
         both = cp.parse_selection(args.select)
@@ -470,7 +376,7 @@ def _compare(args: argparse.Namespace) -> int:
     except ev.EvalError as exc:
         _err(str(exc))
         return 1
-    print(cp.format_comparison(cmp))
+    print(compare_text.format_comparison(cmp))
     if args.out:
         try:
             files = cp.write_comparison(args.out, cmp, plots=not args.no_plots, replace=args.force)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import shlex
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -164,18 +163,18 @@ class Pair:
 
     @property
     def va(self) -> float:
-        return _stat(self.a, self.metric)
+        return pair_stat(self.a, self.metric)
 
     @property
     def vb(self) -> float:
-        return _stat(self.b, self.metric)
+        return pair_stat(self.b, self.metric)
 
     @property
     def diff(self) -> float:
         return self.vb - self.va
 
 
-def _stat(r: ResultRow, metric: tuple[str, str]) -> float:
+def pair_stat(r: ResultRow, metric: tuple[str, str]) -> float:
     v = r.score.stat(*metric)
     return float("nan") if v is None else v
 
@@ -280,7 +279,7 @@ def compare(a: Saved, b: Saved, sel_a: Selection = Selection(), sel_b: Selection
     cmp.only_b = [r for r in rb if key(r) not in keys_a]
     if not cmp.pairs:
         if pairs:
-            raise EvalError(f"{a.path} and {b.path}: no pair of rows has the {_metric_text(metric)} (an older "
+            raise EvalError(f"{a.path} and {b.path}: no pair of rows has the {metric_text(metric)} (an older "
                             "results.json, or a heading statistic of 6D rows)")
         seq_a, seq_b = sorted({r.sequence for r in ra}), sorted({r.sequence for r in rb})
         raise EvalError(f"{a.path} and {b.path} have no result in common: rows pair by sequence"
@@ -289,121 +288,22 @@ def compare(a: Saved, b: Saved, sel_a: Selection = Selection(), sel_b: Selection
     return cmp
 
 
-def _metric_text(metric: tuple[str, str]) -> str:
+def metric_text(metric: tuple[str, str]) -> str:
     err, st = metric
     return {"inclination": "attitude (inclination e_α)", "heading": "heading", "total": "total angle"}[err] + (
         " RMSE" if st == "rmse" else f" {st} error")
 
 
-def _rate(rate: str | float) -> str:
+def rate_text(rate: str | float) -> str:
     return str(rate) if rate == NATIVE else f"{float(rate):g} Hz"
 
 
-def _table(headers: list[str], rows: list[list[str]], numeric: set[str]) -> list[str]:
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(headers)]
-
-    def fmt(row: list[str]) -> str:
-        return "  ".join(c.rjust(w) if h in numeric else c.ljust(w) for c, w, h in zip(row, widths, headers,
-                                                                                       strict=True))
-
-    return [fmt(headers), "  ".join("-" * w for w in widths), *(fmt(r) for r in rows)]
-
-
-def _side_text(side: Side, axis: str) -> str:
+def side_text(side: Side, axis: str) -> str:
     v = side[AXES.index(axis)]
-    return _rate(v) if axis == "rate" else str(v)
+    return rate_text(v) if axis == "rate" else str(v)
 
 
-class _Layout:
-    """Which side columns a comparison's tables show: each differing axis as ``<axis> A`` and ``<axis> B``, then
-    the matched axes once (perturbation and rate only when they are not all ``none`` / one rate)."""
-
-    def __init__(self, cmp: Comparison) -> None:
-        sides = [s for p in cmp.pairs for s in (side_of(p.a), side_of(p.b))]
-        shown = []
-        for ax in AXES:
-            vals = {s[AXES.index(ax)] for s in sides}
-            if ax in cmp.differing or ax in ("estimator", "scenario") or (
-                    ax == "perturbation" and vals != {NONE}) or (ax == "rate" and len(vals) > 1):
-                shown.append(ax)
-        self.axes = shown
-        self.differing = cmp.differing
-        self.headers = [h for ax in shown for h in ((f"{ax} A", f"{ax} B") if ax in self.differing else (ax,))]
-
-    def cells(self, a: Side, b: Side) -> list[str]:
-        return [c for ax in self.axes for c in ((_side_text(a, ax), _side_text(b, ax)) if ax in self.differing
-                                                else (_side_text(a, ax),))]
-
-
-def _how(cmp: Comparison) -> str:
-    sel = [f"{n}: {s.text()}" for n, s in zip("AB", cmp.selections, strict=True) if s.items]
-    text = "rows paired by sequence" + (f", {', '.join(cmp.matched)}" if cmp.matched else "")
-    if cmp.differing:
-        text += f"; A and B differ in {' and '.join(cmp.differing)} (each side's shown)"
-    return text + (f"; selected {'; '.join(sel)}" if sel else "")
-
-
-def format_comparison(cmp: Comparison) -> str:
-    """The text of ``--compare``: per group, then per sequence (the metric, then every statistic of e_α); B − A,
-    negative = B better."""
-    lay = _Layout(cmp)
-    groups = cmp.groups()
-    stats = ("mean", "median", "max")
-    headers = [*lay.headers, "n"] + [f"{s} {x}" for s in stats for x in ("A", "B", "B-A")]
-    rows = [lay.cells(g.a_side, g.b_side) + [str(g.n)]
-            + [f"{v:+.2f}" if x == "B-A" else f"{v:.2f}" for s in stats
-               for x, v in (("A", g.a[s]), ("B", g.b[s]), ("B-A", g.diff(s)))]
-            for g in groups]
-    out = [f"A = {cmp.a.label}: {cmp.a.path}" + (f"  ({cmp.a.command})" if cmp.a.command else ""),
-           f"B = {cmp.b.label}: {cmp.b.path}" + (f"  ({cmp.b.command})" if cmp.b.command else ""),
-           _how(cmp), "",
-           f"{_metric_text(cmp.metric)} (°) per sequence, B − A (negative: B is better)",
-           *_table(headers, rows, {"n", *headers[len(lay.headers) + 1:]}), "", "per sequence"]
-    seq_rows = [[*lay.cells(side_of(p.a), side_of(p.b)), p.sequence, f"{p.va:.2f}", f"{p.vb:.2f}",
-                 f"{p.diff:+.2f}"] for p in _ordered(cmp)]
-    out += _table([*lay.headers, "sequence", "A", "B", "B-A"], seq_rows, {"A", "B", "B-A"})
-    out += _statistics(cmp, lay)
-    for name, rows_only in (("A", cmp.only_a), ("B", cmp.only_b)):
-        if rows_only:
-            shown = ", ".join(_row_text(r) for r in rows_only[:5]) + (" …" if len(rows_only) > 5 else "")
-            out.append(f"only in {name} (no partner in {'B' if name == 'A' else 'A'}): {len(rows_only)} row(s): "
-                       f"{shown}")
-    if cmp.only_a and cmp.only_b and "estimator" in cmp.matched:
-        la = list(dict.fromkeys(r.estimator for r in cmp.only_a))
-        lb = list(dict.fromkeys(r.estimator for r in cmp.only_b))
-        pick = (f"--select-a estimator={shlex.quote(la[0])} --select-b estimator={shlex.quote(lb[0])}"
-                if len(la) == len(lb) == 1 else "--select-a estimator=LABEL --select-b estimator=OTHER")
-        out.append(f"rows with different labels pair when they are selected: {pick}")
-    if cmp.without_metric:
-        out.append(f"{cmp.without_metric} pair(s) without the {_metric_text(cmp.metric)} on one side: not compared")
-    return "\n".join(out)
-
-
-def _statistics(cmp: Comparison, lay: _Layout) -> list[str]:
-    """evo_res's table per sequence: every statistic of e_α for A, B and B − A."""
-    pairs = _ordered(cmp)
-    title = "e_α statistics per sequence (°): A, B and B − A"
-    if len(pairs) > PRINT_PAIRS:
-        return ["", f"{title}: {len(pairs)} pairs, in compare.csv"]
-    rows = []
-    for p in pairs:
-        va = {st: _stat(p.a, ("inclination", st)) for st in STATS}
-        vb = {st: _stat(p.b, ("inclination", st)) for st in STATS}
-        lead = [*lay.cells(side_of(p.a), side_of(p.b)), p.sequence]
-        for run, vals in (("A", va), ("B", vb), ("B-A", {st: vb[st] - va[st] for st in STATS})):
-            rows.append([*(lead if run == "A" else [""] * len(lead)), run,
-                         *("–" if not math.isfinite(v) else (f"{v:+.2f}" if run == "B-A" else f"{v:.2f}")
-                           for v in vals.values())])
-    return ["", title, *_table([*lay.headers, "sequence", "run", *STATS], rows, set(STATS))]
-
-
-def _row_text(r: ResultRow) -> str:
-    """``sequence/scenario[/perturbation][/rate]/estimator``."""
-    return "/".join([r.sequence, r.scenario, *([r.perturbation] if r.perturbation != NONE else []),
-                     *([_rate(r.rate)] if r.rate != NATIVE else []), r.estimator])
-
-
-def _ordered(cmp: Comparison) -> list[Pair]:
+def ordered_pairs(cmp: Comparison) -> list[Pair]:
     order = {(g.a_side, g.b_side): i for i, g in enumerate(cmp.groups())}
     return sorted(cmp.pairs, key=lambda p: order[(side_of(p.a), side_of(p.b))])
 
@@ -430,7 +330,7 @@ def write_csv(path: Path, cmp: Comparison) -> None:
         def num(v: float | None) -> str:
             return "" if v is None or not math.isfinite(v) else f"{v:.6f}"
 
-        for p in _ordered(cmp):
+        for p in ordered_pairs(cmp):
             a, b = p.a, p.b
             cells = [p.sequence, a.scenario, a.perturbation, a.rate, a.estimator, num(a.rmse_deg), num(b.rmse_deg),
                      num(b.rmse_deg - a.rmse_deg), b.scenario, b.perturbation, b.rate, b.estimator, metric,
@@ -448,7 +348,7 @@ def differences(cmp: Comparison) -> dict[tuple[str, str], list[float]]:
     for g in cmp.groups():
         parts = []
         for ax in ("scenario", "perturbation", "rate"):
-            a, b = _side_text(g.a_side, ax), _side_text(g.b_side, ax)
+            a, b = side_text(g.a_side, ax), side_text(g.b_side, ax)
             if ax in cmp.differing:
                 parts.append(f"{a} → {b}")
             elif not ((ax == "perturbation" and a == NONE) or (ax == "rate" and a == NATIVE)):
@@ -468,7 +368,7 @@ def write_comparison(out: Path, cmp: Comparison, plots: bool = True, replace: bo
         write_csv(written[0], cmp)
         if plots:
             written += pl.plot_differences(differences(cmp), cmp.a.label, cmp.b.label, out,
-                                           ylabel=_metric_text(cmp.metric))
+                                           ylabel=metric_text(cmp.metric))
     except BaseException:
         for f in written:
             f.unlink(missing_ok=True)

@@ -76,14 +76,12 @@ class _Shifted:
 
 @dataclass
 class Offset:
-    """The best offset of one estimator: τ (s, added to the estimate stamps), the e_α RMSE there and at τ = 0 (on
-    the same samples), and whether τ is at the edge of the searched span (the minimum may lie beyond it)."""
+    """The best offset of one estimator: τ (s, added to the estimate stamps), the e_α RMSE there, and the input step
+    it is measured in."""
 
     offset_s: float
     rmse_deg: float
-    rmse_at_zero_deg: float
     step_s: float
-    at_edge: bool
 
     @property
     def steps(self) -> float:
@@ -171,10 +169,8 @@ class OffsetSearch:
                 dk = float(np.clip(0.5 * (f[k - 1] - f[k + 1]) / curv, -0.5, 0.5))
                 fk = float(f[k] - 0.25 * (f[k - 1] - f[k + 1]) * dk)
         d_tau = self.taus[1] - self.taus[0]
-        zero = int(np.argmin(np.abs(self.taus)))
         return Offset(offset_s=float(self.taus[k] + dk * d_tau) * 1e-9, rmse_deg=math.sqrt(max(fk, 0.0) / self.n[j]),
-                      rmse_at_zero_deg=math.sqrt(float(f[zero]) / self.n[j]), step_s=self.step_ns * 1e-9,
-                      at_edge=k in (0, len(f) - 1))
+                      step_s=self.step_ns * 1e-9)
 
 
 def search(stamps: NDArray[np.int64], quat_ref: NDArray[np.float64], mask: NDArray[np.bool_],
