@@ -15,6 +15,21 @@ _.enable_cpu_mem_arena
 # dataclass fields written out by name (asdict / getattr in to_dict) into results.csv and results.json
 estimator_name  # riann_ros/evaluation/results.py ResultRow
 max_err_deg  # riann_ros/evaluation/scoring.py Score
+# evo ape's statistics of Score, read by name (Score.stat: getattr of stat_field(error, stat)) and written out
+mean_err_deg
+median_err_deg
+std_err_deg
+min_err_deg
+heading_mean_deg
+heading_median_deg
+heading_std_deg
+heading_min_deg
+heading_max_deg
+total_mean_deg
+total_median_deg
+total_std_deg
+total_min_deg
+total_max_deg
 
 # pytest and launch, in the tests: the module's test marks; a launch substitution's hook; ROS request fields
 pytestmark

@@ -371,10 +371,14 @@ def test_streamed_bag_equals_whole_recording(tmp_path, chunk, t0_ns):
     for ra, rb in zip(streamed.rows, whole.rows, strict=True):
         a, b = ra.to_dict(), rb.to_dict()
         assert list(a) == list(b)  # same columns in the same order
-        for key in ("rmse_deg", "max_err_deg", "heading_rmse_deg", "total_rmse_deg"):
-            assert a[key] == pytest.approx(b[key], abs=1e-6), (a["scenario"], a["estimator"], key)
-        assert {k: v for k, v in a.items() if k not in timing and not k.endswith("_deg")} == {
-            k: v for k, v in b.items() if k not in timing and not k.endswith("_deg")
+        for key in ("rmse_deg", "max_err_deg", "heading_rmse_deg", "total_rmse_deg", "median_err_deg", "std_err_deg",
+                    "heading_median_deg", "total_min_deg", "best_t_offset_rmse_deg"):
+            if key in b:
+                assert a[key] == pytest.approx(b[key], abs=1e-6), (a["scenario"], a["estimator"], key)
+        assert a.get("best_t_offset_s") == pytest.approx(b.get("best_t_offset_s"), abs=1e-9)
+        exact = timing | {"best_t_offset_s"}
+        assert {k: v for k, v in a.items() if k not in exact and not k.endswith("_deg")} == {
+            k: v for k, v in b.items() if k not in exact and not k.endswith("_deg")
         }
     sa, sb = streamed.series, whole.series
     assert sa["sequence"] == sb["sequence"]

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import csv
 import json
+import re
 import shlex
 from pathlib import Path
 
@@ -246,14 +248,14 @@ def test_compare_prints_and_plots_the_difference(two_runs, tmp_path, capsys):
     rb = {(r["sequence"], r["scenario"], r["estimator"]): r["rmse_deg"]
           for r in json.loads((b / "results.json").read_text())["results"]}
     lines = (out / "compare.csv").read_text().splitlines()
-    assert lines[0] == "sequence,scenario,perturbation,rate,estimator,rmse_a_deg,rmse_b_deg,diff_deg"
+    assert lines[0].startswith("sequence,scenario,perturbation,rate,estimator,rmse_a_deg,rmse_b_deg,diff_deg,")
     assert len(lines) - 1 == len(ra) == 3 * 2 * 2
     for line in lines[1:]:
-        seq, scn, _, _, est, va, vb, diff = line.split(",")
+        seq, scn, _, _, est, va, vb, diff = line.split(",")[:8]
         k = (seq, scn, est)
         assert float(va) == pytest.approx(ra[k], abs=1e-6) and float(vb) == pytest.approx(rb[k], abs=1e-6)
         assert float(diff) == pytest.approx(rb[k] - ra[k], abs=1e-5)
-    diffs = [float(x.split(",")[-1]) for x in lines[1:] if ",as-recorded," in x]
+    diffs = [float(x.split(",")[7]) for x in lines[1:] if ",as-recorded," in x]
     assert max(abs(d) for d in diffs) < 1e-9  # the seed draws only the added bias: as-recorded is the same
     mean = np.mean([rb[k] - ra[k] for k in ra if k[1:] == ("partially-restrictive", "madgwick")])
     row = next(ln for ln in text.splitlines() if ln.startswith("madgwick") and "partially-restrictive" in ln)
@@ -274,3 +276,140 @@ def test_compare_errors(two_runs, tmp_path, capsys):
         main(["--compare", str(a), str(b), "some.mcap"])
     assert main(["--compare", str(a), str(b), "--out", str(a)]) == 2  # a holds a run: refused without --force
     assert "already holds the results" in capsys.readouterr().err
+
+
+# -- --compare of any rows, matched by sequence (evo_res) ---------------------------------------------------
+def _rows(run: Path) -> list[dict]:
+    return json.loads((run / "results.json").read_text())["results"]
+
+
+@pytest.fixture(scope="module")
+def params_runs(three, tmp_path_factory) -> tuple[Path, Path, Path]:
+    """Runs on the same three bags: A with madgwick's default β, B with β = 0.1, P clean and jittered."""
+    d = tmp_path_factory.mktemp("params")
+    common = [*map(str, three), "-s", "as-recorded,realistic", "--no-plots", "-q"]
+    assert main([*common, "-e", "madgwick,vqf", "--out", str(d / "a")]) == 0
+    assert main([*common, "-e", "madgwick:beta=0.1,vqf", "--out", str(d / "b")]) == 0
+    assert main([*common, "-e", "madgwick", "-p", "none", "-p", "jitter:10/20/30ms", "--out", str(d / "p")]) == 0
+    return d / "a", d / "b", d / "p"
+
+
+def test_compare_two_runs_with_different_parameters(params_runs, tmp_path, capsys):
+    a, b, _ = params_runs
+    assert main(["--compare", str(a), str(b)]) == 0  # as before: the shared labels pair, the others are listed
+    text = capsys.readouterr().out
+    assert "only in A (no partner in B): 6 row(s)" in text and "madgwick(beta=0.1)" in text
+    assert "--select-a estimator=madgwick --select-b estimator='madgwick(beta=0.1)'" in text
+    out = tmp_path / "cmp"
+    assert main(["--compare", str(a), str(b), "--select-a", "estimator=madgwick", "--select-b",
+                 "estimator=madgwick:beta=0.1", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "A and B differ in estimator" in text
+    assert "estimator A" in text and "estimator B" in text
+    ra = {(r["sequence"], r["scenario"]): r for r in _rows(a) if r["estimator"] == "madgwick"}
+    rb = {(r["sequence"], r["scenario"]): r for r in _rows(b) if r["estimator"] == "madgwick(beta=0.1)"}
+    lines = list(csv.DictReader((out / "compare.csv").open()))
+    assert len(lines) == 3 * 2 == len(ra)
+    for ln in lines:
+        k = (ln["sequence"], ln["scenario"])
+        assert (ln["estimator"], ln["estimator_b"]) == ("madgwick", "madgwick(beta=0.1)")
+        assert float(ln["rmse_a_deg"]) == pytest.approx(ra[k]["rmse_deg"], abs=1e-6)
+        assert float(ln["rmse_b_deg"]) == pytest.approx(rb[k]["rmse_deg"], abs=1e-6)
+        assert float(ln["median_b_deg"]) == pytest.approx(rb[k]["median_err_deg"], abs=1e-6)
+        row = next(x for x in text.splitlines() if x.startswith("madgwick") and f" {ln['sequence']} " in x
+                   and ln["scenario"] in x and "B-A" not in x and x.split()[-1].startswith(("+", "-")))
+        assert f"{rb[k]['rmse_deg'] - ra[k]['rmse_deg']:+.2f}" == row.split()[-1]
+    assert (out / "compare_rmse.svg").is_file()
+    assert 'id="estimator:madgwick → madgwick(beta=0.1)"' in (out / "compare_rmse.svg").read_text()
+
+
+def test_compare_perturbed_against_clean(params_runs, capsys):
+    a, _, p = params_runs
+    # rows of one run: the jittered condition against the clean one, per sequence, scenario and estimator
+    assert main(["--compare", str(p), str(p), "--select-a", "perturbation=none", "--select-b",
+                 "perturbation=jitter:10/20/30ms", "--metric", "median"]) == 0
+    text = capsys.readouterr().out
+    assert "A and B differ in perturbation" in text and "median" in text.splitlines()[4]
+    rows = _rows(p)
+    clean = {(r["sequence"], r["scenario"]): r["median_err_deg"] for r in rows if r["perturbation"] == "none"}
+    jit = {(r["sequence"], r["scenario"]): r["median_err_deg"] for r in rows if r["perturbation"] != "none"}
+    per_seq = [x.split() for x in text.split("\nper sequence\n")[1].split("\n\n")[0].splitlines()[2:]]
+    assert len(per_seq) == len(clean) == 6
+    for cells in per_seq:
+        k = (cells[-4], cells[1])
+        assert cells[-1] == f"{jit[k] - clean[k]:+.2f}"
+    # two runs, one clean, one perturbed only: no selection needed, the perturbation axis is not shared
+    assert main(["--compare", str(a), str(p), "--select-b", "perturbation=jitter:10/20/30ms"]) == 0
+    assert "differ in perturbation" in capsys.readouterr().out
+
+
+def test_compare_selection_errors_and_old_files(params_runs, tmp_path, capsys):
+    a, b, _ = params_runs
+    assert main(["--compare", str(a), str(b), "--select-a", "estimator=kalman"]) == 1
+    assert "A (" in (err := capsys.readouterr().err) and "no row with estimator=kalman" in err and "vqf" in err
+    assert main(["--compare", str(a), str(b), "--select-a", "colour=red"]) == 2
+    assert "FIELD=VALUE" in capsys.readouterr().err
+    assert main(["--compare", str(a), str(b), "--metric", "loudness"]) == 2
+    assert "heading_rmse" in capsys.readouterr().err
+    # a results.json written before the statistics existed: RMSE comparisons work, its missing statistics say so
+    old = tmp_path / "old"
+    old.mkdir()
+    data = json.loads((a / "results.json").read_text())
+    keep = ("rmse_deg", "max_err_deg", "heading_rmse_deg", "total_rmse_deg")
+    data["results"] = [{k: v for k, v in r.items() if not (k.endswith("_deg") or k.endswith("_s")) or k in keep
+                        or k in ("rmse_deg",)} for r in data["results"]]
+    (old / "results.json").write_text(json.dumps(data))
+    assert main(["--compare", str(old), str(a)]) == 0
+    assert "+0.00" in capsys.readouterr().out
+    assert main(["--compare", str(old), str(a), "--metric", "median"]) == 1
+    assert "an older results.json" in capsys.readouterr().err
+
+
+# -- plots: every perturbation condition, fixed colours ---------------------------------------------------
+def _svg_ids(path: Path) -> list[str]:
+    return re.findall(r'id="((?:panel|estimator):[^"]*)"', path.read_text())
+
+
+def _svg_colour(path: Path, gid: str) -> str:
+    """The first colour (a fill or stroke other than black edges) of the SVG group with this id."""
+    text = path.read_text()
+    start = text.index(f'id="{gid}"')
+    group = text[start:text.index("</g>", start)]
+    styles = " ".join(re.findall(r'style="([^"]*)"', group))
+    return next(c for c in re.findall(r"(?:stroke|fill): (#[0-9a-f]{6})", styles) if c != "#000000")
+
+
+def test_every_perturbation_condition_is_plotted(three, tmp_path, capsys):
+    out = tmp_path / "all"
+    args = [*map(str, three[:2]), "-e", "madgwick", "-s", "as-recorded,realistic", "-p", "none", "-p",
+            "jitter:10/20/30ms"]
+    assert main([*args, "--out", str(out), "-q"]) == 0
+    panels = [i for i in _svg_ids(out / "rmse_boxplots.svg") if i.startswith("panel:")]
+    assert panels == ["panel:realistic|none", "panel:as-recorded|none", "panel:realistic|jitter:10/20/30ms",
+                      "panel:as-recorded|jitter:10/20/30ms"]
+    assert sorted(i for i in _svg_ids(out / "error_over_time.svg") if i.startswith("panel:")) == sorted(panels)
+    assert (out / "roll_pitch_s0.svg").is_file() and (out / "roll_pitch_s0_jitter_10_20_30ms.svg").is_file()
+    assert "roll_pitch_s0_jitter_10_20_30ms.png" in (out / "report.md").read_text()
+    chosen = tmp_path / "chosen"  # the user picks the conditions to plot
+    assert main([*args, "--plot-perturb", "jitter:10/20/30ms", "--out", str(chosen), "-q"]) == 0
+    assert [i for i in _svg_ids(chosen / "rmse_boxplots.svg") if i.startswith("panel:")] == [
+        "panel:realistic|jitter:10/20/30ms", "panel:as-recorded|jitter:10/20/30ms"]
+    assert sorted(p.name for p in chosen.glob("roll_pitch_*.svg")) == ["roll_pitch_s0_jitter_10_20_30ms.svg"]
+    assert main([*args, "--plot-perturb", "jitter:5ms", "--out", str(tmp_path / "x"), "-q"]) == 2
+    assert "not an evaluated condition" in capsys.readouterr().err
+
+
+def test_estimator_colours_do_not_depend_on_the_order(three, tmp_path):
+    from riann_ros.evaluation import plots
+
+    colours = []
+    for order in ("madgwick,vqf,madgwick:beta=0.1", "madgwick:beta=0.1,vqf,madgwick"):
+        out = tmp_path / order.replace(":", "_").replace(",", "_")
+        assert main([*map(str, three), "-e", order, "-s", "as-recorded", "--out", str(out), "-q"]) == 0
+        colours.append({(f.name, e): _svg_colour(out / f.name, f"estimator:{e}")
+                        for f in (out / "roll_pitch_s0.svg", out / "rmse_boxplots.svg", out / "error_over_time.svg")
+                        for e in ("madgwick", "vqf", "madgwick(beta=0.1)")})
+    assert colours[0] == colours[1]
+    assert colours[0][("roll_pitch_s0.svg", "madgwick")] == plots.FIXED_COLORS["madgwick"]
+    assert colours[0][("rmse_boxplots.svg", "vqf")] == plots.FIXED_COLORS["vqf"]
+    assert colours[0][("roll_pitch_s0.svg", "madgwick(beta=0.1)")] not in plots.FIXED_COLORS.values()

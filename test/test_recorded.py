@@ -162,7 +162,7 @@ def test_t_offset_decimated_and_late_estimates(copy_with_estimates, capsys):
     # stamps of another clock: no message near any sample, a clear error naming --t-offset
     assert main([str(full), "-e", "madgwick", "--estimate-topic", "/late/imu", "--t-offset", "1000", "-q"]) == 1
     err = capsys.readouterr().err
-    assert "recorded estimate /late/imu: no message near any scored sample" in err and "--t-offset" in err
+    assert "recorded estimate /late/imu: no estimate near any scored sample" in err and "--t-offset" in err
 
 
 def test_estimators_none_scores_only_the_recorded_topic(copy_with_estimates, tmp_path):

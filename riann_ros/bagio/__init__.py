@@ -25,7 +25,8 @@ A "bag" is a rosbag2 directory (``metadata.yaml`` + one storage file) or, for a 
 
 Modules: :mod:`~riann_ros.bagio.layout` (topics, types, :class:`BagError`, the type store, the info record),
 :mod:`~riann_ros.bagio.cdr` (vectorised CDR serialising and parsing), :mod:`~riann_ros.bagio.atomic`
-(refuse-overwrite and atomic rename), :mod:`~riann_ros.bagio.read` and :mod:`~riann_ros.bagio.write`.
+(refuse-overwrite and atomic rename), :mod:`~riann_ros.bagio.read` and :mod:`~riann_ros.bagio.write`;
+:mod:`~riann_ros.bagio.repair` for bags cut off by a crash or a full disk.
 Everything public is re-exported here: use ``from riann_ros import bagio; bagio.read_recording(...)``.
 """
 

@@ -63,8 +63,24 @@ def _open_reader(path: Path):
     except BagError:
         raise
     except Exception as e:
-        raise BagError(path, f"cannot open bag ({type(e).__name__}: {e})") from e
+        raise _truncated_error(path) or BagError(path, f"cannot open bag ({type(e).__name__}: {e})") from e
     return reader
+
+
+def _truncated_error(path: Path) -> BagError | None:
+    """For a bag that does not open because its recording was cut off: what is readable and how to use it."""
+    from riann_ros.bagio import repair
+
+    try:
+        t = repair.truncation(path)
+    except Exception:
+        return None
+    if t is None:
+        return None
+    if not t.total:
+        return BagError(path, repair.describe(t))
+    return BagError(path, f"{repair.describe(t)}. Score the readable part with riann-bag-eval --salvage, or write a "
+                    f"repaired copy: {repair.repair_command(path)}")
 
 
 @contextmanager

@@ -8,6 +8,7 @@ Examples::
     riann-bag-convert room1/ --ground-truth room1_gt.csv -o room1.mcap  # open_vins-style ground truth
     riann-bag-convert --format csv imu.csv --time-unit ms --gyr-unit deg/s -o imu.mcap
     riann-bag-convert --format synthetic --rate 200 --duration 60 --seed 1 -o bags/synthetic.mcap
+    riann-bag-convert --repair cut.mcap -o cut_repaired.mcap            # a recording cut off by a crash
 
 An output ending in ``.mcap`` is a single MCAP file; any other output is a rosbag2 directory. With
 several inputs (or a folder of BROAD/CSV files) the output is a folder receiving one bag per input,
@@ -97,6 +98,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frame-id", default=defaults.IMU_FRAME, help=f"IMU frame_id (default {defaults.IMU_FRAME})")
     p.add_argument("--name", help="sequence name (default: from the input)")
     p.add_argument("--force", action="store_true", help="replace existing output bags")
+    p.add_argument("--repair", action="store_true",
+                   help="no conversion: write the readable part of a bag cut off by a crash or a full disk (an MCAP "
+                   "file without its footer, a sqlite3 bag shorter than its header says) as a complete bag -o (a "
+                   ".mcap file; for a sqlite3 input also a rosbag2 directory), saying how many messages it recovered")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.add_argument(
         "--force-units",
@@ -373,9 +378,30 @@ def _compression(args: argparse.Namespace) -> str | None:
     return None if args.compression == "none" else args.compression
 
 
+def _repair(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    """``--repair IN -o OUT``: the readable part of a cut-off bag as a complete bag."""
+    from riann_ros.bagio import repair
+
+    if len(args.inputs) != 1:
+        parser.error("--repair takes one bag (the cut-off .mcap, .db3 or bag directory)")
+    src = args.inputs[0]
+    try:
+        t = repair.repair(src, args.output, force=args.force)
+    except KeyboardInterrupt:
+        print(f"riann-bag-convert: interrupted while repairing {src}; no partial bag left", file=sys.stderr)
+        return _INTERRUPTED
+    except (OSError, ValueError, bagio.BagError) as e:
+        print(f"riann-bag-convert: error: {e}", file=sys.stderr)  # the messages name the file
+        return _FAILED
+    print(f"{src} → {args.output}: repaired; {repair.describe(t)}; all of them written", file=sys.stderr)
+    return _OK
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.repair:
+        return _repair(parser, args)
     compression = _compression(args)
     out: Path = args.output
 

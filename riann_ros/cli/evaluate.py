@@ -19,7 +19,6 @@ This module only parses the command line and prints; the work is in :mod:`riann_
 from __future__ import annotations
 
 import argparse
-import math
 import re
 import shlex
 import sys
@@ -28,16 +27,11 @@ from pathlib import Path
 
 from riann_ros import defaults
 from riann_ros import evaluation as ev
-from riann_ros.evaluation import outdir, perturb, report
+from riann_ros.cli import eval_inputs
+from riann_ros.evaluation import outdir, perturb, report, seq_tables
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
-
-
-def bagio_imu_topic() -> str:
-    from riann_ros.bagio.layout import IMU_TOPIC
-
-    return IMU_TOPIC
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -56,10 +50,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("inputs", nargs="*", metavar="BAG",
                    help="bags (.mcap, .db3, bag directories) or BROAD .hdf5/.mat files (CSV files and EuRoC folders: "
                    "convert them with riann-bag-convert first; the error message says how)")
-    p.add_argument("--compare", nargs=2, metavar=("A", "B"), type=Path, default=None,
+    c = p.add_argument_group("comparing saved runs (evo_res style)")
+    c.add_argument("--compare", nargs=2, metavar=("A", "B"), type=Path, default=None,
                    help="no evaluation: the difference B − A of two saved runs (results.json files or their --out "
-                   "folders) per estimator × scenario × perturbation (mean/median/max) and per sequence; with --out, "
-                   "compare.csv and the plot compare_rmse")
+                   "folders; the same run twice to compare rows of one run), paired by sequence and by every axis "
+                   "(estimator, scenario, perturbation, rate) on which A and B share a value; per group "
+                   "(mean/median/max) and per sequence; with --out, compare.csv and the plot compare_rmse")
+    c.add_argument("--select-a", action="append", default=[], metavar="FIELD=VALUE",
+                   help="--compare: only A's rows with this value (estimator, scenario, perturbation, rate, sequence, "
+                   "dataset, sensors; estimator: a table label or a spec as for -e). Repeatable")
+    c.add_argument("--select-b", action="append", default=[], metavar="FIELD=VALUE",
+                   help="--compare: only B's rows with this value (as --select-a)")
+    c.add_argument("--select", action="append", default=[], metavar="FIELD=VALUE",
+                   help="--compare: only rows with this value, on both sides")
+    c.add_argument("--metric", default="rmse",
+                   help="--compare: the per-sequence statistic compared: rmse (default), mean, median, std, min, max "
+                   "of e_α; heading_rmse, heading_mean, …, total_rmse, … where scored")
     p.add_argument("--estimators", "-e", default=None,
                    help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed); 'none': only "
                    "the --estimate-topic estimates")
@@ -73,8 +79,21 @@ def build_parser() -> argparse.ArgumentParser:
                    "truth, beside the built-in estimators; matched to the IMU samples by stamp (slerp between "
                    "messages). It is the recording as it is, so it is scored in the as-recorded scenario only, at the "
                    "native rate, unperturbed. Repeatable")
+    b.add_argument("--estimate-file", action="append", default=[], metavar="FILE[:LABEL]",
+                   help="score an estimate in a trajectory file against the input's reference, like --estimate-topic: "
+                   "a TUM file (t tx ty tz qx qy qz qw, t in seconds, no header) or a CSV with a header: a time "
+                   "column (timestamp, time or t; its unit in the name, e.g. time[s], else ns) and qw, qx, qy, qz "
+                   "(the IMU frame's orientation in a z-up world, as the reference). Labelled LABEL (default: the "
+                   "file name). With several inputs a file belongs to the input whose name starts its name "
+                   "(run1.mcap: run1_vins.tum). Repeatable")
+    b.add_argument("--estimate-cols", default=None, metavar="TIME,QW,QX,QY,QZ",
+                   help="the --estimate-file columns, for a CSV in another layout")
+    b.add_argument("--estimate-time-unit", default=None, choices=("s", "ms", "us", "ns"),
+                   help="the time unit of the --estimate-file stamps (default: from the column name; ns for a CSV, "
+                   "s for a TUM file)")
     b.add_argument("--t-offset", type=float, default=0.0, metavar="SECONDS",
-                   help="added to the stamps of the --estimate-topic messages before matching (default 0)")
+                   help="added to the stamps of the --estimate-topic and --estimate-file estimates before matching "
+                   "(default 0)")
     b.add_argument("--max-gap", type=float, default=defaults.MAX_GAP_S, metavar="SECONDS",
                    help="slerp a topic between two messages at most this far apart, hold the nearer one within half "
                    "of it, else the sample has none (not scored, counted as unestimated); --estimate-topic and "
@@ -90,6 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="evaluate under this condition too: 'none', or perturbations joined with '+': "
                    f"{perturb.accepted_forms()}; repeatable, each one a condition (default: none; "
                    "docs/evaluation.md#perturbations)")
+    p.add_argument("--salvage", action="store_true",
+                   help="score the readable part of a bag cut off by a crash or a full disk (an MCAP file without its "
+                   "footer, a sqlite3 file shorter than its header says), saying how much was recovered; without it "
+                   "such a bag fails with that count (riann-bag-convert --repair writes a repaired copy)")
     p.add_argument("--rest", default=None, metavar="START:END",
                    help="the initial rest, in seconds from the first sample, whose mean gyro is removed as the turn-on "
                    "bias (default: detected from the signals before the first scored sample; see docs/evaluation.md)")
@@ -107,6 +130,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--use-mag", choices=USE_MAG_CHOICES, default="auto",
                    help="the magnetometer (/imu/mag), as the nodes' use_mag: auto (default) = every estimator runs 9D "
                    "where the recording has a field, with heading and total error in the results; false = 6D only")
+    p.add_argument("--offset-steps", type=int, default=ev.OFFSET_STEPS, metavar="STEPS",
+                   help="per estimator and sequence, find the time offset (added to the estimate stamps, like "
+                   "--t-offset) that minimises the e_α RMSE within ± STEPS steps of the stream, and the RMSE there; "
+                   f"in the as-recorded scenario, else the first (default {ev.OFFSET_STEPS}; 0: no search)")
+    p.add_argument("--plot-perturb", action="append", default=[], metavar="CONDITION",
+                   help="plot this --perturb condition (repeatable; default: every condition, each in panels or "
+                   "figures of its own)")
     p.add_argument("--plot-sequence", default=None,
                    help="sequence for the error-over-time and roll/pitch plots (default: the first input); 'all': "
                    "a roll/pitch figure (roll_pitch_<sequence>) for every sequence")
@@ -171,12 +201,14 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         ev.parse_grid(t)
     if args.jobs < 1:
         raise ValueError("--jobs must be at least 1")
+    if not 0 <= args.offset_steps <= 50:
+        raise ValueError("--offset-steps must be 0 (no search) to 50")
     have = ev.available_estimators()
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
     only_recorded = spec_text.strip().lower() == "none"
-    topics = _topics(args)
-    if only_recorded and not topics.estimates:
-        raise ValueError("--estimators none needs at least one --estimate-topic")
+    topics = eval_inputs.topics(args)
+    if only_recorded and not (topics.estimates or topics.files):
+        raise ValueError("--estimators none needs at least one --estimate-topic or --estimate-file")
     settings = ev.EvalSettings(
         estimators=[] if only_recorded else ev.parse_estimators(spec_text),
         scenarios=ev.parse_scenarios(args.scenarios or (ev.AS_RECORDED if only_recorded else "all")),
@@ -186,52 +218,28 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         with_heading=args.heading,
         use_mag=args.use_mag,
         series_for=None if args.no_plots or not args.out else (args.plot_sequence or "*"),
+        series_conditions=_plotted(args),
         keep_estimates=args.write_estimates is not None,
         rest=ev.parse_rest(args.rest) if args.rest else None,
         topics=topics,
+        offset_steps=args.offset_steps,
+        salvage=args.salvage,
     )
-    _check_recorded(settings)
+    eval_inputs.check_recorded(settings)
     return settings
 
 
-def _topic(name: str) -> str:
-    name = name.strip()
-    if not name or name == "/":
-        raise ValueError("empty topic name")
-    return name if name.startswith("/") else "/" + name
-
-
-def _topics(args: argparse.Namespace) -> ev.BagTopics:
-    """Which bag topics to read (ValueError on bad values)."""
-    estimates = tuple(dict.fromkeys(_topic(t) for t in args.estimate_topic))
-    if not (args.max_gap > 0 and math.isfinite(args.max_gap)):
-        raise ValueError(f"--max-gap must be a positive number of seconds, got {args.max_gap:g}")
-    if not math.isfinite(args.t_offset):
-        raise ValueError("--t-offset must be a finite number of seconds")
-    return ev.BagTopics(
-        imu=_topic(args.imu_topic) if args.imu_topic else bagio_imu_topic(),
-        reference=_topic(args.ground_truth_topic) if args.ground_truth_topic else None,
-        estimates=estimates,
-        t_offset_s=args.t_offset,
-        max_gap_s=args.max_gap,
-    )
-
-
-def _check_recorded(settings: ev.EvalSettings) -> None:
-    """Recorded estimates are the recording as it is: they need the as-recorded scenario, the native rate and the
-    unperturbed condition among those asked for (ValueError otherwise)."""
-    if not settings.topics.estimates:
-        return
-    missing = []
-    if ev.AS_RECORDED not in settings.scenarios:
-        missing.append("the as-recorded scenario in --scenarios")
-    if None not in settings.rates:
-        missing.append("native in --rates")
-    if not any(not c.parts for c in settings.conditions):
-        missing.append("none in --perturb")
-    if missing:
-        raise ValueError("--estimate-topic estimates exist only for the recording as it is (as-recorded scenario, "
-                         f"native rate, no perturbation): add {' and '.join(missing)}")
+def _plotted(args: argparse.Namespace) -> tuple[str, ...] | None:
+    """The condition labels of --plot-perturb (None: every condition); ValueError for one not evaluated."""
+    if not args.plot_perturb:
+        return None
+    evaluated = [ev.parse_condition(c).label for c in args.perturb] or [perturb.NONE]
+    labels = tuple(ev.parse_condition(c).label for c in args.plot_perturb)
+    unknown = [lbl for lbl in labels if lbl not in evaluated]
+    if unknown:
+        raise ValueError(f"--plot-perturb {unknown[0]} is not an evaluated condition (--perturb: "
+                         f"{', '.join(evaluated)})")
+    return labels
 
 
 def _tune(args: argparse.Namespace, sources: list[str], settings: ev.EvalSettings) -> list[dict]:
@@ -288,9 +296,15 @@ def _write_estimates(results: list[ev.SequenceResult], out_dir: Path, force: boo
 
 def _print_summary(rep: report.Report, live: bool) -> None:
     print(report.format_table(rep.summary))
-    nine = report.format_heading_table(rep.rows)
+    nine = seq_tables.format_heading_table(rep.rows)
     if nine:
         print("\n" + nine)
+    for err in ev.ERRORS:
+        table = seq_tables.format_stats_table(rep.rows, err, limit=report.PRINT_ROWS)
+        if table:
+            print("\n" + table)
+    for note in rep.timing_notes:
+        print(f"\ntiming: {note}")
     rows = rep.rows
     if live and rows:
         lost: dict[str, list[int]] = {}
@@ -347,13 +361,22 @@ def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
 def _compare(args: argparse.Namespace) -> int:
     """``--compare A B``: print (and with --out write) the difference of two saved runs; no estimator runs."""
     from riann_ros.evaluation import compare as cp
+    from riann_ros.evaluation import compare_text
 
     try:
-        cmp = cp.compare(cp.load(args.compare[0]), cp.load(args.compare[1]))
+        both = cp.parse_selection(args.select)
+        sel_a = cp.Selection(both.items + cp.parse_selection(args.select_a).items)
+        sel_b = cp.Selection(both.items + cp.parse_selection(args.select_b).items)
+        metric = cp.parse_metric(args.metric)
+    except ValueError as exc:
+        _err(str(exc))
+        return 2
+    try:
+        cmp = cp.compare(cp.load(args.compare[0]), cp.load(args.compare[1]), sel_a, sel_b, metric)
     except ev.EvalError as exc:
         _err(str(exc))
         return 1
-    print(cp.format_comparison(cmp))
+    print(compare_text.format_comparison(cmp))
     if args.out:
         try:
             files = cp.write_comparison(args.out, cmp, plots=not args.no_plots, replace=args.force)
@@ -379,6 +402,8 @@ def _main(argv: list[str] | None) -> int:
         return _compare(args)
     if not args.inputs:
         parser.error("no input given (bags or BROAD files; or --compare A B)")
+    if args.select or args.select_a or args.select_b or args.metric != "rmse":
+        parser.error("--select, --select-a, --select-b and --metric belong to --compare A B")
     try:
         settings = _settings(args)
         _check_out(args)

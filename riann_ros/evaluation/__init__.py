@@ -17,6 +17,8 @@ Reference: docs/evaluation.md.
 
 from riann_ros.evaluation.aggregate import ALL_DATASETS, Group, aggregate, best_of, rate_order, tune
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.offsets import STEPS as OFFSET_STEPS
+from riann_ros.evaluation.offsets import timing_notes
 from riann_ros.evaluation.perturb import Condition, parse_condition, parse_perturbation
 from riann_ros.evaluation.rest import NO_REST_WARNING, Rest, parse_rest
 from riann_ros.evaluation.results import (
@@ -45,11 +47,12 @@ from riann_ros.evaluation.scenarios import (
     scenario_recording,
     sequence_seed,
 )
-from riann_ros.evaluation.scoring import Accumulator, Score, score
+from riann_ros.evaluation.scoring import ERRORS, STATS, Accumulator, ErrorStats, Score, score, stat_field
 from riann_ros.evaluation.sources import (
     BROAD_SUFFIXES,
     BagTopics,
     Chunk,
+    EstimateFile,
     Source,
     input_hint,
     load_recording,
@@ -71,18 +74,23 @@ __all__ = [
     "AS_RECORDED",
     "BIAS_STD_DPS",
     "BROAD_SUFFIXES",
+    "ERRORS",
     "NATIVE",
     "NO_REST_WARNING",
+    "OFFSET_STEPS",
     "PAPER_SCENARIOS",
     "PARTIAL",
     "REALISTIC",
     "RECORDED",
     "RESTRICTIVE",
     "SCENARIOS",
+    "STATS",
     "Accumulator",
     "BagTopics",
     "Chunk",
     "Condition",
+    "ErrorStats",
+    "EstimateFile",
     "EstimatorSpec",
     "EvalError",
     "EvalSettings",
@@ -120,6 +128,8 @@ __all__ = [
     "scenario_recording",
     "score",
     "sequence_seed",
+    "stat_field",
     "summarise",
+    "timing_notes",
     "tune",
 ]

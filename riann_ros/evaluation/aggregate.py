@@ -108,7 +108,7 @@ def tune(text: str, sources: Sequence[str], scenario: str, seed: int, jobs: int 
     uses."""
     name, grid = parse_grid(text)
     specs = grid_specs(name, grid)
-    settings = EvalSettings(estimators=specs, scenarios=[scenario], seed=seed)
+    settings = EvalSettings(estimators=specs, scenarios=[scenario], seed=seed, offset_steps=0)  # no offset search
     if like is not None:
         settings.topics = replace(like.topics, estimates=())
         settings.rest, settings.chunk, settings.use_mag = like.rest, like.chunk, like.use_mag

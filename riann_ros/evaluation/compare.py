@@ -1,29 +1,113 @@
-"""Two saved runs side by side, evo_res style (``riann-bag-eval --compare A/results.json B/results.json``; ROS-free).
+"""Saved runs side by side, evo_res style (``riann-bag-eval --compare A B``; ROS-free).
 
-Rows of the two results.json files are matched by sequence × scenario × perturbation × rate × estimator; the
-difference is B − A of the per-sequence RMSE. Per estimator × scenario × perturbation (× rate when several): n,
-mean / median / max of A and of B over the matched sequences and their differences; and per sequence. Rows in
-one run only are counted and listed, not compared. No estimator runs.
+A and B are results.json files of riann-bag-eval (or their ``--out`` folders; the same run twice to compare rows of
+one run), each narrowed by selections (``--select-a estimator=madgwick``, ``--select-b perturbation=jitter:10ms``,
+``--select scenario=as-recorded`` for both; :func:`parse_selection`).
+
+Matching: rows always pair by sequence. Of the other axes — scenario, perturbation, rate, estimator — those on
+which A and B share a value also have to agree (so two runs of the same settings pair row by row, as before);
+an axis whose values A and B do not share at all (``madgwick`` in A, ``madgwick(beta=0.1)`` in B; a clean run and a
+perturbed one) is not matched, and each side's value is shown. A statistic (``--metric``: ``rmse`` by default, or
+another of evo ape's mean, median, std, min, max; heading and total errors where scored) is compared as B − A: per
+group n and mean / median / max over the sequences of A, of B and of B − A; per sequence A, B and B − A, and every
+statistic of e_α; rows of one side that found no partner are counted. No estimator runs.
 """
 
 from __future__ import annotations
 
 import csv
 import json
+import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from riann_ros.evaluation import plots as pl
-from riann_ros.evaluation.aggregate import rate_order, scenario_order
+from riann_ros.evaluation.aggregate import rate_label, rate_order, scenario_order
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.outdir import prepare_out
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, ResultRow
+from riann_ros.evaluation.scoring import ERRORS, STATS, stat_field
 
-Key = tuple[str, str, str, str | float, str]  # sequence, scenario, perturbation, rate, estimator
-Group = tuple[str, str, str, str | float]  # estimator, scenario, perturbation, rate
+AXES = ("estimator", "scenario", "perturbation", "rate")  # matched when A and B share a value
+SELECT_FIELDS = ("sequence", "dataset", "sensors", *AXES)
+PRINT_PAIRS = 40  # the per-sequence statistics are printed for at most this many pairs (all in compare.csv)
+
+
+def metrics() -> list[str]:
+    """``--metric`` names: ``rmse`` … ``max`` (e_α), ``heading_rmse`` …, ``total_rmse`` …"""
+    return [st if err == "inclination" else f"{err}_{st}" for err in ERRORS for st in STATS]
+
+
+def parse_metric(text: str) -> tuple[str, str]:
+    """``"median"`` → ("inclination", "median"); ``"heading_rmse"`` → ("heading", "rmse")."""
+    t = text.strip().lower().replace("-", "_")
+    for err in ERRORS:
+        for st in STATS:
+            if t == (st if err == "inclination" else f"{err}_{st}"):
+                return err, st
+    raise ValueError(f"unknown --metric {text!r}; known: {', '.join(metrics())}")
+
+
+@dataclass(frozen=True)
+class Selection:
+    """``field=value`` pairs a side's rows must match (``rate``: ``native`` or Hz; ``estimator``: a label of the
+    tables, e.g. ``madgwick(beta=0.1)``, or a spec as given to ``-e``, e.g. ``madgwick:beta=0.1``)."""
+
+    items: tuple[tuple[str, str], ...] = ()
+
+    def text(self) -> str:
+        return ", ".join(f"{k}={v}" for k, v in self.items)
+
+
+def parse_selection(texts: Iterable[str]) -> Selection:
+    """``["estimator=madgwick", "perturbation=none"]`` → :class:`Selection` (ValueError naming the fields)."""
+    items = []
+    for t in texts:
+        key, sep, value = t.partition("=")
+        key = key.strip().lower()
+        if not sep or key not in SELECT_FIELDS or not value.strip():
+            raise ValueError(f"bad selection {t!r}: expected FIELD=VALUE with FIELD one of {', '.join(SELECT_FIELDS)}")
+        items.append((key, value.strip()))
+    return Selection(tuple(items))
+
+
+def _spec_label(value: str) -> str | None:
+    """The table label of an estimator spec as given to ``-e`` (``madgwick:beta=0.1`` → ``madgwick(beta=0.1)``)."""
+    from riann_ros.evaluation.specs import parse_estimator
+
+    try:
+        return parse_estimator(value).label
+    except (ValueError, ImportError):
+        return None
+
+
+def _value(r: ResultRow, key: str) -> str:
+    v = getattr(r, key)
+    return rate_label(v) if key == "rate" else str(v)
+
+
+def select(rows: Sequence[ResultRow], sel: Selection, side: str) -> list[ResultRow]:
+    """The rows matching every item of ``sel``; EvalError naming what the side has when an item matches none."""
+    out = list(rows)
+    for key, value in sel.items:
+        have = list(dict.fromkeys(_value(r, key) for r in out))
+        want = value
+        if key == "estimator" and value not in have:
+            want = _spec_label(value) or value
+        elif key == "rate" and value.lower() != NATIVE:
+            try:
+                want = rate_label(float(value.lower().removesuffix("hz").strip()))
+            except ValueError:
+                want = value
+        kept = [r for r in out if _value(r, key) == want]
+        if not kept:
+            raise EvalError(f"{side}: no row with {key}={value} (its {key} values: {', '.join(have) or 'none'})")
+        out = kept
+    return out
 
 
 @dataclass
@@ -61,30 +145,47 @@ def load(path: str | Path) -> Saved:
     return Saved(p, run_label(p), str((data.get("settings") or {}).get("command", "")), rows)
 
 
-def key(r: ResultRow) -> Key:
-    return (r.sequence, r.scenario, r.perturbation, r.rate, r.estimator)
+Side = tuple[str, str, str, str | float]  # estimator, scenario, perturbation, rate of one side's row
+
+
+def side_of(r: ResultRow) -> Side:
+    return (r.estimator, r.scenario, r.perturbation, r.rate)
 
 
 @dataclass
 class Pair:
-    key: Key
-    a: float
-    b: float
+    """A row of A and a row of B on the same sequence."""
+
+    sequence: str
+    a: ResultRow
+    b: ResultRow
+    metric: tuple[str, str] = ("inclination", "rmse")
+
+    @property
+    def va(self) -> float:
+        return pair_stat(self.a, self.metric)
+
+    @property
+    def vb(self) -> float:
+        return pair_stat(self.b, self.metric)
 
     @property
     def diff(self) -> float:
-        return self.b - self.a
+        return self.vb - self.va
+
+
+def pair_stat(r: ResultRow, metric: tuple[str, str]) -> float:
+    v = r.score.stat(*metric)
+    return float("nan") if v is None else v
 
 
 @dataclass
 class GroupDiff:
-    """The statistics of A and B over the sequences both runs have, for one estimator × scenario × perturbation ×
-    rate."""
+    """The statistics of A and B over the sequences of one group: the same A side and B side (estimator, scenario,
+    perturbation, rate)."""
 
-    estimator: str
-    scenario: str
-    perturbation: str
-    rate: str | float
+    a_side: Side
+    b_side: Side
     n: int
     a: dict[str, float]  # mean, median, max
     b: dict[str, float]
@@ -92,29 +193,59 @@ class GroupDiff:
     def diff(self, stat: str) -> float:
         return self.b[stat] - self.a[stat]
 
+    # the side's fields, for the axes both sides share (the same value on either side)
+    @property
+    def estimator(self) -> str:
+        return self.a_side[0]
+
+    @property
+    def scenario(self) -> str:
+        return self.a_side[1]
+
+    @property
+    def perturbation(self) -> str:
+        return self.a_side[2]
+
+    @property
+    def rate(self) -> str | float:
+        return self.a_side[3]
+
 
 @dataclass
 class Comparison:
     a: Saved
     b: Saved
+    matched: tuple[str, ...] = AXES  # the axes A and B had to agree on (besides the sequence)
+    metric: tuple[str, str] = ("inclination", "rmse")
     pairs: list[Pair] = field(default_factory=list)
-    only_a: list[Key] = field(default_factory=list)
-    only_b: list[Key] = field(default_factory=list)
+    only_a: list[ResultRow] = field(default_factory=list)
+    only_b: list[ResultRow] = field(default_factory=list)
+    selections: tuple[Selection, Selection] = (Selection(), Selection())
+    without_metric: int = 0  # pairs left out: a side without the statistic (an older file, a 6D heading)
+
+    @property
+    def differing(self) -> tuple[str, ...]:
+        """The axes not matched: each side's value is shown."""
+        return tuple(a for a in AXES if a not in self.matched)
 
     def groups(self) -> list[GroupDiff]:
-        by: dict[Group, list[Pair]] = {}
+        by: dict[tuple[Side, Side], list[Pair]] = {}
         for p in self.pairs:
-            _, scn, prt, rate, est = p.key
-            by.setdefault((est, scn, prt, rate), []).append(p)
-        ests = list(dict.fromkeys(p.key[4] for p in self.pairs))
-        scns = scenario_order(p.key[1] for p in self.pairs)
-        prts = list(dict.fromkeys(p.key[2] for p in self.pairs))
+            by.setdefault((side_of(p.a), side_of(p.b)), []).append(p)
+        ests = list(dict.fromkeys(k[i][0] for k in by for i in (0, 1)))
+        scns = scenario_order(k[i][1] for k in by for i in (0, 1))
+        prts = list(dict.fromkeys(k[i][2] for k in by for i in (0, 1)))
+
+        def order(k: tuple[Side, Side]) -> tuple:
+            (ea, sa, pa, ra), (eb, sb, pb, rb) = k
+            return (scns.index(sa), scns.index(sb), prts.index(pa), prts.index(pb), rate_order(ra), rate_order(rb),
+                    ests.index(ea), ests.index(eb))
+
         out = []
-        for (est, scn, prt, rate), ps in sorted(
-                by.items(), key=lambda kv: (scns.index(kv[0][1]), prts.index(kv[0][2]), rate_order(kv[0][3]),
-                                            ests.index(kv[0][0]))):
-            a, b = np.array([p.a for p in ps]), np.array([p.b for p in ps])
-            out.append(GroupDiff(est, scn, prt, rate, len(ps), _stats(a), _stats(b)))
+        for k in sorted(by, key=order):
+            ps = by[k]
+            out.append(GroupDiff(k[0], k[1], len(ps), _stats(np.array([p.va for p in ps])),
+                                 _stats(np.array([p.vb for p in ps]))))
         return out
 
 
@@ -122,89 +253,110 @@ def _stats(v: np.ndarray) -> dict[str, float]:
     return {"mean": float(np.mean(v)), "median": float(np.median(v)), "max": float(np.max(v))}
 
 
-def compare(a: Saved, b: Saved) -> Comparison:
-    """Match the rows of ``a`` and ``b``; EvalError when they have no row in common."""
-    ra, rb = {key(r): r for r in a.rows}, {key(r): r for r in b.rows}
-    cmp = Comparison(a, b)
-    cmp.pairs = [Pair(k, ra[k].rmse_deg, rb[k].rmse_deg) for k in ra if k in rb]
-    cmp.only_a = [k for k in ra if k not in rb]
-    cmp.only_b = [k for k in rb if k not in ra]
+def _shared_axes(ra: Sequence[ResultRow], rb: Sequence[ResultRow]) -> tuple[str, ...]:
+    """The axes on which A and B share at least one value: those have to agree."""
+    return tuple(ax for ax in AXES if {getattr(r, ax) for r in ra} & {getattr(r, ax) for r in rb})
+
+
+def compare(a: Saved, b: Saved, sel_a: Selection = Selection(), sel_b: Selection = Selection(),
+            metric: tuple[str, str] = ("inclination", "rmse")) -> Comparison:
+    """Pair the (selected) rows of ``a`` and ``b`` by sequence and the axes they share; EvalError when no pair."""
+    ra, rb = select(a.rows, sel_a, f"A ({a.path})"), select(b.rows, sel_b, f"B ({b.path})")
+    matched = _shared_axes(ra, rb)
+    cmp = Comparison(a, b, matched, metric, selections=(sel_a, sel_b))
+
+    def key(r: ResultRow) -> tuple:
+        return (r.sequence, *(getattr(r, ax) for ax in matched))
+
+    by_b: dict[tuple, list[ResultRow]] = {}
+    for r in rb:
+        by_b.setdefault(key(r), []).append(r)
+    keys_a = {key(r) for r in ra}
+    pairs = [Pair(r.sequence, r, s, metric) for r in ra for s in by_b.get(key(r), [])]
+    cmp.pairs = [p for p in pairs if math.isfinite(p.va) and math.isfinite(p.vb)]
+    cmp.without_metric = len(pairs) - len(cmp.pairs)
+    cmp.only_a = [r for r in ra if key(r) not in by_b]
+    cmp.only_b = [r for r in rb if key(r) not in keys_a]
     if not cmp.pairs:
-        raise EvalError(f"{a.path} and {b.path} have no result in common (same sequence, scenario, perturbation, "
-                        "rate and estimator)")
+        if pairs:
+            raise EvalError(f"{a.path} and {b.path}: no pair of rows has the {metric_text(metric)} (an older "
+                            "results.json, or a heading statistic of 6D rows)")
+        seq_a, seq_b = sorted({r.sequence for r in ra}), sorted({r.sequence for r in rb})
+        raise EvalError(f"{a.path} and {b.path} have no result in common: rows pair by sequence"
+                        + (f" and by {', '.join(matched)}" if matched else "")
+                        + f"; sequences in A: {', '.join(seq_a[:6])}; in B: {', '.join(seq_b[:6])}")
     return cmp
 
 
-def _rate(rate: str | float) -> str:
+def metric_text(metric: tuple[str, str]) -> str:
+    err, st = metric
+    return {"inclination": "attitude (inclination e_α)", "heading": "heading", "total": "total angle"}[err] + (
+        " RMSE" if st == "rmse" else f" {st} error")
+
+
+def rate_text(rate: str | float) -> str:
     return str(rate) if rate == NATIVE else f"{float(rate):g} Hz"
 
 
-def _table(headers: list[str], rows: list[list[str]], numeric: set[str]) -> list[str]:
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(headers)]
-
-    def fmt(row: list[str]) -> str:
-        return "  ".join(c.rjust(w) if h in numeric else c.ljust(w) for c, w, h in zip(row, widths, headers,
-                                                                                       strict=True))
-
-    return [fmt(headers), "  ".join("-" * w for w in widths), *(fmt(r) for r in rows)]
+def side_text(side: Side, axis: str) -> str:
+    v = side[AXES.index(axis)]
+    return rate_text(v) if axis == "rate" else str(v)
 
 
-def format_comparison(cmp: Comparison) -> str:
-    """The text of ``--compare``: per group, then per sequence; B − A, negative = B better."""
-    groups = cmp.groups()
-    prt = len({g.perturbation for g in groups}) > 1 or any(g.perturbation != NONE for g in groups)
-    multi = len({g.rate for g in groups}) > 1
-    head = ["estimator", "scenario", *(["perturbation"] if prt else []), *(["rate"] if multi else []), "n"]
-    stats = ("mean", "median", "max")
-    headers = head + [f"{s} {x}" for s in stats for x in ("A", "B", "B-A")]
-    rows = [
-        [g.estimator, g.scenario, *([g.perturbation] if prt else []), *([_rate(g.rate)] if multi else []), str(g.n)]
-        + [f"{v:+.2f}" if x == "B-A" else f"{v:.2f}" for s in stats
-           for x, v in (("A", g.a[s]), ("B", g.b[s]), ("B-A", g.diff(s)))]
-        for g in groups
-    ]
-    numeric = {"n", *headers[len(head):]}
-    out = [f"A = {cmp.a.label}: {cmp.a.path}" + (f"  ({cmp.a.command})" if cmp.a.command else ""),
-           f"B = {cmp.b.label}: {cmp.b.path}" + (f"  ({cmp.b.command})" if cmp.b.command else ""), "",
-           "attitude RMSE e_α (°) per sequence, B − A (negative: B is better)",
-           *_table(headers, rows, numeric), "", "per sequence"]
-    seq_rows = [[p.key[4], p.key[1], *([p.key[2]] if prt else []), *([_rate(p.key[3])] if multi else []), p.key[0],
-                 f"{p.a:.2f}", f"{p.b:.2f}", f"{p.diff:+.2f}"] for p in _ordered(cmp)]
-    out += _table([*head[:-1], "sequence", "A", "B", "B-A"], seq_rows, {"A", "B", "B-A"})
-    for name, keys in (("A", cmp.only_a), ("B", cmp.only_b)):
-        if keys:
-            shown = ", ".join(_key_text(k) for k in keys[:5]) + (" …" if len(keys) > 5 else "")
-            out.append(f"only in {name} (not compared): {len(keys)} row(s): {shown}")
-    return "\n".join(out)
+def ordered_pairs(cmp: Comparison) -> list[Pair]:
+    order = {(g.a_side, g.b_side): i for i, g in enumerate(cmp.groups())}
+    return sorted(cmp.pairs, key=lambda p: order[(side_of(p.a), side_of(p.b))])
 
 
-def _key_text(k: Key) -> str:
-    """``sequence/scenario[/perturbation][/rate]/estimator``."""
-    seq, scn, prt, rate, est = k
-    return "/".join([seq, scn, *([prt] if prt != NONE else []), *([_rate(rate)] if rate != NATIVE else []), est])
-
-
-def _ordered(cmp: Comparison) -> list[Pair]:
-    order = {(g.estimator, g.scenario, g.perturbation, g.rate): i for i, g in enumerate(cmp.groups())}
-    return sorted(cmp.pairs, key=lambda p: order[(p.key[4], p.key[1], p.key[2], p.key[3])])
+def _csv_stats(cmp: Comparison) -> list[tuple[str, str]]:
+    """(column stem, metric) of the statistics in compare.csv: every one of e_α; heading and total where scored."""
+    errs = [e for e in ERRORS if e == "inclination" or any(p.a.score.stat(e, "rmse") is not None for p in cmp.pairs)]
+    return [(stat_field(e, st).removesuffix("_deg").removesuffix("_err"), f"{e}:{st}") for e in errs for st in STATS
+            if (e, st) != ("inclination", "rmse")]
 
 
 def write_csv(path: Path, cmp: Comparison) -> None:
-    """compare.csv: one row per matched sequence × scenario × perturbation × rate × estimator."""
+    """compare.csv: one row per pair. ``sequence, scenario, perturbation, rate, estimator`` are A's (as before),
+    ``rmse_a_deg, rmse_b_deg, diff_deg`` the e_α RMSEs and B − A, then B's side, the ``--metric`` and its
+    difference, and A's and B's value of every other statistic."""
+    extra = _csv_stats(cmp)
+    metric = cmp.metric[1] if cmp.metric[0] == "inclination" else f"{cmp.metric[0]}_{cmp.metric[1]}"
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["sequence", "scenario", "perturbation", "rate", "estimator", "rmse_a_deg", "rmse_b_deg",
-                    "diff_deg"])
-        for p in _ordered(cmp):
-            seq, scn, prt, rate, est = p.key
-            w.writerow([seq, scn, prt, rate, est, f"{p.a:.6f}", f"{p.b:.6f}", f"{p.diff:.6f}"])
+                    "diff_deg", "scenario_b", "perturbation_b", "rate_b", "estimator_b", "metric", "metric_diff_deg",
+                    *(f"{stem}_{x}_deg" for stem, _ in extra for x in ("a", "b"))])
+
+        def num(v: float | None) -> str:
+            return "" if v is None or not math.isfinite(v) else f"{v:.6f}"
+
+        for p in ordered_pairs(cmp):
+            a, b = p.a, p.b
+            cells = [p.sequence, a.scenario, a.perturbation, a.rate, a.estimator, num(a.rmse_deg), num(b.rmse_deg),
+                     num(b.rmse_deg - a.rmse_deg), b.scenario, b.perturbation, b.rate, b.estimator, metric,
+                     num(p.diff)]
+            for _, m in extra:
+                err, st = m.split(":")
+                cells += [num(a.score.stat(err, st)), num(b.score.stat(err, st))]
+            w.writerow(cells)
 
 
-def differences(cmp: Comparison) -> dict[tuple[str, str, str | float, str], list[float]]:
-    """(scenario, perturbation, rate, estimator) -> the per-sequence differences B − A, in table order."""
-    return {(g.scenario, g.perturbation, g.rate, g.estimator):
-            [p.diff for p in cmp.pairs if p.key[1:] == (g.scenario, g.perturbation, g.rate, g.estimator)]
-            for g in cmp.groups()}
+def differences(cmp: Comparison) -> dict[tuple[str, str], list[float]]:
+    """(panel, tick) -> the per-sequence differences B − A, in table order: a panel per scenario × perturbation ×
+    rate (each side's when they differ), a tick per estimator (``A → B`` when they differ)."""
+    out: dict[tuple[str, str], list[float]] = {}
+    for g in cmp.groups():
+        parts = []
+        for ax in ("scenario", "perturbation", "rate"):
+            a, b = side_text(g.a_side, ax), side_text(g.b_side, ax)
+            if ax in cmp.differing:
+                parts.append(f"{a} → {b}")
+            elif not ((ax == "perturbation" and a == NONE) or (ax == "rate" and a == NATIVE)):
+                parts.append(a)
+        tick = g.a_side[0] if g.a_side[0] == g.b_side[0] else f"{g.a_side[0]} → {g.b_side[0]}"
+        out[(", ".join(parts), tick)] = [p.diff for p in cmp.pairs if (side_of(p.a), side_of(p.b)) == (g.a_side,
+                                                                                                      g.b_side)]
+    return out
 
 
 def write_comparison(out: Path, cmp: Comparison, plots: bool = True, replace: bool = False) -> list[Path]:
@@ -215,7 +367,8 @@ def write_comparison(out: Path, cmp: Comparison, plots: bool = True, replace: bo
     try:
         write_csv(written[0], cmp)
         if plots:
-            written += pl.plot_differences(differences(cmp), cmp.a.label, cmp.b.label, out)
+            written += pl.plot_differences(differences(cmp), cmp.a.label, cmp.b.label, out,
+                                           ylabel=metric_text(cmp.metric))
     except BaseException:
         for f in written:
             f.unlink(missing_ok=True)

@@ -20,12 +20,15 @@ import numpy as np
 
 from riann_ros.evaluation import plots as pl
 from riann_ros.evaluation.aggregate import Group, aggregate, rate_label, rate_order, scenario_order
+from riann_ros.evaluation.offsets import timing_notes
 from riann_ros.evaluation.outdir import prepare_out, previous_results
 from riann_ros.evaluation.perturb import DEFINITIONS as PERTURB_DEFINITIONS
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
 from riann_ros.evaluation.results import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
+from riann_ros.evaluation.scoring import ERRORS
+from riann_ros.evaluation.seq_tables import ERROR_TITLES, format_heading_table, format_stats_table
 
 CSV_FIELDS = (
     "sequence",
@@ -37,8 +40,25 @@ CSV_FIELDS = (
     "estimator",
     "rmse_deg",
     "max_err_deg",
+    "mean_err_deg",
+    "median_err_deg",
+    "std_err_deg",
+    "min_err_deg",
+    "best_t_offset_s",
+    "best_t_offset_rmse_deg",
+    "t_offset_step_s",
     "heading_rmse_deg",
+    "heading_mean_deg",
+    "heading_median_deg",
+    "heading_std_deg",
+    "heading_min_deg",
+    "heading_max_deg",
     "total_rmse_deg",
+    "total_mean_deg",
+    "total_median_deg",
+    "total_std_deg",
+    "total_min_deg",
+    "total_max_deg",
     "n_samples",
     "n_scored",
     "n_unestimated",
@@ -52,8 +72,12 @@ CSV_FIELDS = (
 )
 METRIC = (
     "RMSE of e_alpha = 2 acos(sqrt(w^2+z^2)) of q_ref * conj(q_est), deg, over score mask & reference present & "
-    "estimate present"
+    "estimate present; per sequence also the mean, median (log-spaced histogram, within 0.1 %), std (population), "
+    "min and max of e_alpha (heading and total error likewise where scored); best_t_offset_s: the time added to the "
+    "estimate stamps that minimises the e_alpha RMSE within +-offset_steps steps of the stream "
+    "(best_t_offset_rmse_deg: the RMSE there), searched in the as-recorded scenario (else the first)"
 )
+PRINT_ROWS = 48  # per-sequence tables longer than this are not printed (they are in report.md and results.csv)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -132,42 +156,6 @@ def format_markdown_table(agg: Sequence[Group]) -> str:
     return "\n".join(out)
 
 
-def heading_rows(rows: Sequence[ResultRow]) -> list[list[str]]:
-    """Cells of the 9D table: per estimator × scenario × perturbation × rate of the 9D runs, heading and total
-    RMSE (BROAD's definitions, mean / max over the sequences) beside the inclination. 6D runs never enter it:
-    their heading is not referenced to anything (``--heading`` scores it as drift in results.json)."""
-    nine = [r for r in rows if r.sensors == "9D" and r.score.heading_rmse_deg is not None]
-    out = []
-    keys = dict.fromkeys((r.estimator, r.scenario, r.perturbation, r.rate) for r in nine)
-    for key in keys:
-        grp = [r for r in nine if (r.estimator, r.scenario, r.perturbation, r.rate) == key]
-        h = np.array([r.score.heading_rmse_deg for r in grp], dtype=float)
-        t = np.array([r.score.total_rmse_deg for r in grp], dtype=float)
-        i = np.array([r.rmse_deg for r in grp], dtype=float)
-        out.append([key[1], key[2], rate_label(key[3]), key[0], str(len(grp)), f"{h.mean():.2f}", f"{h.max():.2f}",
-                    f"{t.mean():.2f}", f"{t.max():.2f}", f"{i.mean():.2f}"])
-    return out
-
-
-HEADING_HEADERS = ["scenario", "perturbation", "rate", "estimator", "n", "heading mean °", "heading max °",
-                   "total mean °", "total max °", "inclination mean °"]
-
-
-def format_heading_table(rows: Sequence[ResultRow], markdown_table: bool = False) -> str:
-    """The 9D table (empty string when no run used a magnetometer)."""
-    cells = heading_rows(rows)
-    if not cells:
-        return ""
-    if markdown_table:
-        return "\n".join(["| " + " | ".join(HEADING_HEADERS) + " |", "|---|---|---:|---|" + "---:|" * 6]
-                         + ["| " + " | ".join(c) + " |" for c in cells])
-    widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(HEADING_HEADERS)]
-    lines = ["9D runs (magnetometer): heading and total error RMSE (°) per sequence",
-             "  ".join(h.ljust(w) for h, w in zip(HEADING_HEADERS, widths, strict=True))]
-    lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in cells]
-    return "\n".join(lines)
-
-
 # ---------------------------------------------------------------------------------------------------
 # one run
 # ---------------------------------------------------------------------------------------------------
@@ -195,6 +183,11 @@ class Report:
     def summary(self) -> list[Group]:
         return aggregate(self.rows)
 
+    @property
+    def timing_notes(self) -> list[str]:
+        """What the best time offsets say (:func:`~riann_ros.evaluation.offsets.timing_notes`)."""
+        return timing_notes(self.rows, self.settings.offset_steps)
+
     def settings_dict(self) -> dict[str, Any]:
         s = self.settings
         return {
@@ -210,6 +203,7 @@ class Report:
             "scenario_definition": {k: v for k, v in DEFINITIONS.items() if k in s.scenarios},
             "rest": None if s.rest is None else list(s.rest),
             "rest_definition": REST_DEFINITION,
+            "offset_steps": s.offset_steps,
             "perturbation_definition": PERTURB_DEFINITIONS,
             "metric": METRIC,
         }
@@ -224,11 +218,12 @@ class Report:
             "sequences": [
                 {"source": r.source, "name": r.name, "dataset": r.dataset, "seconds": r.seconds,
                  "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios, "perturbations": r.perturbations,
-                 "warnings": r.warnings}
+                 "warnings": r.warnings, **({"salvaged": r.salvaged} if r.salvaged else {})}
                 for r in self.results
                 if not r.error
             ],
             "results": [row.to_dict() for row in self.rows],
+            "timing_notes": self.timing_notes,
             "tuning": self.tuning,
             "failures": self.failures,
         }
@@ -307,6 +302,18 @@ def _per_sequence(rows: Sequence[ResultRow]) -> list[str]:
     return lines
 
 
+def _timing_and_statistics(report: Report) -> list[str]:
+    """report.md's timing notes, per-sequence RMSE tables and per-sequence error statistics."""
+    notes = report.timing_notes
+    lines = ["## Timing", ""] + [f"- {n}" for n in notes] + [""] if notes else []
+    lines += ["## Per sequence", "", *_per_sequence(report.rows)]
+    for err in ERRORS:
+        table = format_stats_table(report.rows, err, markdown_table=True)
+        if table:
+            lines += [f"### Error statistics: {ERROR_TITLES[err]}", "", table, ""]
+    return lines
+
+
 def markdown(report: Report, plots: Sequence[Path]) -> str:
     """The content of report.md."""
     s = report.settings
@@ -336,7 +343,7 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
     warnings = [w for r in report.results if not r.error for w in r.warnings]
     if warnings:
         lines += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
-    lines += ["## Per sequence", "", *_per_sequence(report.rows)]
+    lines += _timing_and_statistics(report)
     if report.failures:
         lines += ["## Failed inputs", ""] + [f"- {f['error']}" for f in report.failures] + [""]
     if plots:
@@ -346,14 +353,17 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
 
 def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
     """The figures: boxplots, error over time (the first sequence with series), roll/pitch per sequence (that one,
-    or every sequence with ``--plot-sequence all``), RMSE vs rate."""
-    figures = pl.plot_boxes(rows, out)
+    or every sequence with ``--plot-sequence all``) and perturbation condition, RMSE vs rate; every condition, or
+    those of ``--plot-perturb``."""
+    chosen = report.settings.series_conditions
+    figures = pl.plot_boxes(rows, out, conditions=chosen)
     with_series = [r.series for r in report.results if r.series and not r.error]
     if with_series:
-        figures += pl.plot_error_over_time(with_series[0], out)
+        figures += pl.plot_error_over_time(with_series[0], out, conditions=chosen)
     for series in with_series if report.settings.series_for == "all" else with_series[:1]:
-        figures += pl.plot_attitude(series, out)
-    return figures + pl.plot_rmse_vs_rate(rows, out)
+        for cond in pl.series_conditions(series, chosen):
+            figures += pl.plot_attitude(series, out, condition=cond)
+    return figures + pl.plot_rmse_vs_rate(rows, out, conditions=chosen)
 
 
 def write_results(out: Path, report: Report, plots: bool = True, replace: bool = False) -> list[Path]:

@@ -5,13 +5,15 @@ results.csv / results.json)."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
 from typing import Any
 
+from riann_ros.evaluation.offsets import STEPS as OFFSET_STEPS
 from riann_ros.evaluation.perturb import NONE, Condition
 from riann_ros.evaluation.scenarios import PAPER_SCENARIOS
 from riann_ros.evaluation.scoring import Score
-from riann_ros.evaluation.sources import STREAM_CHUNK, BagTopics
+from riann_ros.evaluation.sources import STREAM_CHUNK, BagTopics, EstimateFile
 from riann_ros.evaluation.specs import EstimatorSpec
 
 NATIVE = "native"  # rate key of rows at the recording's own rate
@@ -19,6 +21,7 @@ LIVE_KEYS = ("published", "received", "lost", "unexpected")  # RunStats.live col
 RECORDED = "recorded"  # estimator name and mode of estimates recorded in a bag
 SERIES_POINTS = 6000  # points per curve kept for the error-over-time and roll/pitch plots
 REFERENCE = "reference"  # key of the reference's roll/pitch in a series
+_SCORE_REQUIRED = ("n_samples", "n_scored", "n_unestimated", "rmse_deg", "max_err_deg")
 
 
 @dataclass
@@ -32,15 +35,24 @@ class EvalSettings:
     use_mag: str = "auto"  # as the nodes' use_mag: auto/true = 9D where the recording has a magnetometer
     series_for: str | None = None  # sequence whose series are plotted: a name, "*" (the first) or "all"
     series_step: int = 0  # keep every n-th sample of the series (0: about SERIES_POINTS points)
+    series_conditions: tuple[str, ...] | None = None  # the conditions (labels) whose series are kept; None: all
     keep_estimates: bool = False  # return the estimates of the first scenario (for --write-estimates)
     chunk: int = STREAM_CHUNK  # samples per bag chunk
     rest: tuple[float, float] | None = None  # the initial rest by hand (s from the first sample); None: detect it
     topics: BagTopics = field(default_factory=BagTopics)  # which topics of the bags; recorded estimates
+    offset_steps: int = OFFSET_STEPS  # search the e_α-minimising time offset within ± this many steps (0: not)
+    salvage: bool = False  # score the readable part of a bag cut off by a crash (a repaired copy, bagio.repair)
 
     @property
     def recorded(self) -> list[EstimatorSpec]:
-        """The estimates recorded in the bags (``topics.estimates``) as specs labelled by their topic."""
-        return [recorded_spec(t) for t in self.topics.estimates]
+        """The estimates recorded in the bags (``topics.estimates``, labelled by their topic) and in trajectory files
+        (``topics.files``, labelled by their label) as specs."""
+        return self.recorded_for(None)
+
+    def recorded_for(self, source: Path | None) -> list[EstimatorSpec]:
+        """:attr:`recorded` of one input (``source``): the bags' topics and the files that belong to it."""
+        return [recorded_spec(t) for t in self.topics.estimates] + [
+            file_spec(f) for f in self.topics.files if source is None or f.belongs_to(source)]
 
 
 @dataclass
@@ -101,10 +113,12 @@ class ResultRow:
         def num(v: Any) -> float:
             return float("nan") if v is None else float(v)
 
+        # columns added later (error statistics, time offset) are None in older files
+        optional = {f.name: None if d.get(f.name) is None else float(d[f.name]) for f in fields(Score)
+                    if f.name not in _SCORE_REQUIRED}
         score = Score(n_samples=int(d["n_samples"]), n_scored=int(d["n_scored"]),
                       n_unestimated=int(d["n_unestimated"]), rmse_deg=num(d["rmse_deg"]),
-                      max_err_deg=num(d["max_err_deg"]), heading_rmse_deg=d.get("heading_rmse_deg"),
-                      total_rmse_deg=d.get("total_rmse_deg"))
+                      max_err_deg=num(d["max_err_deg"]), **optional)
         live = {k: int(d[k]) for k in LIVE_KEYS if k in d}
         stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
                          rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},
@@ -134,11 +148,17 @@ class SequenceResult:
     cpu_seconds: float = 0.0  # reading + scenarios + runs + scoring, in the worker
     citation: str = ""
     warnings: list[str] = field(default_factory=list)  # "<sequence>: <what>", for stderr and results.json
+    salvaged: dict[str, Any] | None = None  # a cut-off bag scored as far as readable (--salvage): what was read
 
 
 def recorded_spec(topic: str) -> EstimatorSpec:
     """The spec of an estimate recorded on ``topic``: labelled by the topic, served by :class:`RecordedRunner`."""
     return EstimatorSpec(RECORDED, (("topic", topic),), topic)
+
+
+def file_spec(f: EstimateFile) -> EstimatorSpec:
+    """The spec of an estimate in a trajectory file: labelled by its label, served like a recorded topic."""
+    return EstimatorSpec(RECORDED, (("file", f.path),), f.label)
 
 
 Progress = Callable[[int, int, SequenceResult], None]

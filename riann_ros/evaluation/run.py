@@ -29,12 +29,14 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.offsets import OffsetSearch
 from riann_ros.evaluation.perturb import Condition, Transform
 from riann_ros.evaluation.rest import NO_REST_WARNING, Rest
 from riann_ros.evaluation.results import (
@@ -69,7 +71,8 @@ class _ScenarioRun:
     runner's run and one accumulator per estimator."""
 
     def __init__(self, plan: ScenarioPlan, condition: Condition, slot: int, settings: EvalSettings, name: str,
-                 series: bool, estimates: bool, recorded: list[EstimatorSpec] | None = None) -> None:
+                 series: bool, estimates: bool, recorded: list[EstimatorSpec] | None = None,
+                 offsets: bool = False) -> None:
         self.plan = plan
         self.condition = condition
         self.slot = slot
@@ -82,6 +85,9 @@ class _ScenarioRun:
         rate = plan.gate.nominal_rate
         self.gate = GateConfig.for_rate(condition.nominal_rate(rate)) if condition.parts else plan.gate
         self.acc = [Accumulator(settings.with_heading) for _ in self.specs]
+        # the time offset that minimises e_α (one scenario per sequence × condition × rate: see _plan_runs)
+        self.offsets = (OffsetSearch(len(self.specs), 1.0 / self.gate.nominal_rate, settings.offset_steps)
+                        if offsets and settings.offset_steps > 0 else None)
         self.run: Run | None = None
         self.fed = 0  # samples fed so far
         length = plan.length * (condition.nominal_rate(rate) / rate if condition.parts else 1.0)
@@ -110,6 +116,8 @@ class _ScenarioRun:
         qs = self.run.feed(rec)
         for acc, q in zip(self.acc, qs, strict=True):
             acc.add(rec.quat_ref, rec.score_mask, q)
+        if self.offsets is not None:
+            self.offsets.add(rec.stamps_ns, rec.quat_ref, rec.score_mask, qs)
         if self.series and rec.quat_ref is not None:
             self._add_series(rec, qs)
         if self.estimates is not None:
@@ -140,39 +148,51 @@ class _ScenarioRun:
             ResultRow(sequence=res.name, dataset=res.dataset, source=res.source, scenario=self.plan.scenario,
                       rate=NATIVE if rate is None else float(rate), rate_hz=rate_hz, resampled=rate is not None,
                       estimator=spec.label, estimator_name=spec.name, mode=RECORDED if spec.name == RECORDED else mode,
-                      score=self._score(spec, acc, st.mag_samples > 0), stats=st, perturbation=label,
+                      score=self._score(j, spec, acc, st.mag_samples > 0), stats=st, perturbation=label,
                       sensors="9D" if st.mag_samples > 0 else "6D")
-            for spec, acc, st in zip(self.specs, self.acc, stats, strict=True)
+            for j, (spec, acc, st) in enumerate(zip(self.specs, self.acc, stats, strict=True))
         ]
 
-    def _score(self, spec: EstimatorSpec, acc: Accumulator, nine_d: bool) -> Score:
+    def _score(self, j: int, spec: EstimatorSpec, acc: Accumulator, nine_d: bool) -> Score:
         try:
-            return acc.result(acc.with_heading or nine_d)
+            score = acc.result(acc.with_heading or nine_d)
+            off = self.offsets.result(j) if self.offsets is not None else None
+            if off is not None:
+                score.best_t_offset_s, score.best_t_offset_rmse_deg = off.offset_s, off.rmse_deg
+                score.t_offset_step_s = off.step_s
+            return score
         except EvalError as exc:
             if spec.name != RECORDED or acc.n_scored:
                 raise
-            raise EvalError(f"recorded estimate {spec.label}: no message near any scored sample (within half the "
-                            "--max-gap, or between two messages at most --max-gap apart); compare its stamps with the "
-                            "IMU's (--t-offset adds seconds to the estimate stamps)") from exc
+            what = (f"estimate file {dict(spec.params)['file']} ({spec.label})" if "file" in dict(spec.params) else
+                    f"recorded estimate {spec.label}")
+            raise EvalError(f"{what}: no estimate near any scored sample (within half the --max-gap, or between two "
+                            "estimates at most --max-gap apart); compare its stamps with the IMU's (--t-offset adds "
+                            "seconds to the estimate stamps; a file's time unit: --estimate-time-unit)") from exc
 
     def keep_series(self, res: SequenceResult) -> None:
+        """The plot series of this run in ``res.series["conditions"][condition]`` (``curves``, ``t``, ``scored``,
+        ``attitude``, each per scenario); the first condition's are also ``res.series``'s own."""
         if res.series is None:
-            res.series = {"sequence": res.name, "curves": {}}
+            res.series = {"sequence": res.name, "conditions": {}}
+        cond = res.series["conditions"].setdefault(self.condition.label, {})
         scn = self.plan.scenario
-        res.series["curves"][scn] = {
+        cond.setdefault("curves", {})[scn] = {
             spec.label: np.concatenate(c) if c else np.zeros(0, np.float32)
             for spec, c in zip(self.specs, self.curves, strict=True)
         }
-        res.series.setdefault("t", {})[scn] = np.concatenate(self.t) if self.t else np.zeros(0, np.float32)
-        res.series.setdefault("scored", {})[scn] = np.concatenate(self.scored) if self.scored else np.zeros(0, bool)
+        cond.setdefault("t", {})[scn] = np.concatenate(self.t) if self.t else np.zeros(0, np.float32)
+        cond.setdefault("scored", {})[scn] = np.concatenate(self.scored) if self.scored else np.zeros(0, bool)
 
         def cat(parts: list[NDArray[np.float32]]) -> NDArray[np.float32]:
             return np.concatenate(parts) if parts else np.zeros((0, 2), np.float32)
 
         # roll and pitch (°, (n, 2)) of the reference and of every estimator: the evo_traj-style plot
-        res.series.setdefault("attitude", {})[scn] = {
+        cond.setdefault("attitude", {})[scn] = {
             REFERENCE: cat(self.att_ref), **{spec.label: cat(a) for spec, a in zip(self.specs, self.att, strict=True)}
         }
+        first = next(iter(res.series["conditions"].values()))
+        res.series.update(first)
 
     def keep_estimates(self, res: SequenceResult) -> None:
         parts = self.estimates or []
@@ -184,18 +204,24 @@ class _ScenarioRun:
         res.estimates = {"scenario": self.plan.scenario, "stamps": stamps, "quats": quats}
 
 
-def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool) -> list[_ScenarioRun]:
-    """One run per condition × scenario (series for the first condition, estimates for the very first run)."""
+def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool,
+               recorded: list[EstimatorSpec]) -> list[_ScenarioRun]:
+    """One run per condition × scenario (series for the conditions to plot, estimates for the very first run). The
+    time offset is searched in one scenario per condition: as-recorded when evaluated (the stamps as they are),
+    else the first (the paper's scenarios do not change the stamps)."""
     want_series = native and settings.series_for is not None and settings.series_for in ("*", "all", name)
+    plotted = settings.series_conditions
+    offset_scenario = AS_RECORDED if AS_RECORDED in settings.scenarios else settings.scenarios[0]
     runs = []
     for c, condition in enumerate(settings.conditions):
         for s, scn in enumerate(settings.scenarios):
             slot = c * len(settings.scenarios) + s
             # recorded estimates exist for the recording as it is only: as-recorded, unperturbed, own rate
-            recorded = settings.recorded if native and scn == AS_RECORDED and not condition.parts else []
+            served = recorded if native and scn == AS_RECORDED and not condition.parts else []
             runs.append(_ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, name,
-                                     want_series and c == 0, native and settings.keep_estimates and slot == 0,
-                                     recorded))
+                                     want_series and (plotted is None or condition.label in plotted),
+                                     native and settings.keep_estimates and slot == 0,
+                                     served, offsets=scn == offset_scenario))
     return [r for r in runs if r.specs]
 
 
@@ -215,7 +241,7 @@ def _summarise(src: Source, rate: float | None, settings: EvalSettings, res: Seq
 def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runner: Runner,
                    res: SequenceResult, native_rest: Rest | None = None) -> None:
     summary = _summarise(src, rate, settings, res, native_rest)
-    runs = _plan_runs(summary, settings, res.name, rate is None)
+    runs = _plan_runs(summary, settings, res.name, rate is None, settings.recorded_for(src.path))
     for run in runs:
         res.scenarios.setdefault(run.plan.scenario, run.plan.info.to_dict())
     rate_hz = round(summary.rate_all, 3)
@@ -247,7 +273,49 @@ def evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runn
     ``source`` is a bag (``.mcap``, ``.db3``, a bag directory) or a BROAD trial file. Bags at their own
     rate are read chunk by chunk; BROAD files, and inputs that are also resampled (``settings.rates``),
     are read whole once. ``recording``: the input already in memory (``source`` then only names it).
+    With ``settings.salvage``, a bag cut off by a crash is scored as far as it is readable: from a repaired copy
+    in a temporary folder (:func:`riann_ros.bagio.repair.repair`), with a warning saying how much that is.
     """
+    if settings.salvage and recording is None and Path(source).suffix.lower() not in BROAD_SUFFIXES:
+        from riann_ros.bagio import repair
+
+        if repair.is_truncated(source):
+            return _evaluate_salvaged(source, settings, runner)
+    return _evaluate_source(source, settings, runner, recording)
+
+
+def _evaluate_salvaged(source: str | os.PathLike[str], settings: EvalSettings,
+                       runner: Runner | None) -> SequenceResult:
+    """:func:`evaluate_source` of the readable part of a cut-off bag (named as the bag itself in the results)."""
+    import tempfile
+
+    from riann_ros.bagio import repair
+
+    src = Path(source)
+    with tempfile.TemporaryDirectory(prefix=".riann_salvage.") as tmp:
+        copy = Path(tmp) / (src.name if src.suffix == ".mcap" else f"{src.stem if src.is_file() else src.name}.mcap")
+        try:
+            t = repair.repair(src, copy)
+        except Exception as exc:
+            return SequenceResult(source=str(source), error=f"{source}: cannot salvage: {exc}")
+        files = replace(settings.topics, files=tuple(
+            replace(f, input=str(copy)) if f.input is not None and Path(f.input) == src else f
+            for f in settings.topics.files))
+        res = _evaluate_source(copy, replace(settings, topics=files), runner)
+    res.source = str(source)
+    for row in res.rows:
+        row.source = str(source)
+    if res.error:
+        res.error = res.error.replace(str(copy), str(source))
+    else:
+        _warn(res, f"{res.name}: salvaged: {repair.describe(t)}; scored what was readable")
+        res.salvaged = {"file_bytes": t.size, "expected_bytes": t.expected_size, "readable_bytes": t.readable_end,
+                        "messages": t.total, "messages_per_topic": t.messages, "imu_samples_recorded": t.samples}
+    return res
+
+
+def _evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runner: Runner | None = None,
+                     recording: Recording | None = None) -> SequenceResult:
     t0, c0 = time.perf_counter(), time.process_time()
     res = SequenceResult(source=str(source))
     runner = runner or OfflineRunner(settings.use_mag)

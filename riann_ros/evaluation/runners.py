@@ -84,13 +84,13 @@ class OfflineRunner:
 
 class _RecordedRun:
     def __init__(self, specs: list[EstimatorSpec]) -> None:
-        self.topics = [dict(s.params)["topic"] for s in specs]
+        self.keys = [s.label for s in specs]  # a topic's label is the topic; a file's, its label
         self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
 
     def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
         recorded = rec.recorded if isinstance(rec, Chunk) else {}
         none = np.full((len(rec), 4), np.nan)
-        return [recorded.get(t, none) for t in self.topics]
+        return [recorded.get(k, none) for k in self.keys]
 
     def finish(self) -> list[RunStats]:
         return self.stats

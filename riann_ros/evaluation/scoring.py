@@ -2,9 +2,11 @@
 
 Per sample e_α = 2·arccos(√(w² + z²)) of q_err = q_ref ⊗ q_est⁻¹ (heading ignored); per sequence the
 RMSE over the scored samples: score mask ∩ reference present ∩ estimate present (samples the input gate
-rejected have no estimate and are counted as ``n_unestimated``). Heading and total-angle RMSEs are
-optional extra columns. :class:`Accumulator` keeps running sums, so a bag of any length is scored in
-bounded memory; :func:`score` is the one-chunk case.
+rejected have no estimate and are counted as ``n_unestimated``), and beside it evo ape's statistics of the
+per-sample errors: mean, median, std, min and max (:data:`STATS`). Heading and total-angle errors are
+optional extra columns with the same statistics. :class:`Accumulator` keeps running sums (and, for the median,
+a histogram of log-spaced bins, :class:`ErrorStats`), so a bag of any length is scored in bounded memory;
+:func:`score` is the one-chunk case.
 """
 
 from __future__ import annotations
@@ -19,10 +21,74 @@ from riann_ros import quaternion as quat
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.recording import Recording
 
+STATS = ("rmse", "mean", "median", "std", "min", "max")  # evo ape's statistics, per sequence
+ERRORS = ("inclination", "heading", "total")
+# the median comes from a histogram of bins whose edges grow by this factor (from HIST_LO_DEG up to 360°): it is
+# the geometric centre of its bin, so within ±0.1 % of the exact median (clamped to [min, max])
+HIST_RATIO = 1.002
+HIST_LO_DEG = 1e-6
+_LOG_RATIO = math.log(HIST_RATIO)
+HIST_BINS = math.ceil(math.log(360.0 / HIST_LO_DEG) / _LOG_RATIO) + 2
+
+
+def stat_field(error: str, stat: str) -> str:
+    """The results.json / results.csv column of a statistic: ``rmse_deg``, ``max_err_deg``, ``mean_err_deg``, …
+    for the inclination e_α; ``heading_rmse_deg``, ``total_median_deg``, … for the heading and total errors."""
+    if error not in ERRORS or stat not in STATS:
+        raise ValueError(f"unknown error statistic {error} {stat}")
+    if error == "inclination":
+        return "rmse_deg" if stat == "rmse" else f"{stat}_err_deg"
+    return f"{error}_{stat}_deg"
+
+
+class ErrorStats:
+    """Running statistics of per-sample errors (degrees): count, sum, sum of squares, min, max, and a histogram of
+    log-spaced bins for the median. Adding chunks in any split gives the same result."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.sum = self.sq = 0.0
+        self.lo, self.hi = math.inf, -math.inf
+        self.hist: NDArray[np.int64] | None = None
+
+    def add(self, e_deg: NDArray[np.float64]) -> None:
+        if not len(e_deg):
+            return
+        self.n += len(e_deg)
+        self.sum += float(np.sum(e_deg))
+        self.sq += float(np.sum(e_deg**2))
+        self.lo = min(self.lo, float(e_deg.min()))
+        self.hi = max(self.hi, float(e_deg.max()))
+        idx = np.zeros(len(e_deg), dtype=np.int64)
+        pos = e_deg > HIST_LO_DEG
+        idx[pos] = np.floor(np.log(e_deg[pos] / HIST_LO_DEG) / _LOG_RATIO).astype(np.int64) + 1
+        counts = np.bincount(np.clip(idx, 0, HIST_BINS - 1), minlength=HIST_BINS)
+        self.hist = counts if self.hist is None else self.hist + counts
+
+    def _order_stat(self, k: int, cum: NDArray[np.int64]) -> float:
+        """The k-th smallest error (0-based), as the geometric centre of its bin."""
+        b = int(np.searchsorted(cum, k, side="right"))
+        centre = HIST_LO_DEG / 2 if b == 0 else HIST_LO_DEG * HIST_RATIO ** (b - 0.5)
+        return min(max(centre, self.lo), self.hi)
+
+    def summary(self) -> dict[str, float]:
+        """rmse, mean, median, std (population, as numpy and evo), min, max."""
+        if self.n == 0 or self.hist is None:
+            return {s: float("nan") for s in STATS}
+        mean = self.sum / self.n
+        cum = np.cumsum(self.hist)
+        k = self.n // 2
+        median = self._order_stat(k, cum) if self.n % 2 else 0.5 * (self._order_stat(k - 1, cum)
+                                                                     + self._order_stat(k, cum))
+        return {"rmse": math.sqrt(self.sq / self.n), "mean": mean, "median": median,
+                "std": math.sqrt(max(self.sq / self.n - mean * mean, 0.0)), "min": self.lo, "max": self.hi}
+
 
 @dataclass
 class Score:
-    """The scores of one estimator on one sequence."""
+    """The scores of one estimator on one sequence: the inclination e_α's RMSE and statistics; heading and total
+    error statistics when scored; the time offset that minimises e_α (:mod:`~riann_ros.evaluation.timing`).
+    Fields that are None were not scored (or come from an older results.json)."""
 
     n_samples: int
     n_scored: int
@@ -31,16 +97,37 @@ class Score:
     max_err_deg: float
     heading_rmse_deg: float | None = None
     total_rmse_deg: float | None = None
+    mean_err_deg: float | None = None
+    median_err_deg: float | None = None
+    std_err_deg: float | None = None
+    min_err_deg: float | None = None
+    heading_mean_deg: float | None = None
+    heading_median_deg: float | None = None
+    heading_std_deg: float | None = None
+    heading_min_deg: float | None = None
+    heading_max_deg: float | None = None
+    total_mean_deg: float | None = None
+    total_median_deg: float | None = None
+    total_std_deg: float | None = None
+    total_min_deg: float | None = None
+    total_max_deg: float | None = None
+    best_t_offset_s: float | None = None  # added to the estimate stamps, the e_α RMSE is smallest (timing)
+    best_t_offset_rmse_deg: float | None = None  # the e_α RMSE there
+    t_offset_step_s: float | None = None  # the stream's step the offset search is measured in
+
+    def stat(self, error: str, stat: str) -> float | None:
+        """One statistic (:func:`stat_field`), None when not scored."""
+        v = getattr(self, stat_field(error, stat))
+        return None if v is None else float(v)
 
 
 class Accumulator:
-    """Running sums for the RMSE over the chunks of one scenario × estimator run."""
+    """Running sums for the scores over the chunks of one scenario × estimator run."""
 
     def __init__(self, with_heading: bool = False) -> None:
         self.with_heading = with_heading
         self.n = self.n_scored = self.n_unest = self.n_base = 0
-        self.sq = self.sq_heading = self.sq_total = 0.0
-        self.max_e = -math.inf
+        self.errors = {e: ErrorStats() for e in ERRORS}
 
     def add(self, quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_], q: NDArray[np.float64]) -> None:
         """One chunk: reference (N, 4) with NaN rows (None: no reference), score mask, estimates (N, 4)."""
@@ -56,11 +143,9 @@ class Accumulator:
         self.n_unest += int((base & ~est_ok).sum())
         if valid.any():
             qt, qe = quat_ref[valid], q[valid]
-            e = quat.inclination_error(qt, qe)
-            self.sq += float(np.sum(e**2))
-            self.max_e = max(self.max_e, float(e.max()))
-            self.sq_heading += float(np.sum(quat.heading_error(qt, qe) ** 2))  # reported for 9D runs, --heading
-            self.sq_total += float(np.sum(quat.total_error(qt, qe) ** 2))
+            self.errors["inclination"].add(np.degrees(quat.inclination_error(qt, qe)))
+            self.errors["heading"].add(np.degrees(quat.heading_error(qt, qe)))  # reported for 9D runs, --heading
+            self.errors["total"].add(np.degrees(quat.total_error(qt, qe)))
 
     def result(self, with_heading: bool | None = None) -> Score:
         """The scores; heading and total error when ``with_heading`` (default: as constructed)."""
@@ -70,18 +155,9 @@ class Accumulator:
         if self.n_scored == 0:
             raise EvalError("the estimator gave no output on any scored sample")
 
-        def rms(sq: float) -> float:
-            return float(np.degrees(np.sqrt(sq / self.n_scored)))
-
-        return Score(
-            n_samples=self.n,
-            n_scored=self.n_scored,
-            n_unestimated=self.n_unest,
-            rmse_deg=rms(self.sq),
-            max_err_deg=float(np.degrees(self.max_e)),
-            heading_rmse_deg=rms(self.sq_heading) if heading else None,
-            total_rmse_deg=rms(self.sq_total) if heading else None,
-        )
+        stats = {stat_field(err, st): v for err in ERRORS if heading or err == "inclination"
+                 for st, v in self.errors[err].summary().items()}
+        return Score(n_samples=self.n, n_scored=self.n_scored, n_unestimated=self.n_unest, **stats)
 
 
 def score(rec: Recording, q_est: NDArray[np.float64], with_heading: bool = False) -> Score:

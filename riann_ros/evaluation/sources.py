@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Generator, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -34,21 +34,52 @@ BROAD_SUFFIXES = (".hdf5", ".h5", ".mat")
 STREAM_CHUNK = 100_000  # samples per chunk when a bag is read chunk by chunk
 
 
+ESTIMATE_FILE_OPTIONS = ("--estimate-cols", "--estimate-time-unit")  # for the reader's messages
+
+
+@dataclass(frozen=True)
+class EstimateFile:
+    """A trajectory file holding an estimate of one input's sequence (``--estimate-file FILE[:LABEL]``): a TUM file
+    (``t tx ty tz qx qy qz qw``, seconds) or a CSV with a header (a time column and qw, qx, qy, qz; read by
+    :func:`riann_ros.datasets.euroc.read_ground_truth`), scored like an estimate topic of a bag."""
+
+    path: str
+    label: str
+    input: str | None = None  # the input whose sequence it estimates (None: every input)
+    cols: tuple[str, ...] | None = None  # TIME, QW, QX, QY, QZ column names (None: detect the layout)
+    time_unit: str | None = None  # of the time column (None: from its name, else ns; s for TUM files)
+
+    def read(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Stamps (ns) and orientations (N, 4) w, x, y, z; EvalError naming the file for anything unreadable."""
+        from riann_ros.datasets.euroc import read_ground_truth
+
+        try:
+            return read_ground_truth(self.path, self.cols, self.time_unit, options=ESTIMATE_FILE_OPTIONS)
+        except (OSError, ValueError) as exc:
+            raise EvalError(f"estimate file {exc}" if str(exc).startswith(self.path) else
+                            f"estimate file {self.path}: {exc}") from exc
+
+    def belongs_to(self, source: Path) -> bool:
+        return self.input is None or Path(self.input) == source
+
+
 @dataclass(frozen=True)
 class BagTopics:
     """Which topics of a bag to read: the layout's (:mod:`riann_ros.bagio`) by default, or any bag's
     (:mod:`riann_ros.bagio.topics`): its IMU topic, a ground-truth topic interpolated onto the IMU stamps, and
-    estimates recorded from the user's own filters (``estimates``; matched by stamp + ``t_offset_s``)."""
+    estimates recorded from the user's own filters (``estimates``; matched by stamp + ``t_offset_s``); estimates in
+    trajectory files (``files``), aligned the same way, for bags and BROAD trials alike."""
 
     imu: str = IMU_TOPIC
     reference: str | None = None  # None: the layout's /ground_truth/attitude
     estimates: tuple[str, ...] = ()
-    t_offset_s: float = 0.0  # added to the stamps of the estimate topics
+    t_offset_s: float = 0.0  # added to the stamps of the estimate topics and files
     max_gap_s: float = defaults.MAX_GAP_S  # slerp between messages at most this far apart; hold within half of it
+    files: tuple[EstimateFile, ...] = ()
 
     @property
     def plain(self) -> bool:
-        """Only the layout's topics."""
+        """Only the layout's topics (estimate files aside: they are not in the bag)."""
         return self.imu == IMU_TOPIC and self.reference is None and not self.estimates
 
     def options(self) -> list[str]:
@@ -73,7 +104,8 @@ class Chunk(Recording):
 
 
 class Source:
-    """A recording as a re-iterable sequence of chunks (each iteration reads it again)."""
+    """A recording as a re-iterable sequence of chunks (each iteration reads it again). The estimates of the
+    ``topics.files`` that belong to it are aligned onto every chunk (a :class:`Chunk`)."""
 
     def __init__(self, path: str | os.PathLike[str], rec: Recording | None = None, chunk: int = STREAM_CHUNK,
                  topics: BagTopics | None = None) -> None:
@@ -81,12 +113,31 @@ class Source:
         self.rec = rec  # the whole recording, or None: read the bag chunk by chunk
         self.chunk = chunk
         self.topics = topics or BagTopics()
+        self.files = [f for f in self.topics.files if f.belongs_to(self.path)]
+        self._file_data: dict[str, tuple[NDArray[np.int64], NDArray[np.float64]]] = {}
 
     @property
     def resampled(self) -> bool:
         return self.rec is not None and "resampled_from_hz" in self.rec.meta
 
     def chunks(self) -> Iterator[Recording]:
+        if not self.files:
+            yield from self._chunks()
+            return
+        from riann_ros.bagio.topics import Aligner
+
+        t = self.topics
+        for f in self.files:
+            if f.label not in self._file_data:
+                self._file_data[f.label] = f.read()
+        aligners = {f.label: Aligner(iter([self._file_data[f.label]]), round(t.t_offset_s * 1e9),
+                                     round(t.max_gap_s * 1e9)) for f in self.files}
+        for c in self._chunks():
+            recorded = dict(c.recorded) if isinstance(c, Chunk) else {}
+            recorded.update({label: a.at(c.stamps_ns) for label, a in aligners.items()})
+            yield Chunk.of(c, recorded)
+
+    def _chunks(self) -> Iterator[Recording]:
         if self.rec is not None:
             yield self.rec
             return
@@ -131,7 +182,13 @@ def _concat(chunks: list[Recording]) -> Recording:
 
 
 def read_error(path: Path, exc: Exception) -> EvalError:
-    return exc if isinstance(exc, EvalError) else EvalError(f"{path}: cannot read: {exc}")
+    if isinstance(exc, EvalError):
+        return exc
+    from riann_ros.bagio.layout import BagError
+
+    if isinstance(exc, BagError) and exc.path == path:
+        return EvalError(f"{path}: cannot read: {exc.problem}")
+    return EvalError(f"{path}: cannot read: {exc}")
 
 
 def _q(p: Path) -> str:
@@ -206,7 +263,8 @@ def read_whole(path: str | os.PathLike[str], topics: BagTopics | None = None) ->
             return bagio.read_recording(p, pair_mag=NodePairing())
     except Exception as exc:  # bagio.BagError, OSError, ValueError, …
         raise read_error(p, exc) from exc
-    return _concat(list(Source(p, topics=topics).chunks()))
+    # estimate files are aligned by the Source the whole recording goes into (open_source), not here
+    return _concat(list(Source(p, topics=replace(topics, files=())).chunks()))
 
 
 def open_source(path: str | os.PathLike[str], rate: float | None = None, base: Recording | None = None,
@@ -223,8 +281,8 @@ def open_source(path: str | os.PathLike[str], rate: float | None = None, base: R
 
         if not (rate > 0 and math.isfinite(rate)):
             raise ValueError(f"rate must be positive, got {rate}")
-        rec = resample_recording(rec, rate)
-    return Source(p, rec)
+        return Source(p, resample_recording(rec, rate))  # estimate files exist for the recording as it is only
+    return Source(p, rec, topics=topics)
 
 
 def median_rate(hist: dict[int, int]) -> float:

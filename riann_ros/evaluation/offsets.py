@@ -1,0 +1,238 @@
+"""The time offset that minimises the inclination error, found for the user (evo's ``--t_offset``; ROS-free).
+
+For one scenario run, :class:`OffsetSearch` scores every estimator with its estimates moved in time against the
+reference: the estimate stamped ``t`` against the reference at ``t + τ`` (τ is what ``--t-offset`` would add to
+the estimate stamps), for τ on a grid of :data:`GRID` points per input step over ±:data:`STEPS` steps; a parabola
+through the best grid point and its neighbours refines τ and the RMSE there. Only samples that are scored at
+every τ count (score mask, estimate present, reference present at every shifted time), so the RMSEs of the
+offsets compare on the same samples. The reference between its samples is the normalised linear interpolation
+of its gravity direction (e_α is the angle between the gravity directions of reference and estimate in the
+sensor frame), never across a gap of more than :data:`GAP_STEPS` steps.
+
+The search runs chunk by chunk with a carry of a few samples, so memory does not grow with the sequence.
+
+Why: for a regular stream the sample-time convention (point samples at their stamps, or the means over the
+interval before each stamp) cannot be seen from the IMU, and read wrongly it shifts an estimate by half a step;
+a reference that is not synchronised with the IMU shifts every estimator alike. :func:`timing_notes` says which.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+STEPS = 3  # the search spans ± this many input steps
+GRID = 4  # candidate offsets per step (a parabola through the best three refines the best)
+GAP_STEPS = 2.5  # the reference is not interpolated across a gap longer than this many steps
+HALF_STEP_BAND = (0.3, 0.7)  # |offset| / step in this band: "near half a step"
+MIN_GAIN = 0.9  # a note only when the RMSE at the best offset is below this fraction of the RMSE at 0
+BLOCK = 4096  # samples scored at a time (memory: a few BLOCK × candidates arrays)
+
+
+def gravity(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The world's z axis in the sensor frame (N, 3) of sensor-to-world quaternions w, x, y, z (NaN rows stay)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.column_stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
+
+
+class _Shifted:
+    """The reference's gravity direction at the shifted times ``t[:, None] + taus[None, :]`` (B samples × K
+    offsets), ready to be compared with estimates: for each time, the two reference samples around it (at most
+    ``gap`` ns apart) and the fraction between them; the dot product with an estimate is then formed from the
+    estimate's dot products with the few reference samples near its own time (the interpolated direction is never
+    materialised: B × K × 3 arrays would dominate the cost)."""
+
+    def __init__(self, rt: NDArray[np.int64], rg: NDArray[np.float64], t: NDArray[np.int64],
+                 taus: NDArray[np.float64], gap: float) -> None:
+        times = t[:, None] + taus[None, :]
+        self.ok = np.zeros(len(t), bool)
+        if len(rt) < 2:
+            return
+        j = np.clip(np.searchsorted(rt, times, side="right"), 1, len(rt) - 1)
+        ta, tb = rt[j - 1], rt[j]
+        span = (tb - ta).astype(np.float64)
+        inside = (times >= ta) & (times <= tb) & (span <= gap)
+        self.ok = np.asarray(inside.all(axis=1), dtype=bool)  # covered at every offset
+        f = (times - ta) / span
+        lo = (j - 1).min(axis=1)
+        self.m = j - 1 - lo[:, None]  # the earlier sample's place in the sample's window
+        width = int(self.m.max()) + 2
+        self.window = rg[np.minimum(lo[:, None] + np.arange(width)[None, :], len(rt) - 1)]  # (B, W, 3)
+        c = np.einsum("bwc,bwc->bw", self.window[:, :-1], self.window[:, 1:])  # neighbours' dot products
+        self.wa, self.wb = 1.0 - f, f
+        norm2 = self.wa**2 + self.wb**2 + 2 * self.wa * self.wb * np.take_along_axis(c, self.m, axis=1)
+        self.inv_norm = 1.0 / np.sqrt(np.maximum(norm2, 1e-300))
+
+    def sq_err_deg(self, g_est: NDArray[np.float64]) -> NDArray[np.float64]:
+        """e_α² (deg²) of estimates (B, 3) at every offset: (B, K)."""
+        d = np.einsum("bwc,bc->bw", self.window, g_est)
+        dot = (self.wa * np.take_along_axis(d, self.m, axis=1) + self.wb * np.take_along_axis(d, self.m + 1, axis=1))
+        return np.degrees(np.arccos(np.clip(dot * self.inv_norm, -1.0, 1.0))) ** 2
+
+
+@dataclass
+class Offset:
+    """The best offset of one estimator: τ (s, added to the estimate stamps), the e_α RMSE there, and the input step
+    it is measured in."""
+
+    offset_s: float
+    rmse_deg: float
+    step_s: float
+
+    @property
+    def steps(self) -> float:
+        return self.offset_s / self.step_s
+
+
+class OffsetSearch:
+    """e_α sums of ``n_est`` estimators at the candidate offsets, fed chunk by chunk (:meth:`add`, :meth:`result`).
+
+    ``step_s``: the stream's step (1 / its nominal rate)."""
+
+    def __init__(self, n_est: int, step_s: float, steps: int = STEPS, grid: int = GRID) -> None:
+        self.step_ns = step_s * 1e9
+        k = np.arange(-steps * grid, steps * grid + 1)
+        self.taus = k * self.step_ns / grid  # ns
+        self.reach = steps * self.step_ns  # the largest |τ|
+        self.gap = GAP_STEPS * self.step_ns
+        self.sq = np.zeros((n_est, len(k)))
+        self.n = np.zeros(n_est, dtype=np.int64)
+        # the reference seen so far (its finite samples, trimmed to what pending samples can still need)
+        self.ref_t = np.zeros(0, np.int64)
+        self.ref_g = np.zeros((0, 3))
+        # samples not yet scored: their stamps, whether they count, and each estimator's gravity direction
+        self.pend_t = np.zeros(0, np.int64)
+        self.pend_ok = np.zeros(0, bool)
+        self.pend_g = [np.zeros((0, 3)) for _ in range(n_est)]
+
+    def add(self, stamps: NDArray[np.int64], quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_],
+            qs: Sequence[NDArray[np.float64]]) -> None:
+        """One chunk: stamps, reference (N, 4) with NaN rows (None: none), score mask and each estimator's estimates
+        (N, 4); scores the samples whose shifted times the reference now covers."""
+        if quat_ref is None or not len(stamps):
+            return
+        ref_ok = np.isfinite(quat_ref).all(axis=1)
+        g_ref = gravity(quat_ref)
+        self.ref_t = np.concatenate([self.ref_t, stamps[ref_ok]])
+        self.ref_g = np.concatenate([self.ref_g, g_ref[ref_ok]])
+        self.pend_t = np.concatenate([self.pend_t, stamps])
+        self.pend_ok = np.concatenate([self.pend_ok, mask & ref_ok])
+        self.pend_g = [np.concatenate([p, gravity(q)]) for p, q in zip(self.pend_g, qs, strict=True)]
+        # a later chunk can still give reference samples after the last stamp seen
+        self._score(int(np.searchsorted(self.pend_t, stamps[-1] - self.reach - self.gap, side="left")))
+
+    def _score(self, upto: int) -> None:
+        """Score the first ``upto`` pending samples and forget them (and the reference no later sample needs)."""
+        if upto <= 0:
+            return
+        for a in range(0, upto, BLOCK):
+            self._score_block(slice(a, min(a + BLOCK, upto)))
+        last = self.pend_t[upto - 1]
+        self.pend_t, self.pend_ok = self.pend_t[upto:], self.pend_ok[upto:]
+        self.pend_g = [p[upto:] for p in self.pend_g]
+        first = self.pend_t[0] if len(self.pend_t) else last
+        cut = int(np.searchsorted(self.ref_t, first - self.reach - self.gap, side="left"))
+        self.ref_t, self.ref_g = self.ref_t[cut:], self.ref_g[cut:]
+
+    def _score_block(self, sl: slice) -> None:
+        t, ok = self.pend_t[sl], self.pend_ok[sl]
+        if not ok.any():
+            return
+        idx = np.flatnonzero(ok)
+        shifted = _Shifted(self.ref_t, self.ref_g, t[idx], self.taus, self.gap)
+        if not shifted.ok.any():
+            return
+        for j, g_all in enumerate(self.pend_g):
+            g_est = g_all[sl][idx]
+            use = shifted.ok & np.isfinite(g_est).all(axis=1)
+            if not use.any():
+                continue
+            sq = shifted.sq_err_deg(np.where(use[:, None], g_est, 0.0))
+            self.n[j] += int(use.sum())
+            self.sq[j] += np.sum(sq[use], axis=0)
+
+    def result(self, j: int) -> Offset | None:
+        """The best offset of estimator ``j`` (after the last chunk); None when no sample counted."""
+        self._score(len(self.pend_t))
+        if self.n[j] == 0:
+            return None
+        f = self.sq[j]
+        k = int(np.argmin(f))
+        dk, fk = 0.0, float(f[k])
+        if 0 < k < len(f) - 1:
+            curv = f[k - 1] - 2 * f[k] + f[k + 1]
+            if curv > 0:
+                dk = float(np.clip(0.5 * (f[k - 1] - f[k + 1]) / curv, -0.5, 0.5))
+                fk = float(f[k] - 0.25 * (f[k - 1] - f[k + 1]) * dk)
+        d_tau = self.taus[1] - self.taus[0]
+        return Offset(offset_s=float(self.taus[k] + dk * d_tau) * 1e-9, rmse_deg=math.sqrt(max(fk, 0.0) / self.n[j]),
+                      step_s=self.step_ns * 1e-9)
+
+
+def search(stamps: NDArray[np.int64], quat_ref: NDArray[np.float64], mask: NDArray[np.bool_],
+           q_est: NDArray[np.float64], step_s: float) -> Offset | None:
+    """The best offset of one estimate on a whole recording (the one-chunk case)."""
+    s = OffsetSearch(1, step_s)
+    s.add(stamps, quat_ref, mask, [q_est])
+    return s.result(0)
+
+
+def is_half_step(offset_steps: float) -> bool:
+    return HALF_STEP_BAND[0] <= abs(offset_steps) <= HALF_STEP_BAND[1]
+
+
+def _ms(s: float) -> str:
+    return f"{s * 1e3:+.1f} ms"
+
+
+def _group_notes(where: str, grp: Sequence, steps: int, riann_name: str) -> list[str]:
+    """The notes of one sequence × scenario × perturbation × rate (see :func:`timing_notes`)."""
+    step = float(grp[0].score.t_offset_step_s)
+    offsets = {r.estimator: float(r.score.best_t_offset_s) for r in grp}
+    notes = []
+    for r in grp:
+        rel_edge = abs(offsets[r.estimator]) / step
+        if rel_edge >= steps - 0.5 / GRID:
+            notes.append(f"{where}: {r.estimator}'s error is smallest at the edge of the searched offsets "
+                         f"({_ms(offsets[r.estimator])}, ±{steps} steps): the offset may be larger (--offset-steps)")
+        if r.estimator_name != riann_name:
+            continue
+        others = [v for k, v in offsets.items() if k != r.estimator]
+        base = float(np.median(others)) if others else 0.0
+        rel = (offsets[r.estimator] - base) / step
+        if is_half_step(rel) and r.score.best_t_offset_rmse_deg < MIN_GAIN * r.rmse_deg:
+            against = f"the other estimators' ({_ms(base)})" if others else "0 ms"
+            notes.append(
+                f"{where}: {r.estimator} fits the reference best with its estimate moved by "
+                f"{_ms(offsets[r.estimator])}, {rel:+.2f} steps of {step * 1e3:.3g} ms from {against}: e_α RMSE "
+                f"{r.score.best_t_offset_rmse_deg:.2f}° instead of {r.rmse_deg:.2f}°. A shift near half a step is "
+                "what the driver's sample-time convention gives when it is read the other way (point samples at "
+                "their stamps, or means over the interval before each stamp): RIANN reads a regular stream as point "
+                "samples unless its input_model parameter says otherwise (docs/riann.md)")
+    filters = {r.estimator_name for r in grp} - {"recorded"}
+    if len(filters) > 1 and all(abs(v) / step >= 0.25 for v in offsets.values()):
+        if max(offsets.values()) - min(offsets.values()) <= 0.25 * step:
+            notes.append(f"{where}: every estimator fits the reference best moved by about "
+                         f"{_ms(float(np.median(list(offsets.values()))))}: the reference and the IMU stamps may be "
+                         "that far apart (not synchronised), which every score here includes")
+    return notes
+
+
+def timing_notes(rows: Sequence, steps: int = STEPS, riann_name: str = "riann") -> list[str]:
+    """Notes on the best offsets of result rows (:class:`~riann_ros.evaluation.results.ResultRow`), per sequence ×
+    scenario × perturbation × rate: RIANN's best offset differing from the other estimators' (their median; 0 when
+    it runs alone) by about half a step, with a clearly lower RMSE there, points at the sample-time convention (its
+    ``input_model``); all estimators agreeing on an offset of at least a quarter step points at the reference's or
+    the IMU's stamps; a best offset at the edge of the ±``steps`` searched."""
+    groups: dict[tuple, list] = {}
+    for r in rows:
+        if r.score.best_t_offset_s is not None and r.score.t_offset_step_s:
+            groups.setdefault((r.sequence, r.scenario, r.perturbation, r.rate), []).append(r)
+    notes = []
+    for (seq, scn, prt, _rate), grp in groups.items():
+        notes += _group_notes(f"{seq}, {scn}" + ("" if prt == "none" else f", {prt}"), grp, steps, riann_name)
+    return notes

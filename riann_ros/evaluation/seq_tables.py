@@ -1,0 +1,105 @@
+"""Per-sequence tables of ``riann-bag-eval``: evo ape's statistics of each error (with the best time offset) and
+the 9D runs' heading and total errors, as text or markdown (ROS-free; used by :mod:`~riann_ros.evaluation.report`
+and the CLI)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from riann_ros.evaluation.aggregate import rate_label
+from riann_ros.evaluation.results import ResultRow
+from riann_ros.evaluation.scoring import STATS
+
+
+def heading_rows(rows: Sequence[ResultRow]) -> list[list[str]]:
+    """Cells of the 9D table: per estimator × scenario × perturbation × rate of the 9D runs, heading and total
+    RMSE (BROAD's definitions, mean / max over the sequences) beside the inclination. 6D runs never enter it:
+    their heading is not referenced to anything (``--heading`` scores it as drift in results.json)."""
+    nine = [r for r in rows if r.sensors == "9D" and r.score.heading_rmse_deg is not None]
+    out = []
+    keys = dict.fromkeys((r.estimator, r.scenario, r.perturbation, r.rate) for r in nine)
+    for key in keys:
+        grp = [r for r in nine if (r.estimator, r.scenario, r.perturbation, r.rate) == key]
+        h = np.array([r.score.heading_rmse_deg for r in grp], dtype=float)
+        t = np.array([r.score.total_rmse_deg for r in grp], dtype=float)
+        i = np.array([r.rmse_deg for r in grp], dtype=float)
+        out.append([key[1], key[2], rate_label(key[3]), key[0], str(len(grp)), f"{h.mean():.2f}", f"{h.max():.2f}",
+                    f"{t.mean():.2f}", f"{t.max():.2f}", f"{i.mean():.2f}"])
+    return out
+
+
+HEADING_HEADERS = ["scenario", "perturbation", "rate", "estimator", "n", "heading mean °", "heading max °",
+                   "total mean °", "total max °", "inclination mean °"]
+
+
+def format_heading_table(rows: Sequence[ResultRow], markdown_table: bool = False) -> str:
+    """The 9D table (empty string when no run used a magnetometer)."""
+    cells = heading_rows(rows)
+    if not cells:
+        return ""
+    if markdown_table:
+        return "\n".join(["| " + " | ".join(HEADING_HEADERS) + " |", "|---|---|---:|---|" + "---:|" * 6]
+                         + ["| " + " | ".join(c) + " |" for c in cells])
+    widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(HEADING_HEADERS)]
+    lines = ["9D runs (magnetometer): heading and total error RMSE (°) per sequence",
+             "  ".join(h.ljust(w) for h, w in zip(HEADING_HEADERS, widths, strict=True))]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in cells]
+    return "\n".join(lines)
+
+
+ERROR_TITLES = {"inclination": "inclination e_α", "heading": "heading", "total": "total angle"}
+
+
+def _num(v: float | None, fmt: str = ".2f") -> str:
+    return "–" if v is None or not math.isfinite(v) else format(v, fmt)
+
+
+def stats_cells(rows: Sequence[ResultRow], error: str = "inclination") -> tuple[list[str], list[list[str]]]:
+    """Headers and cells of a per-sequence statistics table (evo ape's rmse, mean, median, std, min, max of the
+    per-sample ``error``; for the inclination also the best time offset and the RMSE there). Rows without that error
+    scored are left out; perturbation and rate columns only when they vary."""
+    rows = [r for r in rows if r.score.stat(error, "rmse") is not None]
+    prt = len({r.perturbation for r in rows}) > 1
+    multi = len({r.rate for r in rows}) > 1
+    offsets = error == "inclination" and any(r.score.best_t_offset_s is not None for r in rows)
+    headers = ["sequence", "scenario", *(["perturbation"] if prt else []), *(["rate"] if multi else []),
+               "estimator", *STATS, *(["best offset ms", "rmse there"] if offsets else [])]
+    cells = []
+    for r in rows:
+        sc = r.score
+        cells.append([r.sequence, r.scenario, *([r.perturbation] if prt else []),
+                      *([rate_label(r.rate)] if multi else []), r.estimator,
+                      *(_num(sc.stat(error, st), ".3f" if st == "min" else ".2f") for st in STATS),
+                      *([_num(None if sc.best_t_offset_s is None else sc.best_t_offset_s * 1e3, "+.1f"),
+                         _num(sc.best_t_offset_rmse_deg)] if offsets else [])])
+    return headers, cells
+
+
+def format_stats_table(rows: Sequence[ResultRow], error: str = "inclination", markdown_table: bool = False,
+                       limit: int | None = None) -> str:
+    """The per-sequence statistics of ``error`` as text (or a markdown table); empty when no row has them. With
+    ``limit``, a table longer than that is replaced by a line saying where it is."""
+    headers, cells = stats_cells(rows, error)
+    if not cells:
+        return ""
+    title = f"{ERROR_TITLES[error]} error (°) per sequence: rmse, mean, median, std, min, max over its scored samples"
+    if error == "inclination" and "best offset ms" in headers:
+        title += "; the time offset added to the estimate stamps that minimises the RMSE, and the RMSE there"
+    if limit is not None and len(cells) > limit:
+        return f"{title}: {len(cells)} rows, in report.md and results.csv"
+    numeric = {*STATS, "best offset ms", "rmse there", "rate"}
+    if markdown_table:
+        return "\n".join([title + ":", "", "| " + " | ".join(headers) + " |",
+                          "|" + "".join("---:|" if h in numeric else "---|" for h in headers)]
+                         + ["| " + " | ".join(c) + " |" for c in cells])
+    widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(headers)]
+    lines = [title, "  ".join(h.rjust(w) if h in numeric else h.ljust(w) for h, w in zip(headers, widths,
+                                                                                          strict=True)),
+             "  ".join("-" * w for w in widths)]
+    lines += ["  ".join(c.rjust(w) if h in numeric else c.ljust(w) for c, w, h in zip(row, widths, headers,
+                                                                                       strict=True))
+              for row in cells]
+    return "\n".join(lines)
