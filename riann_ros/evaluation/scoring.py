@@ -3,8 +3,9 @@
 Per sample e_α = 2·arccos(√(w² + z²)) of q_err = q_ref ⊗ q_est⁻¹ (heading ignored); per sequence the
 RMSE over the scored samples: score mask ∩ reference present ∩ estimate present (samples the input gate
 rejected have no estimate and are counted as ``n_unestimated``). Heading and total-angle RMSEs are
-optional extra columns. :class:`Accumulator` keeps running sums, so a bag of any length is scored in
-bounded memory; :func:`score` is the one-chunk case.
+optional extra columns. With the estimator's σ per sample the uncertainty is scored too (NEES, 95 % coverage,
+sharpness: :mod:`riann_ros.evaluation.uncertainty`). :class:`Accumulator` keeps running sums, so a bag of any
+length is scored in bounded memory; :func:`score` is the one-chunk case.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from numpy.typing import NDArray
 
 from riann_ros import quaternion as quat
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.uncertainty import UncertaintySums
 from riann_ros.recording import Recording
 
 
@@ -31,6 +33,23 @@ class Score:
     max_err_deg: float
     heading_rmse_deg: float | None = None
     total_rmse_deg: float | None = None
+    # the reported uncertainty (riann_ros.evaluation.uncertainty; None: the estimator reported none)
+    nees: float | None = None
+    cover95_pct: float | None = None
+    err_bottom_decile_deg: float | None = None
+    err_top_decile_deg: float | None = None
+    yaw_nees: float | None = None
+    yaw_cover95_mag_pct: float | None = None
+    yaw_cover95_held_pct: float | None = None
+    n_yaw_mag: int | None = None
+    n_yaw_held: int | None = None
+
+    @property
+    def sharpness(self) -> float | None:
+        """The mean error in the top decile of σ over that in the bottom decile."""
+        if self.err_top_decile_deg is None or not self.err_bottom_decile_deg:
+            return None
+        return self.err_top_decile_deg / self.err_bottom_decile_deg
 
 
 class Accumulator:
@@ -41,9 +60,12 @@ class Accumulator:
         self.n = self.n_scored = self.n_unest = self.n_base = 0
         self.sq = self.sq_heading = self.sq_total = 0.0
         self.max_e = -math.inf
+        self.unc = UncertaintySums()
 
-    def add(self, quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_], q: NDArray[np.float64]) -> None:
-        """One chunk: reference (N, 4) with NaN rows (None: no reference), score mask, estimates (N, 4)."""
+    def add(self, quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_], q: NDArray[np.float64],
+            sigma: NDArray[np.float64] | None = None) -> None:
+        """One chunk: reference (N, 4) with NaN rows (None: no reference), score mask, estimates (N, 4), and the
+        estimator's σ (N, 2) when it reports one."""
         self.n += len(q)
         if quat_ref is None:
             return
@@ -59,8 +81,11 @@ class Accumulator:
             e = quat.inclination_error(qt, qe)
             self.sq += float(np.sum(e**2))
             self.max_e = max(self.max_e, float(e.max()))
-            self.sq_heading += float(np.sum(quat.heading_error(qt, qe) ** 2))  # reported for 9D runs, --heading
+            eh = quat.heading_error(qt, qe)
+            self.sq_heading += float(np.sum(eh**2))  # reported for 9D runs, --heading
             self.sq_total += float(np.sum(quat.total_error(qt, qe) ** 2))
+            if sigma is not None:
+                self.unc.add(e, eh, sigma[valid])
 
     def result(self, with_heading: bool | None = None) -> Score:
         """The scores; heading and total error when ``with_heading`` (default: as constructed)."""
@@ -81,6 +106,7 @@ class Accumulator:
             max_err_deg=float(np.degrees(self.max_e)),
             heading_rmse_deg=rms(self.sq_heading) if heading else None,
             total_rmse_deg=rms(self.sq_total) if heading else None,
+            **self.unc.result(),  # type: ignore[arg-type]
         )
 
 
