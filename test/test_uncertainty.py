@@ -4,6 +4,7 @@ documented constants of the classical filters, batch equal to per sample, and th
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -74,3 +75,64 @@ def test_riann_sigma_never_changes_the_attitude():
         q_b.append(b.update(acc[i], gyr[i], dt[i]))
         b.sigma(np.zeros(1, dtype=bool))
     assert np.abs(q_a - np.array(q_b)).max() == 0.0
+
+
+# -- the evaluator's scores -------------------------------------------------------------------------------------
+def _gaussian_errors(sig_i: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Inclination errors (rad) of a calibrated isotropic 2-D Gaussian with per-axis σ ``sig_i``."""
+    return np.hypot(rng.normal(0, 1, len(sig_i)), rng.normal(0, 1, len(sig_i))) * sig_i
+
+
+def test_uncertainty_sums_score_a_calibrated_sigma_as_calibrated_and_a_constant_as_not_sharp():
+    from riann_ros.evaluation.uncertainty import UncertaintySums
+
+    rng = np.random.default_rng(1)
+    n = 200_000
+    s_i = np.radians(rng.uniform(0.2, 4.0, n))
+    e = _gaussian_errors(s_i, rng)
+    s_y = np.where(np.arange(n) < n // 2, np.radians(5.0), np.radians(20.0))
+    e_y = np.abs(rng.normal(0, 1, n)) * s_y
+    u = UncertaintySums()
+    for part in np.array_split(np.arange(n), 7):  # chunk by chunk
+        u.add(e[part], e_y[part], np.column_stack([s_i, s_y])[part])
+    r = u.result()
+    assert r["cover95_pct"] == pytest.approx(95.0, abs=0.3) and r["nees"] == pytest.approx(1.0, abs=0.02)
+    assert r["yaw_cover95_mag_pct"] == pytest.approx(95.0, abs=0.3)
+    assert r["yaw_cover95_held_pct"] == pytest.approx(95.0, abs=0.3) and r["n_yaw_held"] == n // 2
+    # top decile of σ ≈ 3.6–4°, bottom ≈ 0.2–0.6°: mean errors in about that ratio
+    assert r["err_top_decile_deg"] / r["err_bottom_decile_deg"] == pytest.approx(3.8 / 0.39, rel=0.1)
+    # 2x overconfident: NEES 4, coverage far below 95 %; a constant σ has no sharpness
+    v = UncertaintySums()
+    v.add(e, e_y, np.column_stack([s_i / 2.0, np.full(n, np.radians(180.0))]))
+    rv = v.result()
+    assert rv["nees"] == pytest.approx(4.0, rel=0.05) and rv["cover95_pct"] < 60.0 and rv["n_yaw_mag"] == 0
+    w = UncertaintySums()
+    w.add(e, e_y, np.column_stack([np.full(n, np.radians(2.0)), s_y]))
+    assert w.result()["err_top_decile_deg"] == pytest.approx(w.result()["err_bottom_decile_deg"], rel=0.05)
+    nothing = UncertaintySums()
+    nothing.add(e, e_y, np.full((n, 2), np.nan))
+    assert set(nothing.result().values()) == {None}
+
+
+def test_results_rows_keep_the_uncertainty_scores_and_older_rows_read():
+    from riann_ros.evaluation.compare import Comparison, Saved, compare, format_comparison
+    from riann_ros.evaluation.results import ResultRow
+    from riann_ros.evaluation.scoring import Score
+    from riann_ros.evaluation.uncertainty import format_uncertainty_table
+
+    def row(seq: str, est: str, cover: float | None) -> ResultRow:
+        extra = {} if cover is None else {"nees": 1.1, "cover95_pct": cover, "err_bottom_decile_deg": 0.3,
+                                          "err_top_decile_deg": 1.2}
+        return ResultRow(sequence=seq, dataset="d", source="s", scenario="as-recorded", rate="native", rate_hz=100.0,
+                         resampled=False, estimator=est, estimator_name=est, mode="offline",
+                         score=Score(n_samples=10, n_scored=10, n_unestimated=0, rmse_deg=1.0, max_err_deg=2.0,
+                                     **extra))
+
+    rows = [row("t1", "riann", 90.0), row("t2", "riann", 96.0), row("t1", "old", None)]
+    back = [ResultRow.from_dict(r.to_dict()) for r in rows]
+    assert back[0].score.cover95_pct == 90.0 and back[0].score.sharpness == pytest.approx(4.0)
+    assert back[2].score.cover95_pct is None and "cover95_pct" not in rows[2].to_dict()  # an older row
+    table = format_uncertainty_table(back)
+    assert "riann" in table and "old" not in table and "93.0" in table and "90.0–96.0" in table
+    cmp: Comparison = compare(Saved(Path("a"), "a", "", back), Saved(Path("b"), "b", "", back))
+    assert "uncertainty" in format_comparison(cmp) and "4.00" in format_comparison(cmp)

@@ -29,6 +29,7 @@ from pathlib import Path
 from riann_ros import defaults
 from riann_ros import evaluation as ev
 from riann_ros.evaluation import outdir, perturb, report
+from riann_ros.evaluation.uncertainty import format_uncertainty_table
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
@@ -291,6 +292,9 @@ def _print_summary(rep: report.Report, live: bool) -> None:
     nine = report.format_heading_table(rep.rows)
     if nine:
         print("\n" + nine)
+    unc = format_uncertainty_table(rep.rows)
+    if unc:
+        print("\n" + unc)
     rows = rep.rows
     if live and rows:
         lost: dict[str, list[int]] = {}

@@ -21,6 +21,7 @@ from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.outdir import prepare_out
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, ResultRow
+from riann_ros.evaluation.uncertainty import format_uncertainty_comparison
 
 Key = tuple[str, str, str, str | float, str]  # sequence, scenario, perturbation, rate, estimator
 Group = tuple[str, str, str, str | float]  # estimator, scenario, perturbation, rate
@@ -171,6 +172,7 @@ def format_comparison(cmp: Comparison) -> str:
     seq_rows = [[p.key[4], p.key[1], *([p.key[2]] if prt else []), *([_rate(p.key[3])] if multi else []), p.key[0],
                  f"{p.a:.2f}", f"{p.b:.2f}", f"{p.diff:+.2f}"] for p in _ordered(cmp)]
     out += _table([*head[:-1], "sequence", "A", "B", "B-A"], seq_rows, {"A", "B", "B-A"})
+    out += format_uncertainty_comparison(cmp.a.rows, cmp.b.rows)
     for name, keys in (("A", cmp.only_a), ("B", cmp.only_b)):
         if keys:
             shown = ", ".join(_key_text(k) for k in keys[:5]) + (" …" if len(keys) > 5 else "")

@@ -26,6 +26,8 @@ from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
 from riann_ros.evaluation.results import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
+from riann_ros.evaluation.uncertainty import NOTE as UNCERTAINTY_NOTE
+from riann_ros.evaluation.uncertainty import format_uncertainty_table
 
 CSV_FIELDS = (
     "sequence",
@@ -325,6 +327,9 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
         lines += ["## Heading (9D runs: estimators that used the magnetometer)", "",
                   "Heading and total error as BROAD defines them (error quaternion in the earth frame); the heading "
                   "of a 9D estimate is absolute (magnetic north), so it is scored as it is.", "", nine, ""]
+    unc = format_uncertainty_table(report.rows, markdown_table=True)
+    if unc:
+        lines += ["## Uncertainty (the σ each estimator reports)", "", UNCERTAINTY_NOTE, "", unc, ""]
     if report.tuning:
         lines += ["## Tuning (grid search on these sequences)", ""]
         for t in report.tuning:
