@@ -56,6 +56,11 @@ def test_riann_sigma_batch_equals_per_sample_and_grows_with_the_copies_spread():
     # at turn-on the bias is unknown (σ_b = bias_sigma_init): larger than after it has settled at rest
     assert s_b[0, 0] > 2.0 * s_b[n // 2 - 1, 0]
     f = est.uncertainty.features
+    # the per-sample formula (plain floats) is the vectorised one the fit uses
+    from riann_ros.estimators.riann.s8_uncertainty import heading_sigma
+
+    assert np.allclose(inclination_sigma(f), s_b[:, 0], rtol=1e-12)
+    assert np.allclose(heading_sigma(est.uncertainty.yaw_features, s_b[:, 0], f[:, 4]), s_b[:, 1], rtol=1e-12)
     more = f.copy()
     more[:, 0] *= 2.0
     assert (inclination_sigma(more) > inclination_sigma(f)).all()
@@ -136,3 +141,51 @@ def test_results_rows_keep_the_uncertainty_scores_and_older_rows_read():
     assert "riann" in table and "old" not in table and "93.0" in table and "90.0–96.0" in table
     cmp: Comparison = compare(Saved(Path("a"), "a", "", back), Saved(Path("b"), "b", "", back))
     assert "uncertainty" in format_comparison(cmp) and "4.00" in format_comparison(cmp)
+
+
+def test_riann_heading_sigma_follows_the_field():
+    """9D: 180° before the first field, the field's σ (with the tilt's share) while it corrects, growing with the
+    gyro's drift while it is absent; the per-sample formula equals the vectorised one."""
+    from riann_ros.estimators.riann.s8_uncertainty import FREE, HELD, MAG_SD, USED, heading_sigma
+
+    n = 2400
+    acc, gyr, dt = _motion(n, seed=9)
+    mag = np.tile([0.0, 2e-5, -4e-5], (n, 1))
+    mag[:100] = np.nan  # no field yet
+    mag[1600:] = np.nan  # the field goes away
+    est = RiannEstimator()
+    est.update_batch(acc, gyr, dt, mag)
+    s = est.sigma(np.isfinite(mag).all(axis=1))
+    yf = est.uncertainty.yaw_features
+    assert (yf[:100, 0] == FREE).all() and (yf[200:1600, 0] == USED).all() and (yf[1600:, 0] == HELD).all()
+    assert np.allclose(s[:100, 1], math.radians(YAW_FREE_SD_DEG))
+    tilt = yf[:, 2] * s[:, 0]  # the tilt compensation's share: tan(dip) σ_i, dip 63.4° here
+    assert ((yf[200:, 2] > 1.5) & (yf[200:, 2] < 2.2)).all()  # the learned reference dip, about 63°
+    assert np.allclose(np.sqrt(s[200:1600, 1] ** 2 - tilt[200:1600] ** 2), MAG_SD)
+    drift = np.sqrt(s[1600:, 1] ** 2 - tilt[1600:] ** 2 - MAG_SD**2)
+    assert drift[0] < drift[-1] < math.radians(180.0)
+    assert np.allclose(heading_sigma(yf, s[:, 0], est.uncertainty.features[:, 4]), s[:, 1], rtol=1e-12)
+
+
+def test_error_vs_sigma_plot_from_the_histograms_of_the_rows(tmp_path):
+    from riann_ros.evaluation.results import ResultRow
+    from riann_ros.evaluation.scoring import Accumulator
+    from riann_ros.evaluation.uncertainty import plot_error_vs_sigma
+
+    rng = np.random.default_rng(4)
+    n = 20_000
+    s_i = np.radians(rng.uniform(0.2, 4.0, n))
+    e = _gaussian_errors(s_i, rng)
+    q_ref = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    q = np.column_stack([np.cos(e / 2), np.sin(e / 2), np.zeros(n), np.zeros(n)])  # tilted about x by e
+    acc = Accumulator()
+    acc.add(q_ref, np.ones(n, dtype=bool), q, np.column_stack([s_i, np.full(n, np.pi)]))
+    score = acc.result()
+    assert score.cover95_pct == pytest.approx(95.0, abs=0.6) and score.sigma_hist is not None
+    row = ResultRow(sequence="t", dataset="d", source="s", scenario="as-recorded", rate="native", rate_hz=100.0,
+                    resampled=False, estimator="riann", estimator_name="riann", mode="offline", score=score)
+    back = ResultRow.from_dict(row.to_dict())
+    assert back.score.sigma_hist == score.sigma_hist
+    paths = plot_error_vs_sigma([back], tmp_path)
+    assert {p.name for p in paths} == {"error_vs_sigma.png", "error_vs_sigma.svg"}
+    assert plot_error_vs_sigma([], tmp_path) == []

@@ -26,8 +26,9 @@ from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
 from riann_ros.evaluation.results import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
+from riann_ros.evaluation.uncertainty import KEYS as UNCERTAINTY_KEYS
 from riann_ros.evaluation.uncertainty import NOTE as UNCERTAINTY_NOTE
-from riann_ros.evaluation.uncertainty import format_uncertainty_table
+from riann_ros.evaluation.uncertainty import format_uncertainty_table, plot_error_vs_sigma
 
 CSV_FIELDS = (
     "sequence",
@@ -51,6 +52,7 @@ CSV_FIELDS = (
     "received",
     "lost",
     "source",
+    *UNCERTAINTY_KEYS,
 )
 METRIC = (
     "RMSE of e_alpha = 2 acos(sqrt(w^2+z^2)) of q_ref * conj(q_est), deg, over score mask & reference present & "
@@ -358,7 +360,7 @@ def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
         figures += pl.plot_error_over_time(with_series[0], out)
     for series in with_series if report.settings.series_for == "all" else with_series[:1]:
         figures += pl.plot_attitude(series, out)
-    return figures + pl.plot_rmse_vs_rate(rows, out)
+    return figures + pl.plot_rmse_vs_rate(rows, out) + plot_error_vs_sigma(rows, out)
 
 
 def write_results(out: Path, report: Report, plots: bool = True, replace: bool = False) -> list[Path]:

@@ -105,7 +105,8 @@ class ResultRow:
         score = Score(n_samples=int(d["n_samples"]), n_scored=int(d["n_scored"]),
                       n_unestimated=int(d["n_unestimated"]), rmse_deg=num(d["rmse_deg"]),
                       max_err_deg=num(d["max_err_deg"]), heading_rmse_deg=d.get("heading_rmse_deg"),
-                      total_rmse_deg=d.get("total_rmse_deg"), **{k: d.get(k) for k in UNCERTAINTY_KEYS})
+                      total_rmse_deg=d.get("total_rmse_deg"), **{k: d.get(k) for k in UNCERTAINTY_KEYS},
+                      sigma_hist=d.get("sigma_hist"))
         live = {k: int(d[k]) for k in LIVE_KEYS if k in d}
         stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
                          rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},

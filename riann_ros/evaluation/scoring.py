@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +44,7 @@ class Score:
     yaw_cover95_held_pct: float | None = None
     n_yaw_mag: int | None = None
     n_yaw_held: int | None = None
+    sigma_hist: dict[str, Any] | None = None  # the σ histogram (uncertainty.histogram): results.json and the plot
 
     @property
     def sharpness(self) -> float | None:
@@ -106,7 +108,7 @@ class Accumulator:
             max_err_deg=float(np.degrees(self.max_e)),
             heading_rmse_deg=rms(self.sq_heading) if heading else None,
             total_rmse_deg=rms(self.sq_total) if heading else None,
-            **self.unc.result(),  # type: ignore[arg-type]
+            **self.unc.result(),
         )
 
 

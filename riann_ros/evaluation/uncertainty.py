@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +27,8 @@ from numpy.typing import NDArray
 from riann_ros.defaults import MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from riann_ros.evaluation.results import ResultRow
 
 CHI2_2_95 = 5.991  # χ²₂(0.95)
@@ -70,10 +72,10 @@ class UncertaintySums:
                 self.yaw[key][1] += int(np.sum(ry <= CHI2_1_95))
                 self.yaw_nees += float(np.sum(ry))
 
-    def result(self) -> dict[str, float | int | None]:
-        """The scores (None where no sample had a σ); keys :data:`KEYS`."""
+    def result(self) -> dict[str, Any]:
+        """The scores (None where no sample had a σ); keys :data:`KEYS` and ``sigma_hist`` (:func:`histogram`)."""
         if self.n == 0:
-            return dict.fromkeys(KEYS)
+            return {**dict.fromkeys(KEYS), "sigma_hist": None}
         bottom, top = decile_errors(self.hist_n, self.hist_e)
         ny = self.yaw["mag"][0] + self.yaw["held"][0]
 
@@ -85,7 +87,15 @@ class UncertaintySums:
                 "err_bottom_decile_deg": math.degrees(bottom), "err_top_decile_deg": math.degrees(top),
                 "yaw_nees": self.yaw_nees / ny if ny else None, "yaw_cover95_mag_pct": pct("mag"),
                 "yaw_cover95_held_pct": pct("held"), "n_yaw_mag": self.yaw["mag"][0],
-                "n_yaw_held": self.yaw["held"][0]}
+                "n_yaw_held": self.yaw["held"][0], "sigma_hist": histogram(self.hist_n, self.hist_e)}
+
+
+def histogram(hist_n: NDArray[np.float64], hist_e: NDArray[np.float64]) -> dict[str, Any]:
+    """The σ_i histogram as results.json keeps it: the first non-empty bin ``lo`` of :data:`BINS` (bin ``k`` holds
+    σ below ``BINS[k]``), then per bin the samples ``n`` and the sum of their errors ``e_deg``."""
+    nz = np.flatnonzero(hist_n)
+    lo, hi = int(nz[0]), int(nz[-1]) + 1
+    return {"lo": lo, "n": [int(v) for v in hist_n[lo:hi]], "e_deg": [round(math.degrees(v), 6) for v in hist_e[lo:hi]]}
 
 
 def decile_errors(hist_n: NDArray[np.float64], hist_e: NDArray[np.float64]) -> tuple[float, float]:
@@ -207,3 +217,45 @@ def format_uncertainty_comparison(a: Sequence[ResultRow], b: Sequence[ResultRow]
     return ["", "uncertainty (the σ each estimator reports): 95 % coverage, NEES per DOF, sharpness; A and B",
             "  ".join(h.ljust(w) for h, w in zip(headers, widths, strict=True)),
             *("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows)]
+
+
+def plot_error_vs_sigma(rows: Sequence[ResultRow], out_dir: Path, stem: str = "error_vs_sigma",
+                        min_samples: int = 50) -> list[Path]:
+    """Mean inclination error against the predicted σ_i per estimator (the σ histogram pooled over the sequences;
+    bins with at least ``min_samples``), one panel per perturbation, native rate, first scenario; the line of a
+    calibrated σ (the mean of a 2-D Gaussian error's length, σ·√(π/2)). Nothing when no row has a σ."""
+    from riann_ros.evaluation import plots as pl  # here: plots imports results, which imports this module
+
+    rows = [r for r in rows if r.score.sigma_hist and not r.resampled]
+    if not rows:
+        return []
+    scenario = rows[0].scenario
+    rows = [r for r in rows if r.scenario == scenario]
+    prts = list(dict.fromkeys(r.perturbation for r in rows))
+    ests = list(dict.fromkeys(r.estimator for r in rows))
+    plt = pl._plt()
+    fig, axes = plt.subplots(1, len(prts), figsize=(4.6 * len(prts), 4.0), squeeze=False)
+    centres = np.degrees(np.sqrt(BINS[:-1] * BINS[1:]))
+    for ax, prt in zip(axes[0], prts, strict=True):
+        for est in ests:
+            n = np.zeros(len(BINS) + 1)
+            e = np.zeros(len(BINS) + 1)
+            for r in rows:
+                h = r.score.sigma_hist
+                if r.perturbation == prt and r.estimator == est and h:
+                    n[h["lo"]: h["lo"] + len(h["n"])] += h["n"]
+                    e[h["lo"]: h["lo"] + len(h["n"])] += h["e_deg"]
+            ok = n[1:-1] >= min_samples
+            if ok.any():
+                ax.plot(centres[ok], e[1:-1][ok] / n[1:-1][ok], "o-", ms=3, label=est)
+        lim = np.array([0.05, 30.0])
+        ax.plot(lim, lim * math.sqrt(math.pi / 2.0), "k--", lw=1, label="calibrated: σ·√(π/2)")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("predicted σ_i per axis (°)")
+        ax.set_ylabel("mean e_α (°)")
+        ax.set_title(f"{scenario}, {prt}")
+        ax.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    pl._fig_legend(fig, axes[0, 0], min(len(ests) + 1, 5))
+    return pl._save(fig, out_dir, stem)

@@ -39,6 +39,7 @@ class Heading:
         self.psi = 0.0  # heading of the output (rad)
         self.q_prev: Quat | None = None  # the previous sample's carried network attitude
         self.observed: list[bool] = []  # per sample of the last block: its heading was corrected by the field
+        self.dip: list[float] = []  # per sample of the last block: the field reference's dip (rad; 0 before a field)
 
     def restart(self, cause: Cause) -> None:
         if cause is Cause.RESET:
@@ -54,6 +55,7 @@ class Heading:
         a hole → the uncertainty of the bridge over it (deg); ``tilt_sd``: each sample's inclination uncertainty
         after a hole (deg, 0: converged)."""
         self.observed = [False] * len(qc)
+        self.dip = [0.0] * len(qc)
         if len(qc) <= SCALAR_MAX:
             return np.array([self._one(i, qc[i], delta[i], dt[i], None if mag is None else mag[i], bridges.get(i),
                                        tilt_sd[i]) for i in range(len(qc))])
@@ -72,6 +74,7 @@ class Heading:
             qo = qmul(about_z(self.psi), qc)
             self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), TWO_PI)
             self.observed[i] = self.mag.observed
+            self.dip[i] = self.mag.ref_dip
         w, x, y, z = qmul(about_z(self.psi), qc)
         n = math.sqrt(w * w + x * x + y * y + z * z)
         if w < 0.0:  # sign convention: w >= 0
@@ -124,6 +127,7 @@ class Heading:
             qo = (c * q[0] - s * q[3], c * q[1] - s * q[2], c * q[2] + s * q[1], c * q[3] + s * q[0])
             psi += step(qo, delta[i], dt[i], None if mag is None else mag[i], tilt_sd[i])
             self.observed[first + i] = self.mag.observed
+            self.dip[first + i] = self.mag.ref_dip
             out[i] = psi
         return out
 
