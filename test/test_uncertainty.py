@@ -123,7 +123,7 @@ def test_results_rows_keep_the_uncertainty_scores_and_older_rows_read():
     from riann_ros.evaluation.compare import Comparison, Saved, compare, format_comparison
     from riann_ros.evaluation.results import ResultRow
     from riann_ros.evaluation.scoring import Score
-    from riann_ros.evaluation.uncertainty import format_uncertainty_table
+    from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
 
     def row(seq: str, est: str, cover: float | None) -> ResultRow:
         extra = {} if cover is None else {"nees": 1.1, "cover95_pct": cover, "err_bottom_decile_deg": 0.3,
@@ -170,7 +170,7 @@ def test_riann_heading_sigma_follows_the_field():
 def test_error_vs_sigma_plot_from_the_histograms_of_the_rows(tmp_path):
     from riann_ros.evaluation.results import ResultRow
     from riann_ros.evaluation.scoring import Accumulator
-    from riann_ros.evaluation.uncertainty import plot_error_vs_sigma
+    from riann_ros.evaluation.uncertainty_report import plot_error_vs_sigma
 
     rng = np.random.default_rng(4)
     n = 20_000

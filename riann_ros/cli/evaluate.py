@@ -29,7 +29,7 @@ from pathlib import Path
 from riann_ros import defaults
 from riann_ros import evaluation as ev
 from riann_ros.evaluation import outdir, perturb, report
-from riann_ros.evaluation.uncertainty import format_uncertainty_table
+from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"

@@ -21,7 +21,7 @@ from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.outdir import prepare_out
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, ResultRow
-from riann_ros.evaluation.uncertainty import format_uncertainty_comparison
+from riann_ros.evaluation.uncertainty_report import format_uncertainty_comparison
 
 Key = tuple[str, str, str, str | float, str]  # sequence, scenario, perturbation, rate, estimator
 Group = tuple[str, str, str, str | float]  # estimator, scenario, perturbation, rate

@@ -27,8 +27,8 @@ from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
 from riann_ros.evaluation.results import NATIVE, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
 from riann_ros.evaluation.uncertainty import KEYS as UNCERTAINTY_KEYS
-from riann_ros.evaluation.uncertainty import NOTE as UNCERTAINTY_NOTE
-from riann_ros.evaluation.uncertainty import format_uncertainty_table, plot_error_vs_sigma
+from riann_ros.evaluation.uncertainty_report import NOTE as UNCERTAINTY_NOTE
+from riann_ros.evaluation.uncertainty_report import format_uncertainty_table, plot_error_vs_sigma
 
 CSV_FIELDS = (
     "sequence",
