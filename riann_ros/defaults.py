@@ -21,6 +21,13 @@ MAX_GAP_S = 0.1
 #: stage and the yaw standard deviation the nodes publish while the heading is corrected (``mag_yaw_stddev_deg``).
 MAG_HEADING_SD_DEG = 5.0
 
+#: deg; the inclination standard deviation (per axis: roll and pitch) the classical filters report and the nodes
+#: publish with ``orientation_covariance: constant`` (``roll_pitch_stddev_deg``); the order of RIANN's RMSE on BROAD.
+INCLINATION_SD_DEG = 2.0
+
+#: deg; the heading standard deviation while no field ties it (unobservable: gyro drift only; ``yaw_stddev_deg``).
+YAW_FREE_SD_DEG = 180.0
+
 
 @dataclass(frozen=True)
 class Synthetic:

@@ -259,6 +259,10 @@ class EstimatorStream:
         self.estimator = estimator
         self.gate = InputGate(config)
         self.mag = MagInput(mag_config)
+        # σ (rad) of the inclination per axis and of the heading (:meth:`AttitudeEstimator.sigma`): of the last
+        # accepted sample of process() (None: rejected), and per sample of the last process_batch() (NaN: rejected)
+        self.sigma: NDArray[np.float64] | None = None
+        self.batch_sigma: NDArray[np.float64] = np.empty((0, 2))
 
     def reset(self) -> None:
         """Clear the estimator and restart the stamp sequence (the node's ~/reset service)."""
@@ -272,6 +276,7 @@ class EstimatorStream:
     ) -> tuple[NDArray[np.float64] | None, GateResult]:
         """One sample (and the field paired with it, see :mod:`riann_ros.mag`) → (quaternion wxyz or None
         when rejected, the gate's verdict)."""
+        self.sigma = None
         r = self.gate.check(stamp_ns, acc, gyr, receive_ns)
         if not r.accepted:
             return None, r
@@ -281,6 +286,7 @@ class EstimatorStream:
         q = self.estimator.update(acc, gyr, r.dt, field)
         if not _is_unit(q):
             return None, self._fault(r)
+        self.sigma = self.estimator.sigma(np.array([field is not None]))[0]
         if self.mag.note(field is not None) and self.mag.config.declination_deg != 0.0:
             q = self.mag.declination_applied(q[None, :], np.ones(1, dtype=bool))[0]
         return q, r
@@ -305,7 +311,7 @@ class EstimatorStream:
         self, stamps_ns: ArrayLike, acc: ArrayLike, gyr: ArrayLike, mag: ArrayLike | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """A sequence (with the fields paired to its samples, NaN rows = none) → (quaternions (N, 4) with NaN
-        rows for rejected samples, accepted mask).
+        rows for rejected samples, accepted mask); their σ in :attr:`batch_sigma`.
 
         Equal to calling :meth:`process` per sample (the gate runs per sample; the estimator runs
         vectorised over each run of accepted samples between restarts).
@@ -316,6 +322,7 @@ class EstimatorStream:
         self._fields = self.mag.prepare_batch(mag) if self.estimator.USES_MAG else None
         state = self.mag.state  # of the last sample (a restart inside the sequence must not clear it)
         out = np.full((len(stamps), 4), np.nan)
+        self.batch_sigma = np.full((len(stamps), 2), np.nan)
         accepted, dts, starts = self._gate_batch(stamps, acc, gyr)
         idx = np.flatnonzero(accepted)
         if len(idx) == 0:
@@ -368,6 +375,9 @@ class EstimatorStream:
             q = self.estimator.update_batch(acc[seg], gyr[seg], dts[seg], m)
             bad = ~_rows_unit(q)
             n_ok = int(np.argmax(bad)) if bad.any() else len(seg)
+            got: NDArray[np.bool_] = (np.zeros(len(seg), dtype=bool) if m is None
+                                      else np.asarray(np.isfinite(m).all(axis=1), dtype=bool))
+            self.batch_sigma[seg[:n_ok]] = self.estimator.sigma(got)[:n_ok]
             if m is not None or self.mag.seen:
                 ok: NDArray[np.bool_] = (np.zeros(n_ok, dtype=bool) if m is None
                                          else np.asarray(np.isfinite(m[:n_ok]).all(axis=1), dtype=bool))

@@ -33,6 +33,8 @@ def test_node_output_equals_core_on_a_broad_trial(ros, start_node, broad_trial):
     node = start_node("riann_node", "-p", "input_qos:=reliable", "-p", "input_depth:=1000",
                       "-p", f"nominal_rate:={rec.rate_hz}")
     pub, att = connect(ros, node)
+    imu_out = ros.collect(Imu, "imu/data")
+    wait_matched([], [imu_out], "imu/data")
     stamps = rec.stamps_ns + 1_700_000_000_000_000_000  # BROAD starts at 0; a zero stamp means "unstamped"
     msgs = [imu_msg(s, a, g) for s, a, g in zip(stamps, rec.acc, rec.gyr, strict=True)]
     t0 = time.monotonic()
@@ -47,14 +49,24 @@ def test_node_output_equals_core_on_a_broad_trial(ros, start_node, broad_trial):
     assert [stamp_ns(m) for m in got] == stamps.tolist()
     assert all(m.header.frame_id == "odom" for m in got[:100])  # fixed_frame: the orientation's frame
     q_node = quats(got)
-    q_core, ok = EstimatorStream(create("riann"), GateConfig(nominal_rate=rec.rate_hz)).process_batch(
-        stamps, rec.acc, rec.gyr)
+    core = EstimatorStream(create("riann"), GateConfig(nominal_rate=rec.rate_hz))
+    q_core, ok = core.process_batch(stamps, rec.acc, rec.gyr)
     assert ok.all()
     assert np.abs(q_node - q_core).max() < 1e-4
     e_node = rmse(rec, q_node)
     e_core = rmse(rec, q_core)
     assert abs(e_node - e_core) < 0.01 and 0.2 < e_node < 3.0
-    ros.destroy(pub, att)
+    # imu/data's covariance (orientation_covariance: model, the default) is the offline σ, SPD on every message
+    wait_for(lambda: len(imu_out.messages) >= len(msgs), 30, "imu/data")
+    cov = np.array([m.orientation_covariance for m in imu_out.messages])
+    want = np.zeros_like(cov)
+    want[:, 0] = want[:, 4] = core.batch_sigma[:, 0] ** 2
+    want[:, 8] = core.batch_sigma[:, 1] ** 2
+    assert np.abs(cov - want).max() < 1e-6
+    assert (np.abs(cov[:, 0] - want[:, 0]) < 1e-2 * want[:, 0]).all()  # relative, too (float32 GRU round-off)
+    assert (np.linalg.eigvalsh(cov.reshape(-1, 3, 3)) > 0.0).all()
+    assert np.sqrt(cov[:, 0]).max() > 3.0 * np.sqrt(cov[:, 0]).min()  # per sample, not a constant
+    ros.destroy(pub, att, imu_out)
 
 
 def synthetic(n: int, rate: float = 200.0, t0_ns: int = 1_000_000_000):
@@ -121,7 +133,8 @@ def test_bad_input_is_rejected_or_restarts_as_documented(ros, start_node):
 
 
 def test_imu_data_carries_input_with_orientation_and_covariance(ros, start_node):
-    node = start_node("riann_node", "-p", "input_qos:=reliable", "-p", "yaw_stddev_deg:=90.0")
+    node = start_node("riann_node", "-p", "input_qos:=reliable", "-p", "yaw_stddev_deg:=90.0",
+                      "-p", "orientation_covariance:=constant")
     pub, att = connect(ros, node)
     imu_out = ros.collect(Imu, "imu/data")
     wait_matched([], [imu_out], "imu/data")

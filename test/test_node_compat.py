@@ -61,7 +61,7 @@ def test_imu_tools_translations() -> None:
     assert imu_tools.translate("yaw_offset", -math.pi / 2, "mahony").values == {"yaw_offset_deg": pytest.approx(-90)}
     t = imu_tools.translate("orientation_stddev", 0.01, "riann")
     d = pytest.approx(0.5729578)
-    assert t.values == {"roll_pitch_stddev_deg": d, "mag_yaw_stddev_deg": d}
+    assert t.values == {"roll_pitch_stddev_deg": d, "mag_yaw_stddev_deg": d, "orientation_covariance": "constant"}
     assert imu_tools.translate("orientation_stddev", 0.0, "riann").values == {}  # imu_tools: covariance unknown
     assert "nominal_rate: 200" in imu_tools.translate("constant_dt", 0.005, "vqf").refused
     assert imu_tools.translate("do_bias_estimation", False, "vqf").values == {"motion_bias_est": False,

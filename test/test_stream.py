@@ -90,11 +90,18 @@ def test_process_batch_equals_per_sample_process(name):
     batch = EstimatorStream(create(name), GateConfig(nominal_rate=200.0))
     q_b, ok = batch.process_batch(stamps, acc, gyr)
     single = EstimatorStream(create(name), GateConfig(nominal_rate=200.0))
-    rows = [single.process(int(s), a, g)[0] for s, a, g in zip(stamps, acc, gyr, strict=True)]
+    rows, sig = [], []
+    for s, a, g in zip(stamps, acc, gyr, strict=True):
+        rows.append(single.process(int(s), a, g)[0])
+        sig.append(single.sigma)
     assert [r is not None for r in rows] == ok.tolist()
     tol = 1e-5 if name == "riann" else 1e-9  # RIANN: float32 GRU, one step at a time vs a sequence
     assert np.abs(np.array([r for r in rows if r is not None]) - q_b[ok]).max() < tol
     assert np.isnan(q_b[~ok]).all()
+    # the σ of every accepted sample, the same on both paths (and NaN where rejected)
+    assert [s is not None for s in sig] == ok.tolist()
+    assert np.abs(np.array([s for s in sig if s is not None]) - batch.batch_sigma[ok]).max() < 1e-6
+    assert np.isnan(batch.batch_sigma[~ok]).all() and (batch.batch_sigma[ok] > 0.0).all()
     assert batch.gate.rejected == single.gate.rejected and batch.gate.resets == single.gate.resets
 
 

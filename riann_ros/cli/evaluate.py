@@ -29,6 +29,7 @@ from riann_ros import defaults
 from riann_ros import evaluation as ev
 from riann_ros.cli import eval_inputs
 from riann_ros.evaluation import outdir, perturb, report, seq_tables
+from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
@@ -305,6 +306,9 @@ def _print_summary(rep: report.Report, live: bool) -> None:
             print("\n" + table)
     for note in rep.timing_notes:
         print(f"\ntiming: {note}")
+    unc = format_uncertainty_table(rep.rows)
+    if unc:
+        print("\n" + unc)
     rows = rep.rows
     if live and rows:
         lost: dict[str, list[int]] = {}

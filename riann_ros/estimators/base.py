@@ -21,6 +21,13 @@ A subclass implements ``reset`` and at least one of ``update`` / ``update_batch`
 derives the other (one sample as a batch of one, or a batch as a loop of samples). Construction
 validates the parameters and calls ``reset()``.
 
+**Uncertainty.** :meth:`AttitudeEstimator.sigma` gives, per sample of the last ``update`` /
+``update_batch`` call, the standard deviations (rad) of the inclination (roll and pitch errors as an
+isotropic 2-D Gaussian: σ per horizontal axis) and of the heading. The default (Madgwick, Mahony, VQF)
+is a documented constant: :data:`~riann_ros.defaults.INCLINATION_SD_DEG`, and the heading
+:data:`~riann_ros.defaults.YAW_FREE_SD_DEG` without a field or
+:data:`~riann_ros.defaults.MAG_HEADING_SD_DEG` with one; RIANN reports its per-sample model.
+
 Parameters are described by :class:`~riann_ros.params.ParamSpec` so that the ROS node base can declare
 them (with description, range and whether they can change at run time) without knowing the estimator,
 and the evaluator can list, parse and grid-search them.
@@ -34,6 +41,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.params import ParamSpec, find
 
 Array = NDArray[np.float64]
@@ -101,6 +109,15 @@ class AttitudeEstimator(ABC):
         """True while the heading is tied to the magnetic field (the last sample's field was used and
         not rejected as disturbed); False for 6D estimators and while the heading follows the gyro."""
         return False
+
+    def sigma(self, fields: NDArray[np.bool_]) -> Array:
+        """(n, 2): σ (rad) of the inclination per horizontal axis and of the heading, for the n samples of the last
+        :meth:`update` / :meth:`update_batch` call; ``fields`` (n,): which of them carried a field the estimator
+        got. Default: the documented constants (see the module docstring); the heading's σ with a field only for
+        estimators that use it (``USES_MAG``). Never changes the state."""
+        f = np.asarray(fields, dtype=bool) & self.USES_MAG
+        yaw = np.where(f, np.radians(MAG_HEADING_SD_DEG), np.radians(YAW_FREE_SD_DEG))
+        return np.column_stack([np.full(len(f), np.radians(INCLINATION_SD_DEG)), yaw])
 
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
         """Process one sample and return the attitude quaternion ``[w, x, y, z]``."""

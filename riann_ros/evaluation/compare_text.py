@@ -21,6 +21,7 @@ from riann_ros.evaluation.compare import (
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, ResultRow
 from riann_ros.evaluation.scoring import STATS
+from riann_ros.evaluation.uncertainty_report import format_uncertainty_comparison
 
 
 def _table(headers: list[str], rows: list[list[str]], numeric: set[str]) -> list[str]:
@@ -82,6 +83,7 @@ def format_comparison(cmp: Comparison) -> str:
                  f"{p.diff:+.2f}"] for p in ordered_pairs(cmp)]
     out += _table([*lay.headers, "sequence", "A", "B", "B-A"], seq_rows, {"A", "B", "B-A"})
     out += _statistics(cmp, lay)
+    out += format_uncertainty_comparison([(p.a, p.b) for p in ordered_pairs(cmp)])
     for name, rows_only in (("A", cmp.only_a), ("B", cmp.only_b)):
         if rows_only:
             shown = ", ".join(_row_text(r) for r in rows_only[:5]) + (" …" if len(rows_only) > 5 else "")

@@ -29,6 +29,9 @@ from riann_ros.evaluation.results import NATIVE, EvalSettings, ResultRow, Sequen
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
 from riann_ros.evaluation.scoring import ERRORS
 from riann_ros.evaluation.seq_tables import ERROR_TITLES, format_heading_table, format_stats_table
+from riann_ros.evaluation.uncertainty import KEYS as UNCERTAINTY_KEYS
+from riann_ros.evaluation.uncertainty_report import NOTE as UNCERTAINTY_NOTE
+from riann_ros.evaluation.uncertainty_report import format_uncertainty_table, plot_error_vs_sigma
 
 CSV_FIELDS = (
     "sequence",
@@ -69,6 +72,7 @@ CSV_FIELDS = (
     "received",
     "lost",
     "source",
+    *UNCERTAINTY_KEYS,
 )
 METRIC = (
     "RMSE of e_alpha = 2 acos(sqrt(w^2+z^2)) of q_ref * conj(q_est), deg, over score mask & reference present & "
@@ -332,6 +336,9 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
         lines += ["## Heading (9D runs: estimators that used the magnetometer)", "",
                   "Heading and total error as BROAD defines them (error quaternion in the earth frame); the heading "
                   "of a 9D estimate is absolute (magnetic north), so it is scored as it is.", "", nine, ""]
+    unc = format_uncertainty_table(report.rows, markdown_table=True)
+    if unc:
+        lines += ["## Uncertainty (the σ each estimator reports)", "", UNCERTAINTY_NOTE, "", unc, ""]
     if report.tuning:
         lines += ["## Tuning (grid search on these sequences)", ""]
         for t in report.tuning:
@@ -363,7 +370,7 @@ def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
     for series in with_series if report.settings.series_for == "all" else with_series[:1]:
         for cond in pl.series_conditions(series, chosen):
             figures += pl.plot_attitude(series, out, condition=cond)
-    return figures + pl.plot_rmse_vs_rate(rows, out, conditions=chosen)
+    return figures + pl.plot_rmse_vs_rate(rows, out, conditions=chosen) + plot_error_vs_sigma(rows, out)
 
 
 def write_results(out: Path, report: Report, plots: bool = True, replace: bool = False) -> list[Path]:

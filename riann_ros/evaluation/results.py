@@ -114,11 +114,14 @@ class ResultRow:
             return float("nan") if v is None else float(v)
 
         # columns added later (error statistics, time offset) are None in older files
-        optional = {f.name: None if d.get(f.name) is None else float(d[f.name]) for f in fields(Score)
-                    if f.name not in _SCORE_REQUIRED}
+        optional: dict[str, Any] = {f.name: None if d.get(f.name) is None else float(d[f.name])
+                                    for f in fields(Score) if f.name not in (*_SCORE_REQUIRED, "sigma_hist")}
+        for k in ("n_yaw_mag", "n_yaw_held"):
+            optional[k] = None if optional[k] is None else int(optional[k])
         score = Score(n_samples=int(d["n_samples"]), n_scored=int(d["n_scored"]),
                       n_unestimated=int(d["n_unestimated"]), rmse_deg=num(d["rmse_deg"]),
-                      max_err_deg=num(d["max_err_deg"]), **optional)
+                      max_err_deg=num(d["max_err_deg"]), **optional,
+                      sigma_hist=d.get("sigma_hist"))
         live = {k: int(d[k]) for k in LIVE_KEYS if k in d}
         stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
                          rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},

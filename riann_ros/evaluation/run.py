@@ -50,7 +50,7 @@ from riann_ros.evaluation.results import (
     RunStats,
     SequenceResult,
 )
-from riann_ros.evaluation.runners import Joined, OfflineRunner, RecordedRunner, Run, Runner
+from riann_ros.evaluation.runners import Joined, OfflineRunner, RecordedRunner, Run, Runner, run_sigmas
 from riann_ros.evaluation.scenarios import AS_RECORDED, ScenarioPlan, sequence_seed
 from riann_ros.evaluation.scoring import Accumulator, Score, error_deg, roll_pitch_deg
 from riann_ros.evaluation.sources import (
@@ -114,8 +114,11 @@ class _ScenarioRun:
         if rec is None or not len(rec) or self.run is None:
             return
         qs = self.run.feed(rec)
-        for acc, q in zip(self.acc, qs, strict=True):
-            acc.add(rec.quat_ref, rec.score_mask, q)
+        run = self.run
+        sigmas = (run.sigmas([len(self.own), len(self.recorded)]) if isinstance(run, Joined)
+                  else run_sigmas(run, len(self.specs)))
+        for acc, q, sig in zip(self.acc, qs, sigmas, strict=True):
+            acc.add(rec.quat_ref, rec.score_mask, q, sig)
         if self.offsets is not None:
             self.offsets.add(rec.stamps_ns, rec.quat_ref, rec.score_mask, qs)
         if self.series and rec.quat_ref is not None:

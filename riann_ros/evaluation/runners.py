@@ -50,15 +50,18 @@ class _OfflineRun:
             est.reset()
             self.streams.append(EstimatorStream(est, gate, MagConfig(use_mag=use_mag)))
         self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
+        self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimator (N, 2)
 
     def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
         out = []
+        self.sigmas = []
         for stream, stats in zip(self.streams, self.stats, strict=True):
             t, cpu = time.perf_counter(), time.process_time()
             q, _accepted = stream.process_batch(rec.stamps_ns, rec.acc, rec.gyr, rec.mag)
             stats.seconds += time.perf_counter() - t
             stats.cpu_seconds += time.process_time() - cpu
             out.append(q)
+            self.sigmas.append(stream.batch_sigma)
         return out
 
     def finish(self) -> list[RunStats]:
@@ -117,5 +120,16 @@ class Joined:
     def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
         return [q for run in self.runs for q in run.feed(rec)]
 
+    def sigmas(self, counts: list[int]) -> list[NDArray[np.float64] | None]:
+        """The σ of the last feed per estimator (None: that run reports none); ``counts``: estimators per run."""
+        return [s for run, n in zip(self.runs, counts, strict=True) for s in run_sigmas(run, n)]
+
     def finish(self) -> list[RunStats]:
         return [st for run in self.runs for st in run.finish()]
+
+
+def run_sigmas(run: Run, n: int) -> list[NDArray[np.float64] | None]:
+    """The σ (N, 2) of the last feed of each of the ``n`` estimators of ``run``: those of an offline run, None for
+    estimates that carry none (recorded, live)."""
+    sig = getattr(run, "sigmas", None)
+    return list(sig) if isinstance(sig, list) and len(sig) == n else [None] * n

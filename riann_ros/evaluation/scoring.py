@@ -6,19 +6,22 @@ rejected have no estimate and are counted as ``n_unestimated``), and beside it e
 per-sample errors: mean, median, std, min and max (:data:`STATS`). Heading and total-angle errors are
 optional extra columns with the same statistics. :class:`Accumulator` keeps running sums (and, for the median,
 a histogram of log-spaced bins, :class:`ErrorStats`), so a bag of any length is scored in bounded memory;
-:func:`score` is the one-chunk case.
+:func:`score` is the one-chunk case. With the estimator's σ per sample the uncertainty is scored too (NEES,
+95 % coverage, sharpness: :mod:`riann_ros.evaluation.uncertainty`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros import quaternion as quat
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.uncertainty import UncertaintySums
 from riann_ros.recording import Recording
 
 STATS = ("rmse", "mean", "median", "std", "min", "max")  # evo ape's statistics, per sequence
@@ -120,6 +123,25 @@ class Score:
         v = getattr(self, stat_field(error, stat))
         return None if v is None else float(v)
 
+    # the reported uncertainty (riann_ros.evaluation.uncertainty; None: the estimator reported none)
+    nees: float | None = None
+    cover95_pct: float | None = None
+    err_bottom_decile_deg: float | None = None
+    err_top_decile_deg: float | None = None
+    yaw_nees: float | None = None
+    yaw_cover95_mag_pct: float | None = None
+    yaw_cover95_held_pct: float | None = None
+    n_yaw_mag: int | None = None
+    n_yaw_held: int | None = None
+    sigma_hist: dict[str, Any] | None = None  # the σ histogram (uncertainty.histogram): results.json and the plot
+
+    @property
+    def sharpness(self) -> float | None:
+        """The mean error in the top decile of σ over that in the bottom decile."""
+        if self.err_top_decile_deg is None or not self.err_bottom_decile_deg:
+            return None
+        return self.err_top_decile_deg / self.err_bottom_decile_deg
+
 
 class Accumulator:
     """Running sums for the scores over the chunks of one scenario × estimator run."""
@@ -128,9 +150,12 @@ class Accumulator:
         self.with_heading = with_heading
         self.n = self.n_scored = self.n_unest = self.n_base = 0
         self.errors = {e: ErrorStats() for e in ERRORS}
+        self.unc = UncertaintySums()
 
-    def add(self, quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_], q: NDArray[np.float64]) -> None:
-        """One chunk: reference (N, 4) with NaN rows (None: no reference), score mask, estimates (N, 4)."""
+    def add(self, quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_], q: NDArray[np.float64],
+            sigma: NDArray[np.float64] | None = None) -> None:
+        """One chunk: reference (N, 4) with NaN rows (None: no reference), score mask, estimates (N, 4), and the
+        estimator's σ (N, 2) when it reports one."""
         self.n += len(q)
         if quat_ref is None:
             return
@@ -143,9 +168,13 @@ class Accumulator:
         self.n_unest += int((base & ~est_ok).sum())
         if valid.any():
             qt, qe = quat_ref[valid], q[valid]
-            self.errors["inclination"].add(np.degrees(quat.inclination_error(qt, qe)))
-            self.errors["heading"].add(np.degrees(quat.heading_error(qt, qe)))  # reported for 9D runs, --heading
+            e = quat.inclination_error(qt, qe)
+            eh = quat.heading_error(qt, qe)
+            self.errors["inclination"].add(np.degrees(e))
+            self.errors["heading"].add(np.degrees(eh))  # reported for 9D runs, --heading
             self.errors["total"].add(np.degrees(quat.total_error(qt, qe)))
+            if sigma is not None:
+                self.unc.add(e, eh, sigma[valid])
 
     def result(self, with_heading: bool | None = None) -> Score:
         """The scores; heading and total error when ``with_heading`` (default: as constructed)."""
@@ -155,9 +184,10 @@ class Accumulator:
         if self.n_scored == 0:
             raise EvalError("the estimator gave no output on any scored sample")
 
-        stats = {stat_field(err, st): v for err in ERRORS if heading or err == "inclination"
-                 for st, v in self.errors[err].summary().items()}
-        return Score(n_samples=self.n, n_scored=self.n_scored, n_unestimated=self.n_unest, **stats)
+        stats: dict[str, Any] = {stat_field(err, st): v for err in ERRORS if heading or err == "inclination"
+                                 for st, v in self.errors[err].summary().items()}
+        return Score(n_samples=self.n, n_scored=self.n_scored, n_unestimated=self.n_unest, **stats,
+                     **self.unc.result())
 
 
 def score(rec: Recording, q_est: NDArray[np.float64], with_heading: bool = False) -> Score:

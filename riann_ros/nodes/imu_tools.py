@@ -82,7 +82,7 @@ def _orientation_stddev(v: Any, est: str) -> Translation:
                   "roll_pitch_stddev_deg, yaw_stddev_deg and mag_yaw_stddev_deg")
     else:
         d = math.degrees(s)
-        t.values = {"roll_pitch_stddev_deg": d, "mag_yaw_stddev_deg": d}
+        t.values = {"roll_pitch_stddev_deg": d, "mag_yaw_stddev_deg": d, "orientation_covariance": "constant"}
         t.note = (f"{s:g} rad = {d:g} deg for roll, pitch and the magnetometer-referenced yaw; yaw_stddev_deg (the "
                   "unobservable 6D heading) stays")
     return t

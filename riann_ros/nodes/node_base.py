@@ -191,7 +191,7 @@ class EstimatorNode(Node):
             stamps.set_ns(stamp, r.stamp_ns)
         diag.frame_id = msg.header.frame_id
         self.outputs.publish(msg, (float(q[0]), float(q[1]), float(q[2]), float(q[3])),
-                             self.stream.estimator.heading_observed())
+                             self.stream.estimator.heading_observed(), self.stream.sigma)
         diag.proc_us.append((time.perf_counter_ns() - t0) * 1e-3)
 
     def _on_mag(self, msg: MagneticField) -> None:

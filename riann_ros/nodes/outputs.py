@@ -70,6 +70,14 @@ def yaw_rotated(q: Quat, yaw_rad: float) -> Quat:
     return c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w
 
 
+def model_covariance(sigma: Any) -> list[float]:
+    """The orientation covariance (row-major 3 × 3 about the world x, y, z axes) of the σ (rad) an estimator reports:
+    ``diag(σ_i², σ_i², σ_ψ²)``. The inclination's σ is the same about both horizontal axes, so the matrix is the
+    same in ENU, NED and NWU and after ``yaw_offset_deg``; positive definite for σ > 0."""
+    i2 = float(sigma[0]) ** 2
+    return [i2, 0.0, 0.0, 0.0, i2, 0.0, 0.0, 0.0, float(sigma[1]) ** 2]
+
+
 def orientation_covariances(p: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """(covariance while the heading follows the gyro only, while a magnetometer field corrects it)."""
     rp = math.radians(p["roll_pitch_stddev_deg"]) ** 2
@@ -91,6 +99,7 @@ class Outputs:
         self._rpy_pub = node.create_publisher(Vector3Stamped, rpy_topic(attitude_topic), qos) \
             if p["publish_rpy"] else None
         self.world = frames.check_world_frame(p["world_frame"])
+        self._model = True
         self.fixed_frame = str(p["fixed_frame"])
         self._warn = warn
         self._att = QuaternionStamped()
@@ -105,6 +114,8 @@ class Outputs:
         """Apply the run-time output parameters in ``p`` (covariances, yaw offset, gravity removal)."""
         if "roll_pitch_stddev_deg" in p:
             self.covariances = orientation_covariances(p)
+        if "orientation_covariance" in p:
+            self._model = p["orientation_covariance"] == "model"
         if "yaw_offset_deg" in p:
             self._yaw_offset = math.radians(p["yaw_offset_deg"])
         if "remove_gravity_vector" in p:
@@ -128,8 +139,9 @@ class Outputs:
         q = frames.to_world_scalar(*q_enu, self.world)
         return yaw_rotated(q, self._yaw_offset) if self._yaw_offset else q
 
-    def publish(self, msg: Imu, q_enu: Quat, heading_observed: bool) -> None:
-        """Publish the estimate ``q_enu`` (w, x, y, z, sensor to ENU) of the input ``msg``."""
+    def publish(self, msg: Imu, q_enu: Quat, heading_observed: bool, sigma: Any = None) -> None:
+        """Publish the estimate ``q_enu`` (w, x, y, z, sensor to ENU) of the input ``msg``; ``sigma``: the
+        estimator's σ (rad) of its inclination and heading, used with ``orientation_covariance: model``."""
         q = self.world_orientation(q_enu)
         att = self._att
         att.header.stamp = msg.header.stamp
@@ -148,7 +160,8 @@ class Outputs:
             self._publish_tf(msg.header.stamp, msg.header.frame_id, q)
         if self._imu_pub.get_subscription_count():
             msg.orientation = o
-            msg.orientation_covariance = self.covariances[heading_observed]
+            msg.orientation_covariance = (model_covariance(sigma) if self._model and sigma is not None
+                                          else self.covariances[heading_observed])
             if self._remove_gravity:
                 a = msg.linear_acceleration
                 gx, gy, gz = gravity_in_sensor(q_enu)

@@ -24,7 +24,7 @@ from rclpy.parameter import Parameter
 from riann_ros import frames
 from riann_ros import mag as mg
 from riann_ros import stream as st
-from riann_ros.defaults import MAG_HEADING_SD_DEG
+from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.estimators import REGISTRY, estimator_class
 from riann_ros.nodes import imu_tools
 from riann_ros.params import ParamSpec
@@ -40,9 +40,14 @@ NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
               "messages in DDS before the node sees them.", min=1, max=100000),
     ParamSpec("output_depth", 1000, "Output queue depth (keep last, reliable): outputs not yet acknowledged by a "
               "slow subscriber are dropped once more than this many are queued.", min=1, max=100000),
-    ParamSpec("roll_pitch_stddev_deg", 2.0, "deg; standard deviation written to the roll and pitch entries of the "
-              "orientation covariance of imu/data.", min=0.0, max=180.0, runtime=True),
-    ParamSpec("yaw_stddev_deg", 180.0, "deg; standard deviation written to the yaw entry of the orientation "
+    ParamSpec("orientation_covariance", "model", "Orientation covariance of imu/data: 'model' = the estimator's "
+              "per-sample standard deviations (RIANN: its uncertainty model; Madgwick, Mahony, VQF: documented "
+              "constants), 'constant' = roll_pitch_stddev_deg, yaw_stddev_deg and mag_yaw_stddev_deg.",
+              choices=("model", "constant"), runtime=True),
+    ParamSpec("roll_pitch_stddev_deg", INCLINATION_SD_DEG, "deg; with orientation_covariance: constant, the standard "
+              "deviation written to the roll and pitch entries of the orientation covariance of imu/data.", min=0.0,
+              max=180.0, runtime=True),
+    ParamSpec("yaw_stddev_deg", YAW_FREE_SD_DEG, "deg; standard deviation written to the yaw entry of the orientation "
               "covariance while the heading is not tied to a magnetometer (it is unobservable: gyro drift only).",
               min=0.0, max=1.0e6, runtime=True),
     ParamSpec("mag_yaw_stddev_deg", MAG_HEADING_SD_DEG, "deg; standard deviation of the yaw entry while the heading "

@@ -12,6 +12,7 @@ with the physics; :data:`~.stage.RESTARTS` says what each does when the stream r
 5. :mod:`.s5_carry` — the newest network attitude carried by the gyro to each sample's stamp
 6. :mod:`.s6_handover` — after a hole, from the gyro bridge to the fresh network
 7. :mod:`.s7_heading` — a heading that follows the gyro, and the magnetometer when there is one
+8. :mod:`.s8_uncertainty` — each output's standard deviations (inclination, heading), read-only (:meth:`sigma`)
 
 One output per input sample, at its stamp. ``update`` is a block of one; ``update_batch`` runs the same stages on
 the whole block (the network once over all its rows), so both give the same numbers (within float32 round-off).
@@ -38,6 +39,7 @@ from riann_ros.estimators.riann.s5_carry import Carry
 from riann_ros.estimators.riann.s6_handover import Handover
 from riann_ros.estimators.riann.s7_heading import Heading
 from riann_ros.estimators.riann.s7a_mag import MagHeading
+from riann_ros.estimators.riann.s8_uncertainty import Uncertainty
 from riann_ros.estimators.riann.stage import Cause, Row6, Vec
 
 RESTART_WARMUP = 0.0  # s a fresh network runs beside the old one after a hole before it takes over
@@ -110,6 +112,7 @@ class RiannEstimator(AttitudeEstimator):
         self.handover = Handover(p["hole_blend"])
         self.heading = Heading(MagHeading(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"],
                                           p["estimate_mag_delay"]))
+        self.uncertainty = Uncertainty()
         self.samples = 0  # input samples taken since reset
 
     @property
@@ -122,6 +125,7 @@ class RiannEstimator(AttitudeEstimator):
         gap (the network starts afresh without a bridge; bias, rate statistics and heading carry on)."""
         for stage in self.stages:
             stage.restart(Cause.GAP)
+        self.uncertainty.restart(Cause.GAP)
 
     def _on_params_changed(self) -> None:
         h, p = self.heading.mag, self.params
@@ -134,9 +138,17 @@ class RiannEstimator(AttitudeEstimator):
 
     def diagnostics(self) -> dict[str, str]:
         out: dict[str, str] = {}
-        for stage in (self.bias, *(s for s in self.stages if s is not self.bias)):
+        for stage in (self.bias, *(s for s in self.stages if s is not self.bias), self.uncertainty):
             out.update(stage.diagnostics())
         return out
+
+    def sigma(self, fields: np.ndarray) -> Array:
+        """Stage 8's σ of the samples of the last call (``fields`` is not needed: the heading stage knows which
+        samples its field corrected)."""
+        s = self.uncertainty.sigma
+        if len(s) != len(fields):
+            raise ValueError(f"sigma for {len(fields)} samples asked, the last call had {len(s)}")
+        return s.copy()
 
     def _run(self, x: list[Row6], dt: list[float], mag: list[Vec | None] | None) -> Array:
         """A block of samples through the chain."""
@@ -153,7 +165,10 @@ class RiannEstimator(AttitudeEstimator):
         qc, delta = self.carry.run(net, g, bias)
         dts = [d if math.isfinite(d) and d > 0.0 else 0.0 for d in dt]  # the heading's step (0 for a bad dt)
         qc, tilt_sd, bridges = self.handover.run(qc, delta, dts, [(r[0], r[1], r[2]) for r in x], holes)
-        return self.heading.run(qc, delta, dts, mag, bridges, tilt_sd)
+        q = self.heading.run(qc, delta, dts, mag, bridges, tilt_sd)
+        self.uncertainty.run(g, self.network.spread, self.bias.sigma, x, bias, dts, tilt_sd, self.heading.observed,
+                             self.heading.dip)
+        return q
 
     # -- public API -----------------------------------------------------------------------------
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:

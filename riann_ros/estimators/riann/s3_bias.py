@@ -6,14 +6,19 @@ RIANN was trained on gyros without a large bias; a MEMS gyro starts with several
 network gets, at the grid step (rebuilt, keeping its estimate, when the grid step switches), and each row's gyro
 loses the bias known before it: causal, and the network's output never feeds back. The carry stage (5) uses the
 same estimate. With ``rate_adaptation`` off the rows are the samples, at the first sample's step, each scaled by
-its own dt. docs/riann.md, stage 3.
+its own dt. VQF also gives the standard deviation of its estimate (the worst direction); it is kept per row
+(:attr:`Bias.sigma`) for stage 8's uncertainty and never changes the attitude. docs/riann.md, stage 3.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from riann_ros.defaults import FALLBACK_DT_S
+from riann_ros.estimators.base import Array
 from riann_ros.estimators.bias import GyroBiasFrontEnd
 from riann_ros.estimators.common import BIAS_KEY, bias_text
 from riann_ros.estimators.riann.s1a_rate import DT_MIN
@@ -24,6 +29,41 @@ BATCH_ROWS = 8  # from this many rows on, VQF takes them in one call (the same n
 ZERO3: Vec = (0.0, 0.0, 0.0)
 
 
+class FrontEnd(GyroBiasFrontEnd):
+    """The front end that also keeps VQF's standard deviation of its estimate (rad/s, the worst direction):
+    :attr:`sigma` before the next row, and per row of the last batch the value before it."""
+
+    def __init__(self, ts: float, clip: float, sigma_init: float) -> None:
+        super().__init__(ts, clip, sigma_init)
+        self.sigma = self._sigma_now()
+        self.sigma_rows: list[float] = []
+
+    def _sigma_now(self) -> float:
+        vqf = self._vqf
+        assert vqf is not None
+        return float(vqf.getBiasEstimate()[1])
+
+    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float | None = None) -> None:
+        super().update(acc, gyr, dt)
+        self.sigma = self._sigma_now()
+
+    def update_batch(self, acc: Array, gyr: Array, dt: Array | None = None) -> Array:
+        """Take N samples; return the bias known before each of them (N, 3); :attr:`sigma_rows` its σ."""
+        g = np.asarray(gyr, dtype=float)
+        if dt is not None:
+            g = g * (np.asarray(dt, dtype=float) / self.ts)[:, None]
+        vqf = self._vqf
+        assert vqf is not None
+        out = vqf.updateBatch(np.ascontiguousarray(g), np.ascontiguousarray(acc, dtype=float))
+        before = np.vstack([np.asarray(self.bias)[None, :], out["bias"][:-1]])
+        sig = out["biasSigma"]
+        self.sigma_rows = [self.sigma, *sig[:-1].tolist()]
+        self.sigma = float(sig[-1])
+        b = out["bias"][-1]
+        self.bias = (float(b[0]), float(b[1]), float(b[2]))
+        return before
+
+
 class Bias:
     """Stage 3 (see the module docstring). ``fixed_step``: the rows' steps vary (``rate_adaptation`` off): the
     estimator keeps the first row's step and scales each row's gyro by its own."""
@@ -32,7 +72,8 @@ class Bias:
 
     def __init__(self, on: bool, clip: float, sigma_init: float, fixed_step: bool = False) -> None:
         self.on, self.clip, self.sigma_init, self.fixed_step = on, clip, sigma_init, fixed_step
-        self.fe: GyroBiasFrontEnd | None = None
+        self.fe: FrontEnd | None = None
+        self.sigma: list[float] = []  # per row of the last run: the σ of the bias before it (rad/s), and after the last
 
     def restart(self, cause: Cause) -> None:
         if cause is Cause.RESET:
@@ -43,9 +84,17 @@ class Bias:
         """The estimate now (rad/s): the bias known before the next row."""
         return self.fe.bias if self.fe is not None else ZERO3
 
+    @property
+    def sigma_now(self) -> float:
+        """The σ of the estimate now (rad/s): VQF's, or ``bias_sigma_init`` before the first row (0 when off)."""
+        if not self.on:
+            return 0.0
+        return self.fe.sigma if self.fe is not None else math.radians(self.sigma_init)
+
     def run(self, rows: list[Row6], steps: list[float]) -> tuple[list[Row7], list[Vec]]:
         """The rows with the bias removed (acc, gyr, dt), and the bias before each row and after the last (M + 1)."""
         before: list[Vec] = []
+        self.sigma = []
         if self.on and rows:
             i = 0
             while i < len(rows):  # runs of rows at one step
@@ -59,9 +108,11 @@ class Bias:
                 i = j
         else:
             before = [self.bias] * len(rows)
+            self.sigma = [self.sigma_now] * len(rows)
         out = [(r[0], r[1], r[2], r[3] - b[0], r[4] - b[1], r[5] - b[2], s)
                for r, b, s in zip(rows, before, steps, strict=True)]
         before.append(self.bias)
+        self.sigma.append(self.sigma_now)
         return out, before
 
     def _run(self, rows: list[Row6], steps: list[float]) -> list[Vec]:
@@ -69,7 +120,7 @@ class Bias:
         step = steps[0]
         if self.fe is None:
             ts = step if DT_MIN * 0.01 < step < 10.0 else FALLBACK_DT_S
-            self.fe = GyroBiasFrontEnd(ts, self.clip, self.sigma_init)
+            self.fe = FrontEnd(ts, self.clip, self.sigma_init)
         elif not self.fixed_step and step != self.fe.ts:
             self.fe.set_ts(step)  # the grid step switched: VQF rebuilt for it, the estimate kept
         fe = self.fe
@@ -77,10 +128,12 @@ class Bias:
             out = []
             for r, s in zip(rows, steps, strict=True):
                 out.append(fe.bias)
+                self.sigma.append(fe.sigma)
                 fe.update(r[0:3], r[3:6], s)
             return out
         x = np.asarray(rows, dtype=float)
         b = fe.update_batch(x[:, 0:3], x[:, 3:6], np.asarray(steps, dtype=float))
+        self.sigma += fe.sigma_rows
         return [tuple(v) for v in b.tolist()]
 
     def diagnostics(self) -> dict[str, str]:

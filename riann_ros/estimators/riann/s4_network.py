@@ -3,7 +3,8 @@
 Model I/O (the official ``riann.onnx`` of the ``riann`` package, Apache-2.0): ``input`` float32 [1, T, 7] = acc
 xyz (m/s²), gyr xyz (rad/s), dt (s); ``h0`` [2, 1, 1, 200]; outputs ``output`` [1, T, 4] (unit quaternion w, x,
 y, z) and ``hn``. Each copy of the ensemble (:mod:`.s4a_ensemble`) sees the rows in its own rotated frame, all
-copies in one call (:mod:`.s4b_model`); their gravity directions are combined into one attitude per row.
+copies in one call (:mod:`.s4b_model`); their gravity directions are combined into one attitude per row, and how
+far they spread is kept per row (:attr:`Network.spread`, an input of stage 8's uncertainty, never of the attitude).
 
 After a hole a fresh state starts at the row after the hole (a *fork*, placed by the grid) and runs beside the
 old one for ``restart_warmup`` (at least one row), then replaces it (a *join*): the old state trusts what it
@@ -18,7 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from riann_ros.estimators.base import Array
-from riann_ros.estimators.riann.s4a_ensemble import FLOAT_ROWS, combine, copy_rows, frames
+from riann_ros.estimators.riann.s4a_ensemble import FLOAT_ROWS, combine_spread, copy_rows, frames
 from riann_ros.estimators.riann.s4b_model import BatchedModel
 from riann_ros.estimators.riann.stage import Cause
 
@@ -35,6 +36,7 @@ class Network:
         self.warmup = warmup  # s a fresh state runs beside the old one before it takes over
         self.rows = 0  # rows run since the estimator's reset (compute per sample = rows / samples)
         self.holes = 0  # fresh states started after holes
+        self.spread = np.zeros(0)  # per row of the last run: the copies' spread around their mean direction (rad)
         self._fresh()
 
     def _fresh(self) -> None:
@@ -52,6 +54,7 @@ class Network:
         (before that row; position M: after the last)."""
         m = len(rows)
         out = np.empty((m, 4))
+        self.spread = np.empty(m)
         self.rows += m
         pos, f = 0, 0
         while True:
@@ -74,17 +77,18 @@ class Network:
 
     def _segment(self, rows: Sequence[Sequence[float]], a: int, b: int, out: Array) -> None:
         x = self._rows_for(np.asarray(rows[a:b], dtype=np.float64).reshape(-1, 7))
-        out[a:b], self._h = self._net(x, self._h)
+        out[a:b], self.spread[a:b], self._h = self._net(x, self._h)
         if self._h_cand is not None:
-            _, self._h_cand = self._net(x, self._h_cand)
+            _, _, self._h_cand = self._net(x, self._h_cand)
 
-    def _net(self, x: np.ndarray, h: np.ndarray) -> tuple[Array, np.ndarray]:
-        """The copies' rows (copies, M, 7) through the model: the combined attitudes, the next states."""
+    def _net(self, x: np.ndarray, h: np.ndarray) -> tuple[Array, Array, np.ndarray]:
+        """The copies' rows (copies, M, 7) through the model: the combined attitudes, their spread, the next states."""
         q, hn = self.model.run(x, h)
         outs = [o.astype(np.float64) for o in q]
         if len(outs) == 1 or x.shape[1] > FLOAT_ROWS:
             outs = [o / np.linalg.norm(o, axis=-1, keepdims=True) for o in outs]
-        return combine(outs, self.rots), hn
+        att, spread = combine_spread(outs, self.rots)
+        return att, spread, hn
 
     def diagnostics(self) -> dict[str, str]:
         return {"network copies": str(len(self.rots)), "network restarts after holes": str(self.holes)}

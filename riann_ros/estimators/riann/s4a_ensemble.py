@@ -3,8 +3,9 @@
 RIANN was trained with virtual IMU rotations, so a copy fed the IMU in another frame gives an estimate whose
 error is partly independent. Copy 0 is the sensor frame; the others see it turned by 180° about three orthogonal
 axes in general position (:func:`frames`). Copy ``m`` sees ``R_m acc``, ``R_m gyr``; its gravity direction maps
-back by ``R_mᵀ``; the ensemble attitude is copy 0's tilted to the normalised mean direction (:func:`combine`).
-Physics and measurements: docs/riann.md, stage 4.
+back by ``R_mᵀ``; the ensemble attitude is copy 0's tilted to the normalised mean direction (:func:`combine`). How
+far the copies' directions spread around their mean (:func:`combine_spread`) is one input of the uncertainty the
+estimator reports (stage 8); it never changes the attitude. Physics and measurements: docs/riann.md, stage 4.
 """
 
 from __future__ import annotations
@@ -72,27 +73,40 @@ def combine(outs: list[Array], rots: list[Array]) -> Array:
     """The ensemble attitude (M, 4) from the copies' outputs ``outs[m]`` in their frames ``rots[m]``: copy 0's
     attitude tilted to the mean gravity direction. The outputs must be unit quaternions, except for up to
     :data:`FLOAT_ROWS` rows (the node's path, in plain floats), which are normalised here."""
-    q0 = outs[0]
     if len(outs) == 1:
-        return q0
+        return outs[0]
+    return combine_spread(outs, rots)[0]
+
+
+def combine_spread(outs: list[Array], rots: list[Array]) -> tuple[Array, Array]:
+    """:func:`combine`, and per row how far the copies' gravity directions spread around their mean (rad):
+    ``√(2 (1 − R))`` with ``R`` the length of the mean of the ``n`` unit directions, for small angles the root mean
+    square of their angles from the mean direction (0 for one copy)."""
+    q0 = outs[0]
+    n = len(outs)
+    if n == 1:
+        return q0, np.zeros(len(q0))
     if len(q0) <= FLOAT_ROWS:  # the node's path (a row or two per message): plain floats, no numpy overhead
         rl = [r.tolist() for r in rots]
-        return np.array([_combine_row([o[i].tolist() for o in outs], rl) for i in range(len(q0))])
+        rows = [_combine_row([o[i].tolist() for o in outs], rl) for i in range(len(q0))]
+        return np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
     u = gravity_rows(q0)
     v = u.copy()
     for q, r in zip(outs[1:], rots[1:], strict=True):
         v += gravity_rows(q) @ r  # row form of Rᵀ g'
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    length = np.linalg.norm(v, axis=1, keepdims=True)
+    v /= length
+    spread = np.sqrt(np.maximum(2.0 * (1.0 - length[:, 0] / n), 0.0))
     ax = np.cross(u, v)
     s = np.linalg.norm(ax, axis=1)
     a = np.arctan2(s, np.sum(u * v, axis=1))
     h = np.where(s > 1e-12, -np.sin(0.5 * a) / np.maximum(s, 1e-300), 0.0)
     r_inv = np.column_stack([np.cos(0.5 * a), ax * h[:, None]])  # the turn taking u to v, inverted
-    return quat.normalize(quat.multiply(q0, r_inv))
+    return quat.normalize(quat.multiply(q0, r_inv)), spread
 
 
-def _combine_row(qs: list[list[float]], rots: list[list[list[float]]]) -> list[float]:
-    """:func:`combine` of one row in plain floats (the copies' outputs normalised first)."""
+def _combine_row(qs: list[list[float]], rots: list[list[list[float]]]) -> tuple[list[float], float]:
+    """:func:`combine_spread` of one row in plain floats (the copies' outputs normalised first)."""
     units: list[tuple[float, float, float, float]] = []
     for q in qs:
         n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
@@ -103,7 +117,7 @@ def _combine_row(qs: list[list[float]], rots: list[list[list[float]]]) -> list[f
         vx += gx * r[0][0] + gy * r[1][0] + gz * r[2][0]  # Rᵀ g
         vy += gx * r[0][1] + gy * r[1][1] + gz * r[2][1]
         vz += gx * r[0][2] + gy * r[1][2] + gz * r[2][2]
-    n = math.sqrt(vx * vx + vy * vy + vz * vz)
-    w, x, y, z = tilt_to(units[0], (vx / n, vy / n, vz / n))
+    length = math.sqrt(vx * vx + vy * vy + vz * vz)
+    w, x, y, z = tilt_to(units[0], (vx / length, vy / length, vz / length))
     n = math.sqrt(w * w + x * x + y * y + z * z)
-    return [w / n, x / n, y / n, z / n]
+    return [w / n, x / n, y / n, z / n], math.sqrt(max(2.0 * (1.0 - length / len(qs)), 0.0))

@@ -38,6 +38,8 @@ class Heading:
         self.mag = mag
         self.psi = 0.0  # heading of the output (rad)
         self.q_prev: Quat | None = None  # the previous sample's carried network attitude
+        self.observed: list[bool] = []  # per sample of the last block: its heading was corrected by the field
+        self.dip: list[float] = []  # per sample of the last block: the field reference's dip (rad; 0 before a field)
 
     def restart(self, cause: Cause) -> None:
         if cause is Cause.RESET:
@@ -52,12 +54,14 @@ class Heading:
         """The output attitudes (n, 4), w >= 0. ``mag``: per sample its field or None; ``bridges``: samples that end
         a hole → the uncertainty of the bridge over it (deg); ``tilt_sd``: each sample's inclination uncertainty
         after a hole (deg, 0: converged)."""
+        self.observed = [False] * len(qc)
+        self.dip = [0.0] * len(qc)
         if len(qc) <= SCALAR_MAX:
-            return np.array([self._one(qc[i], delta[i], dt[i], None if mag is None else mag[i], bridges.get(i),
+            return np.array([self._one(i, qc[i], delta[i], dt[i], None if mag is None else mag[i], bridges.get(i),
                                        tilt_sd[i]) for i in range(len(qc))])
         return self._vector(qc, delta, dt, mag, bridges, tilt_sd)
 
-    def _one(self, qc: Quat, delta: Quat, dt: float, mag: Vec | None, bridge: float | None, tilt_sd: float
+    def _one(self, i: int, qc: Quat, delta: Quat, dt: float, mag: Vec | None, bridge: float | None, tilt_sd: float
              ) -> tuple[float, float, float, float]:
         if bridge is not None:
             self.mag.reacquire(bridge)
@@ -69,6 +73,8 @@ class Heading:
         if mag is not None or self.mag.started:
             qo = qmul(about_z(self.psi), qc)
             self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), TWO_PI)
+            self.observed[i] = self.mag.observed
+            self.dip[i] = self.mag.ref_dip
         w, x, y, z = qmul(about_z(self.psi), qc)
         n = math.sqrt(w * w + x * x + y * y + z * z)
         if w < 0.0:  # sign convention: w >= 0
@@ -89,7 +95,8 @@ class Heading:
         if first < n:
             psi[first:] = self._mag_psi(float(psi[first - 1]) if first else self.psi, tw[first:], qc_l[first:],
                                         delta[first:], dt[first:], None if mag is None else mag[first:],
-                                        {k - first: b for k, b in bridges.items() if k >= first}, tilt_sd[first:])
+                                        {k - first: b for k, b in bridges.items() if k >= first}, tilt_sd[first:],
+                                        first)
         self.psi = math.remainder(float(psi[-1]), TWO_PI)
         self.q_prev = qc_l[-1]
         rz = np.column_stack([np.cos(0.5 * psi), np.zeros(n), np.zeros(n), np.sin(0.5 * psi)])
@@ -105,8 +112,10 @@ class Heading:
         return next((i for i, m in enumerate(mag) if m is not None), n)
 
     def _mag_psi(self, psi: float, tw: Array, qc: list[Quat], delta: list[Quat], dt: list[float],
-                 mag: list[Vec | None] | None, bridges: dict[int, float], tilt_sd: list[float]) -> Array:
-        """Heading angles from the first field on: the gyro increment, then the magnetic correction."""
+                 mag: list[Vec | None] | None, bridges: dict[int, float], tilt_sd: list[float], first: int
+                 ) -> Array:
+        """Heading angles from the first field on (sample ``first`` of the block): the gyro increment, then the
+        magnetic correction."""
         out = np.empty(len(tw))
         step = self.mag.step
         for i, t in enumerate(tw.tolist()):
@@ -117,6 +126,8 @@ class Heading:
             q = qc[i]
             qo = (c * q[0] - s * q[3], c * q[1] - s * q[2], c * q[2] + s * q[1], c * q[3] + s * q[0])
             psi += step(qo, delta[i], dt[i], None if mag is None else mag[i], tilt_sd[i])
+            self.observed[first + i] = self.mag.observed
+            self.dip[first + i] = self.mag.ref_dip
             out[i] = psi
         return out
 
