@@ -188,6 +188,14 @@ class TopicTool:
                                  "what there is")
             self.spin_for(0.1)
 
+    def no_message(self, topic: str, type_name: str, timeout: float) -> TopicError:
+        """The error when nothing came: a type the graph now shows for the topic (it may have shown up after the
+        subscription, on a slow discovery) is named, else that no message came."""
+        types = self.topics().get(topic)
+        if types and type_name not in types and _short(type_name) not in map(_short, types):
+            return TopicError(f"{topic} has type {', '.join(types)}, not {type_name}")
+        return TopicError(f"no message on {topic} ({type_name}) in {timeout:g} s")
+
     def qos(self, topic: str, kind: str) -> Any:
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -236,7 +244,7 @@ def cmd_echo(tool: TopicTool, args: argparse.Namespace) -> int:
     while not args.count or len(received) < args.count:
         tool.spin_for(0.1)
         if not received and time.monotonic() - start > args.timeout:
-            raise TopicError(f"no message on {topic} ({type_name}) in {args.timeout:g} s")
+            raise tool.no_message(topic, type_name, args.timeout)
     return 0
 
 
@@ -250,7 +258,7 @@ def cmd_hz(tool: TopicTool, args: argparse.Namespace) -> int:
     while not args.duration or time.monotonic() - start < args.duration:
         tool.spin_for(1.0)
         if stats.total == 0 and time.monotonic() - start > args.timeout:
-            raise TopicError(f"no message on {topic} ({type_name}) in {args.timeout:g} s")
+            raise tool.no_message(topic, type_name, args.timeout)
         for line in stats.report():
             print(line, flush=True)
     print(f"{stats.total} messages in {time.monotonic() - start:.1f} s", flush=True)
