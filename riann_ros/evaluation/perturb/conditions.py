@@ -170,8 +170,8 @@ def _magnetic(args: str) -> Perturbation | None:
     return Magnetic(strength=strength, t0=t0, t1=t1) if t0 < t1 else None
 
 
-_PARSERS = {"jitter": _points(_jitter), "rate": _lowpass(_points(_rate)), "latency": _latency, "fifo": _fifo, "bias": _bias,
-            "dropout": _dropout, "magnetic": _magnetic}
+_PARSERS = {"jitter": _points(_jitter), "rate": _lowpass(_points(_rate)), "latency": _latency, "fifo": _fifo,
+            "bias": _bias, "dropout": _dropout, "magnetic": _magnetic}
 
 
 def parse_perturbation(text: str) -> Perturbation:

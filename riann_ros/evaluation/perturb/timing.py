@@ -1,5 +1,6 @@
 """Perturbations of the stamps (ROS-free): irregular stamps with interval means or point samples (``jitter:``),
-a regular stream at another rate (``rate:``: interval means, point samples, or a low-pass sensor's samples), receive-time stamps (``latency:``) and FIFO read-out (``fifo:``).
+a regular stream at another rate (``rate:``: interval means, point samples or a low-pass sensor's samples),
+receive-time stamps (``latency:``) and FIFO read-out (``fifo:``).
 Definitions: :data:`~riann_ros.evaluation.perturb.conditions.DEFINITIONS`."""
 
 from __future__ import annotations
