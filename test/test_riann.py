@@ -115,7 +115,8 @@ def test_rates_outside_the_trained_range_stay_accurate(broad_trial, trial):
     fast = resample_recording(rec, 1000.0)
     slow = resample_recording(rec, 25.0)
     e_fast = rmse(fast, create("riann").update_batch(fast.acc, fast.gyr, gate_dts(fast)))
-    e_slow = rmse(slow, create("riann").update_batch(slow.acc, slow.gyr, gate_dts(slow)))
+    # the FFT-resampled stream is point samples: told so (the default reads a 25 Hz stream a quarter step early)
+    e_slow = rmse(slow, create("riann", input_model="points").update_batch(slow.acc, slow.gyr, gate_dts(slow)))
     assert e_fast <= 1.3 * native, (native, e_fast)
     assert e_slow <= 2.5 * native, (native, e_slow)
     # and the adaptation is what makes the difference: fed straight in, 1000 Hz is far worse
