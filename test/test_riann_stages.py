@@ -78,7 +78,7 @@ def test_grid_block_equals_samples(jitter):
     read a quarter step early)."""
     x, dt = _stream(2000, jitter=jitter)
     tl = Timeline(0.1, "auto").run(x, dt)
-    assert {s[4] for s in tl.spec[20:]} == ({0.0} if jitter else {0.0025})
+    assert {s[4] for s in tl.spec} == ({0.0} if jitter else {0.0, 0.0025})
     whole = Grid().run(x, tl)
     grid = Grid()
     rows, steps, forks, r0, r1 = [], [], [], [], []
@@ -248,7 +248,8 @@ def test_timeline_says_the_sample_delay_of_an_up_sampled_regular_stream_only(rat
     x, dt = _regular(rate)
     tl = Timeline(0.1, model, delay).run(x, dt)
     delays = np.array([s[4] for s in tl.spec])
-    np.testing.assert_allclose(delays, want, rtol=0, atol=1e-12)
+    assert not delays[:16].any()  # none before the stream is judged regular (16 steps)
+    np.testing.assert_allclose(delays[16:], want, rtol=0, atol=1e-12)
 
 
 def test_timeline_gives_jittery_sample_times_no_delay_and_a_clock_its_delay():
@@ -261,6 +262,7 @@ def test_timeline_gives_jittery_sample_times_no_delay_and_a_clock_its_delay():
     stamps = np.arange(n) * 0.020 + rng.uniform(0.0, 0.010, n)
     xs, _ = _regular(50.0, n)
     tl = Timeline(0.1, "auto").run(xs, np.diff(stamps, prepend=-0.02).tolist())
+    assert tl.spec[100][4] == 0.0  # jittery until the clock test has seen 256 steps
     assert tl.spec[-1][4] == pytest.approx(0.005, rel=1e-3)
 
 
@@ -270,11 +272,12 @@ def test_grid_reads_a_delayed_sample_as_the_signal_that_much_before_its_stamp():
     the stamp with the newest sample held over the 5 ms; from stamp to stamp the gyro is the signal between the
     two signal times less the previous carry plus the new one (the carries and the steps add up)."""
     x, dt = _regular(50.0, 200)
-    g = Grid().run(x, Timeline(0.1, "auto", 0.25).run(x, dt))
-    tau = -0.005 + 0.005 * np.arange(len(g.rows))  # the first grid point on the first sample's signal time
+    g = Grid().run(x, Timeline(0.1, "auto", 0.25).run(x, dt))  # the delay from sample 16 on (judged regular)
+    tau = 0.005 * np.arange(len(g.rows))  # the first grid point on the first sample
     rows = np.array(g.rows)
-    np.testing.assert_allclose(rows[1:, 3], 0.5 + 0.1 * (tau[1:] - 0.0025 + 0.005), atol=1e-9)
-    for k in range(1, 200):
+    later = np.arange(len(rows)) >= g.r0[20]
+    np.testing.assert_allclose(rows[later, 3], 0.5 + 0.1 * (tau[later] - 0.0025 + 0.005), atol=1e-9)
+    for k in range(20, 200):
         assert g.r1[k] - g.r0[k] == 4 and tau[g.r1[k] - 1] == pytest.approx(k / 50 - 0.005, abs=1e-9)
         assert g.s_carry[k] == pytest.approx(0.005, abs=1e-9)
         assert g.g_carry[k][0] == pytest.approx(0.5 + 0.1 * k / 50, abs=1e-9)

@@ -85,11 +85,11 @@ class Timeline:
     def delay(self) -> float:
         """How long before its stamp a sample is read (s): ``sample_delay`` input steps for a regular stream (or a
         clock's) that the grid up-samples, read with ``input_model`` auto; else 0: samples fed straight in (a
-        quarter of a step of 5.5 ms or less costs more than it saves), jittery sample times (the sample-model
-        test finds what they are) and a set model."""
+        quarter of a step of 5.5 ms or less is small), jittery sample times (the sample-model test finds what
+        they are), a set model, and the first ``MIN_STEPS`` steps (before the stream is judged regular)."""
         steps = self.steps
         assert steps is not None
-        if self.sample_delay == 0.0 or (steps.jittery and not self.clock.clocked):
+        if self.sample_delay == 0.0 or not steps.judged or (steps.jittery and not self.clock.clocked):
             return 0.0
         d = self.input_step
         return self.sample_delay * d if steps.step < d * (1.0 - REL_EPS) else 0.0
