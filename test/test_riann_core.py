@@ -338,7 +338,7 @@ def test_slow_input_runs_the_network_on_a_5_ms_grid_and_fast_input_in_blocks():
     n = 250
     acc = np.tile([0.0, 0.0, G], (n, 1))
     est.update_batch(acc, np.zeros((n, 3)), np.full(n, 0.040))  # 25 Hz
-    assert est.network.rows == pytest.approx(8 * n, abs=8)
+    assert est.network.rows == pytest.approx(8 * n, abs=10)  # rows up to a quarter step (2 rows) before the stamp
     est.reset()
     est.update_batch(np.tile(acc, (20, 1)), np.zeros((20 * n, 3)), np.full(20 * n, 0.001))  # 1 kHz
     assert est.network.rows == pytest.approx(20 * n / 5, abs=5)
