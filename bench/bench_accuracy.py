@@ -9,7 +9,9 @@ Runs ``riann-bag-eval`` on the BROAD trial files (``$RIANN_BROAD_DIR`` or ``../s
 1. scenarios ``as-recorded`` (the recording as it is, from its first sample) and ``realistic`` (from the motion
    onset), one run each, under the conditions ``none``, ``jitter:10/20/30ms`` (interval means),
    ``jitter:10/20/30ms:points`` and ``jitter:5-15ms:points`` (point samples at random times), ``jitter:2-8ms``,
-   ``latency:0-10ms``, ``fifo:20ms``, ``rate:50`` (stamps exactly 20 ms apart), ``bias:3,3,0``, ``bias:random:2``,
+   ``latency:0-10ms``, ``fifo:20ms``, regular streams at 25, 50 and 100 Hz made three ways (``rate:HZ`` interval
+   means stamped at the end, ``rate:HZ:points`` the signal at the stamp, ``rate:HZ:lowpass`` a first-order
+   low-pass of time constant half a step at the stamp), ``bias:3,3,0``, ``bias:random:2``,
    ``dropout:0.1-0.6s@10s``, ``dropout:0.01-0.05s@1s`` (a few messages lost about once a second) and
    ``latency:0-10ms+dropout:0.01-0.05s@1s`` (the same on a stream stamped on arrival);
 2. the as-recorded scenario FFT-resampled to 25, 50, 100, 200, 500 and 1000 Hz (``--rates``).
@@ -39,8 +41,9 @@ from riann_ros.cli.evaluate import main as eval_main
 from riann_ros.datasets.broad import broad_files, find_broad_dir
 
 ESTIMATORS = "riann,vqf,madgwick,mahony"
+REGULAR = tuple(f"rate:{hz}{kind}" for hz in (25, 50, 100) for kind in ("", ":points", ":lowpass"))
 CONDITIONS = ("none", "jitter:10/20/30ms", "jitter:10/20/30ms:points", "jitter:2-8ms", "jitter:5-15ms:points",
-              "latency:0-10ms", "fifo:20ms", "rate:50", "bias:3,3,0", "bias:random:2", "dropout:0.1-0.6s@10s",
+              "latency:0-10ms", "fifo:20ms", *REGULAR, "bias:3,3,0", "bias:random:2", "dropout:0.1-0.6s@10s",
               "dropout:0.01-0.05s@1s", "latency:0-10ms+dropout:0.01-0.05s@1s")
 RATES = "25,50,100,200,500,1000"
 SCENARIOS = ("as-recorded", "realistic")

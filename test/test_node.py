@@ -69,6 +69,33 @@ def test_node_output_equals_core_on_a_broad_trial(ros, start_node, broad_trial):
     ros.destroy(pub, att, imu_out)
 
 
+def test_node_output_equals_core_on_a_regular_low_rate_stream(ros, start_node, broad_trial):
+    """A BROAD trial made a regular 50 Hz stream of a low-pass sensor (``rate:50:lowpass``): the grid up-samples it
+    and reads each sample a quarter step before its stamp (``sample_delay``); the node equals the core."""
+    from riann_ros.evaluation.perturb import parse_perturbation
+
+    rec = parse_perturbation("rate:50:lowpass").start(np.random.default_rng(0))(broad_trial("33"))
+    node = start_node("riann_node", "-p", "input_qos:=reliable", "-p", "input_depth:=1000", "-p", "nominal_rate:=50.0")
+    pub, att = connect(ros, node)
+    stamps = rec.stamps_ns + 1_700_000_000_000_000_000
+    msgs = [imu_msg(s, a, g) for s, a, g in zip(stamps, rec.acc, rec.gyr, strict=True)]
+    try:
+        publish_paced(pub, msgs, att.messages, len(msgs))
+    except AssertionError as e:
+        raise AssertionError(f"{e}; node log: {node.output()[-3000:]}") from None
+    time.sleep(0.2)
+    got = att.messages
+    assert len(got) == len(msgs), f"{len(got)} outputs for {len(msgs)} inputs"
+    q_node = quats(got)
+    est = create("riann")
+    q_core, ok = EstimatorStream(est, GateConfig(nominal_rate=50.0)).process_batch(stamps, rec.acc, rec.gyr)
+    assert ok.all()
+    assert est.timeline is not None and est.timeline.delay() == pytest.approx(0.005, rel=1e-3)
+    assert np.abs(q_node - q_core).max() < 1e-4
+    assert abs(rmse(rec, q_node) - rmse(rec, q_core)) < 0.01
+    ros.destroy(pub, att)
+
+
 def synthetic(n: int, rate: float = 200.0, t0_ns: int = 1_000_000_000):
     rng = np.random.default_rng(3)
     stamps = t0_ns + (np.arange(n) * 1e9 / rate).astype(np.int64)

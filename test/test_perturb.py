@@ -204,13 +204,13 @@ def test_magnetic_offset_and_disturbance_window():
 
 
 def test_perturb_help_and_errors_name_every_kind():
-    """The --perturb help and the parse error are built from the definitions: every kind the parser accepts (and
-    the :points suffix) has example forms there, each of which parses, and the CLI help shows every one."""
+    """The --perturb help and the parse error are built from the definitions: every kind the parser accepts (and the
+    :points and :lowpass suffixes) has example forms there, each of which parses, and the CLI help shows every one."""
     from riann_ros.cli.evaluate import build_parser
     from riann_ros.evaluation.perturb import conditions
 
     kinds = set(conditions._PARSERS)
-    assert kinds | {"points"} == set(pt.EXAMPLES) == set(pt.DEFINITIONS) - {"seeding"}
+    assert kinds | {"points", "lowpass"} == set(pt.EXAMPLES) == set(pt.DEFINITIONS) - {"seeding"}
     help_text = " ".join(next(a.help for a in build_parser()._actions if "--perturb" in a.option_strings).split())
     with pytest.raises(ValueError) as err:
         pt.parse_perturbation("nonsense:1")
@@ -222,3 +222,25 @@ def test_perturb_help_and_errors_name_every_kind():
             assert text.startswith(p.kind) and (kind == "points") == text.endswith(":points")
             assert form in help_text and form in str(err.value)
     assert {f.split(":")[0] for forms in pt.EXAMPLES.values() for f in forms} == kinds
+
+
+def test_rate_lowpass_is_a_first_order_filter_sampled_at_the_stamp():
+    """rate:HZ:lowpass: a ramp comes out settled half a step late (the filter's lag tau = T/2), a step input as
+    1 - exp(-t/tau); stamps and reference as rate:HZ:points; chunked equals whole."""
+    rec = linear(n=4000)  # gyr x = 0.1 t at 200 Hz
+    lp = pt.parse_perturbation("rate:50:lowpass")
+    assert lp.text() == "rate:50:lowpass" and "rate:50:lowpass" in pt.accepted_forms()
+    out, _ = run(lp, rec)
+    pts, _ = run(pt.parse_perturbation("rate:50:points"), rec)
+    np.testing.assert_array_equal(out.stamps_ns, pts.stamps_ns)
+    np.testing.assert_allclose(out.quat_ref, pts.quat_ref, atol=1e-12)
+    t = (out.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    settled = t > 0.2  # 20 time constants of 10 ms
+    np.testing.assert_allclose(out.gyr[settled, 0], 0.1 * (t[settled] - 0.010), atol=1e-9)
+    assert abs(out.gyr[1, 0] - 0.1 * (t[1] - 0.010 * (1 - np.exp(-t[1] / 0.010)))) < 1e-9
+    chunked, _ = run(lp, rec, [1, 2, 700, 701, 2500, 3999])
+    np.testing.assert_allclose(chunked.gyr, out.gyr, atol=1e-9)
+    np.testing.assert_allclose(chunked.acc, out.acc, atol=1e-9)
+    for bad in ("jitter:5-15ms:lowpass", "rate:50:points:lowpass"):
+        with pytest.raises(ValueError):
+            pt.parse_perturbation(bad)

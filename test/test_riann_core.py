@@ -338,7 +338,7 @@ def test_slow_input_runs_the_network_on_a_5_ms_grid_and_fast_input_in_blocks():
     n = 250
     acc = np.tile([0.0, 0.0, G], (n, 1))
     est.update_batch(acc, np.zeros((n, 3)), np.full(n, 0.040))  # 25 Hz
-    assert est.network.rows == pytest.approx(8 * n, abs=8)
+    assert est.network.rows == pytest.approx(8 * n, abs=10)  # rows up to a quarter step (2 rows) before the stamp
     est.reset()
     est.update_batch(np.tile(acc, (20, 1)), np.zeros((20 * n, 3)), np.full(20 * n, 0.001))  # 1 kHz
     assert est.network.rows == pytest.approx(20 * n / 5, abs=5)
@@ -623,23 +623,33 @@ def _roll_rmse(est: RiannEstimator, acc: np.ndarray, gyr: np.ndarray, dt: np.nda
     return float(np.sqrt(np.mean(e[len(e) // 4:] ** 2)))
 
 
-def _roll_rmse_deg(model: str, data_means: bool) -> float:
-    return _roll_rmse(RiannEstimator(input_model=model, gyro_bias_estimation=False), *_swing(50.0, data_means))
+def _roll_rmse_deg(model: str, data_means: bool, rate: float = 50.0, **kw: float) -> float:
+    return _roll_rmse(RiannEstimator(input_model=model, gyro_bias_estimation=False, **kw), *_swing(rate, data_means))
 
 
 def test_input_model_matches_what_a_sample_is():
-    """A regular 50 Hz stream: read as point samples by default; interval means stamped at the end of their
-    interval lag by half a step when read as points, and point samples lead when read as means."""
-    points_on_points = _roll_rmse_deg("auto", data_means=False)
-    assert _roll_rmse_deg("points", data_means=False) == pytest.approx(points_on_points, abs=1e-9)
+    """A regular 50 Hz stream: interval means stamped at the end of their interval lag by half a step when read as
+    points, and point samples lead when read as means; 'auto' without a sample delay reads points."""
+    points_on_points = _roll_rmse_deg("points", data_means=False)
+    assert _roll_rmse_deg("auto", data_means=False, sample_delay=0.0) == pytest.approx(points_on_points, abs=1e-9)
     means_on_points = _roll_rmse_deg("means", data_means=False)
     means_on_means = _roll_rmse_deg("means", data_means=True)
-    points_on_means = _roll_rmse_deg("auto", data_means=True)
+    points_on_means = _roll_rmse_deg("points", data_means=True)
     assert points_on_points < 0.7 * means_on_points
     assert means_on_means < 0.7 * points_on_means
     est = RiannEstimator(input_model="means")
     est.update_batch(*_swing(50.0, True, seconds=1.0)[:3])
     assert est.diagnostics()["input model"] == "interval means (set)"
+
+
+def test_the_default_sample_delay_halves_the_worst_timing_error():
+    """25 Hz: point samples and end-stamped interval means are half a step (20 ms) apart, and nothing on the stream
+    tells which it is. Either fixed reading is 20 ms off on the other; the default (a quarter step early) is 10 ms
+    off on both, so its worse error is far below the worse error of either fixed reading."""
+    err = {(m, data): _roll_rmse_deg(m, data, rate=25.0) for m in ("auto", "points", "means") for data in (0, 1)}
+    worst = {m: max(err[(m, 0)], err[(m, 1)]) for m in ("auto", "points", "means")}
+    assert worst["auto"] < 0.8 * min(worst["points"], worst["means"]), err
+    assert err[("points", 0)] < err[("auto", 0)] and err[("means", 1)] < err[("auto", 1)], err  # each at its own
 
 
 def _jittered_swing(means: bool, seconds: float = 30.0, seed: int = 0) -> tuple[np.ndarray, ...]:

@@ -72,9 +72,13 @@ def test_timeline_block_equals_samples():
     assert [h.index for h in whole.holes] == [k for k, p in enumerate(parts) if p.holes] == [1500]
 
 
-def test_grid_block_equals_samples():
-    x, dt = _stream(2000)
+@pytest.mark.parametrize("jitter", [True, False])
+def test_grid_block_equals_samples(jitter):
+    """Jittery stamps (no sample delay once judged jittery, after 16 steps) and a regular 100 Hz stream (up-sampled,
+    read a quarter step early)."""
+    x, dt = _stream(2000, jitter=jitter)
     tl = Timeline(0.1, "auto").run(x, dt)
+    assert {s[4] for s in tl.spec} == ({0.0} if jitter else {0.0, 0.0025})
     whole = Grid().run(x, tl)
     grid = Grid()
     rows, steps, forks, r0, r1 = [], [], [], [], []
@@ -88,7 +92,8 @@ def test_grid_block_equals_samples():
         r1.append(len(rows) + g.r1[0])
         rows += g.rows
         steps += g.steps
-        assert g.g_delta[0] == whole.g_delta[k] and g.g_carry[0] == whole.g_carry[k]
+        assert np.allclose(g.g_delta[0], whole.g_delta[k], rtol=0, atol=1e-9)
+        assert np.allclose(g.g_carry[0], whole.g_carry[k], rtol=0, atol=1e-9)
     assert rows == whole.rows and steps == whole.steps and forks == whole.forks
     assert r0 == whole.r0 and r1 == whole.r1
     assert len(whole.forks) == 1 and len(rows) > 2000  # up-sampled to the grid
@@ -181,8 +186,9 @@ def test_heading_plain_floats_equal_the_vectorised_form():
     assert one.mag.started
 
 
-def test_estimator_block_equals_samples(model):
-    x, dt = _stream(1500)
+@pytest.mark.parametrize("jitter", [True, False])
+def test_estimator_block_equals_samples(model, jitter):
+    x, dt = _stream(1500, jitter=jitter)
     mag = _mag(len(x))
     a = np.array([r[:3] for r in x])
     g = np.array([r[3:] for r in x])
@@ -220,3 +226,61 @@ def test_after_a_hole_the_stages_act_at_the_hole(model):
     rows, _ = est.bias.run(g.rows, g.steps)
     est.network.run(rows, g.forks)
     assert est.network.holes == 1
+
+
+# -- the sample delay (stage 1 says it, stage 2 reads the samples that much earlier) -------------------------------
+def _regular(rate: float, n: int = 400) -> tuple[list[tuple[float, ...]], list[float]]:
+    """A regular stream: acc and gyr linear in time (gyr x = 0.5 + 0.1 t rad/s), ``n`` samples at ``rate``."""
+    t = np.arange(n) / rate
+    rows = np.column_stack([0 * t, 0 * t, G + 0 * t, 0.5 + 0.1 * t, 0 * t, 0 * t])
+    return [tuple(r) for r in rows.tolist()], [1.0 / rate] * n
+
+
+@pytest.mark.parametrize(("rate", "model", "delay", "want"), [
+    (50.0, "auto", 0.25, 0.005),  # up-sampled ×4: a quarter of 20 ms
+    (25.0, "auto", 0.5, 0.020),
+    (200.0, "auto", 0.25, 0.0),  # fed straight in: no delay
+    (50.0, "points", 0.25, 0.0),  # a set model: as set
+    (50.0, "means", 0.25, 0.0),
+    (50.0, "auto", 0.0, 0.0),
+])
+def test_timeline_says_the_sample_delay_of_an_up_sampled_regular_stream_only(rate, model, delay, want):
+    x, dt = _regular(rate)
+    tl = Timeline(0.1, model, delay).run(x, dt)
+    delays = np.array([s[4] for s in tl.spec])
+    assert not delays[:16].any()  # none before the stream is judged regular (16 steps)
+    np.testing.assert_allclose(delays[16:], want, rtol=0, atol=1e-12)
+
+
+def test_timeline_gives_jittery_sample_times_no_delay_and_a_clock_its_delay():
+    """Random sample times: none (the sample-model test says what they are); a 50 Hz clock stamped on arrival
+    (0-10 ms late): a quarter of its period once the clock test has recognised it."""
+    x, dt = _stream(3000)
+    assert Timeline(0.1, "auto").run(x, dt).spec[-1][4] == 0.0
+    rng = np.random.default_rng(1)
+    n = 1500
+    stamps = np.arange(n) * 0.020 + rng.uniform(0.0, 0.010, n)
+    xs, _ = _regular(50.0, n)
+    tl = Timeline(0.1, "auto").run(xs, np.diff(stamps, prepend=-0.02).tolist())
+    assert tl.spec[100][4] == 0.0  # jittery until the clock test has seen 256 steps
+    assert tl.spec[-1][4] == pytest.approx(0.005, rel=1e-3)
+
+
+def test_grid_reads_a_delayed_sample_as_the_signal_that_much_before_its_stamp():
+    """Regular 50 Hz point samples of a ramp read a quarter step (5 ms) early: the rows (5 ms grid) are the ramp's
+    cell means on the shifted timeline, made as soon as the signal time reaches them; the newest row is carried to
+    the stamp with the newest sample held over the 5 ms; from stamp to stamp the gyro is the signal between the
+    two signal times less the previous carry plus the new one (the carries and the steps add up)."""
+    x, dt = _regular(50.0, 200)
+    g = Grid().run(x, Timeline(0.1, "auto", 0.25).run(x, dt))  # the delay from sample 16 on (judged regular)
+    tau = 0.005 * np.arange(len(g.rows))  # the first grid point on the first sample
+    rows = np.array(g.rows)
+    later = np.arange(len(rows)) >= g.r0[20]
+    np.testing.assert_allclose(rows[later, 3], 0.5 + 0.1 * (tau[later] - 0.0025 + 0.005), atol=1e-9)
+    for k in range(20, 200):
+        assert g.r1[k] - g.r0[k] == 4 and tau[g.r1[k] - 1] == pytest.approx(k / 50 - 0.005, abs=1e-9)
+        assert g.s_carry[k] == pytest.approx(0.005, abs=1e-9)
+        assert g.g_carry[k][0] == pytest.approx(0.5 + 0.1 * k / 50, abs=1e-9)
+        w_prev, w = 0.5 + 0.1 * (k - 1) / 50, 0.5 + 0.1 * k / 50
+        want = 0.5 * (w_prev + w) * 0.020 - w_prev * 0.005 + w * 0.005
+        assert g.g_delta[k][0] * g.s_delta[k] == pytest.approx(want, abs=1e-9)

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import front_end_params
-from riann_ros.estimators.riann.s1_timeline import Timeline
+from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY, Timeline
 from riann_ros.estimators.riann.s2_grid import DirectRows, Grid
 from riann_ros.estimators.riann.s3_bias import Bias
 from riann_ros.estimators.riann.s4_network import Network
@@ -64,6 +64,10 @@ class RiannEstimator(AttitudeEstimator):
         ParamSpec("input_model", "auto", "What an input sample is when the grid resamples it: 'points' (the "
                   "signal at the stamp), 'means' (the mean since the previous sample), 'auto' (means when the "
                   "stamps jitter and the gyro says so, else points).", choices=("auto", "points", "means")),
+        ParamSpec("sample_delay", SAMPLE_DELAY, "Input steps: with input_model 'auto', a regular stream the grid "
+                  "up-samples (slower than ~180 Hz) is read as the signal this long before each stamp: 0 = point "
+                  "samples at the stamp, 0.5 = interval means stamped at the end or a MEMS low-pass of half a step's "
+                  "group delay; the default halves the worst timing error of either.", min=0.0, max=1.0),
         ParamSpec("ensemble", MAX_COPIES, "Copies of the network run on virtually rotated IMU frames, their "
                   "inclinations averaged (the paper's training augmentation used at run time); 1 = the single "
                   "network. Compute grows with it.", min=1, max=MAX_COPIES),
@@ -104,7 +108,7 @@ class RiannEstimator(AttitudeEstimator):
     def reset(self) -> None:
         p = self.params
         grid = bool(p["rate_adaptation"])
-        self.timeline = Timeline(p["restart_gap"], p["input_model"]) if grid else None
+        self.timeline = Timeline(p["restart_gap"], p["input_model"], p["sample_delay"]) if grid else None
         self.grid: Grid | DirectRows = Grid() if grid else DirectRows()
         self.bias = Bias(p["gyro_bias_estimation"], p["bias_clip"], p["bias_sigma_init"], fixed_step=not grid)
         self.network = Network(self.model, p["restart_warmup"])

@@ -17,6 +17,9 @@ from riann_ros.estimators.riann.s1c_sample_model import SampleModelTest
 from riann_ros.estimators.riann.stage import Cause, GridSpec, Hole, Row6, TimelineBlock, Vec
 
 HOLE_STEPS = 4.0  # a hole is also longer than this many median input steps
+SAMPLE_DELAY = 0.25  # input steps: an up-sampled regular stream's sample is read as the signal this long before
+# its stamp (point samples sit at 0, interval means and a MEMS low-pass at about half a step: a quarter halves the
+# worst timing error of either; docs/riann.md, stage 1, "Sample delay")
 
 
 class Timeline:
@@ -24,9 +27,10 @@ class Timeline:
 
     NAME = "timeline"
 
-    def __init__(self, restart_gap: float, input_model: str) -> None:
+    def __init__(self, restart_gap: float, input_model: str, sample_delay: float = SAMPLE_DELAY) -> None:
         self.restart_gap = restart_gap
         self.forced = None if input_model == "auto" else input_model == "means"  # None: judged from the stream
+        self.sample_delay = sample_delay if input_model == "auto" else 0.0
         self._clear()
 
     def _clear(self) -> None:
@@ -78,10 +82,22 @@ class Timeline:
             return step
         return step - d if step > d * (1.0 + REL_EPS) else 0.0
 
+    def delay(self) -> float:
+        """How long before its stamp a sample is read (s): ``sample_delay`` input steps for a regular stream (or a
+        clock's) that the grid up-samples, read with ``input_model`` auto; else 0: samples fed straight in (a
+        quarter of a step of 5.5 ms or less is small), jittery sample times (the sample-model test finds what
+        they are), a set model, and the first ``MIN_STEPS`` steps (before the stream is judged regular)."""
+        steps = self.steps
+        assert steps is not None
+        if self.sample_delay == 0.0 or not steps.judged or (steps.jittery and not self.clock.clocked):
+            return 0.0
+        d = self.input_step
+        return self.sample_delay * d if steps.step < d * (1.0 - REL_EPS) else 0.0
+
     def spec(self) -> GridSpec:
         assert self.steps is not None
         means, step = self.means, self.steps.step
-        return step, self.box_width(), means, not means and step < self.input_step * (1.0 - REL_EPS)
+        return step, self.box_width(), means, not means and step < self.input_step * (1.0 - REL_EPS), self.delay()
 
     # -- the stage ---------------------------------------------------------------------------------
     def run(self, x: list[Row6], dt: list[float]) -> TimelineBlock:

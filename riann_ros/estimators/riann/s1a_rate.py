@@ -54,6 +54,11 @@ class StepTracker:
         self.switches = 0
         self._pending = 0
 
+    @property
+    def judged(self) -> bool:
+        """Enough steps seen (``MIN_STEPS``) to say whether the sample times are jittery."""
+        return len(self._dts) >= min(MIN_STEPS, self.window)
+
     def push(self, dt: float, input_step: float | None = None, clocked: bool = False) -> bool:
         """Take one input step (s); return True when the grid step switched. ``input_step``: the step the grid is
         chosen for when it is not the median (a clocked stream's period, stage 1b); ``clocked``: the stamps are a

@@ -41,7 +41,9 @@ class Grid:
         self._anchor = 0.0  # ns; grid point m is at anchor + m * T
         self._m = 0
         self._t_net = 0.0  # ns of the last grid point made a row
-        self._t = 0.0  # ns of the newest sample
+        self._t = 0.0  # ns of the newest sample's stamp
+        self._s = 0.0  # ns of its signal time (the stamp less the sample delay)
+        self._w: Sample = ZERO3  # its raw gyro
 
     def restart(self, cause: Cause) -> None:
         self._clear()  # GAP and RESET alike: the next sample starts a new grid (holes are bridged in run)
@@ -52,31 +54,35 @@ class Grid:
         holes = {h.index for h in tl.holes}
         rows = out.rows
         for k, xk in enumerate(x):
-            T, width, means, curved = tl.spec[k]
+            T, width, means, curved, delay = tl.spec[k]
+            t = tl.t[k]
             if tl.start[k]:
-                self._anchor = -T * 1e9  # the first grid point on the first sample
+                s = t - delay * 1e9
+                self._anchor = s - T * 1e9  # the first grid point on the first sample's signal time
                 self._m = 0
                 self._t_net = self._anchor
-                t_prev = 0.0
+                t_prev = s_prev = t
+                w_prev: Sample = (xk[3], xk[4], xk[5])
             else:
-                t_prev = self._t
+                t_prev, s_prev, w_prev = self._t, self._s, self._w
+                s = max(t - delay * 1e9, s_prev)  # the signal time never runs backwards (a larger delay)
                 if tl.switched[k]:
                     self._anchor = self._t_net
                     self._m = 0
-            t = self._t = tl.t[k]
-            hist.append(t, xk)
+            self._t, self._s, self._w = t, s, (xk[3], xk[4], xk[5])
+            hist.append(s, xk)
             if t > t_prev:
-                out.g_delta.append(tuple(hist.mean(t_prev, t, means, 3, 6)))  # type: ignore[arg-type]
+                out.g_delta.append(self._delta(t - t_prev, s_prev, s, t_prev - s_prev, t - s, w_prev, means))
                 out.s_delta.append((t - t_prev) * 1e-9)
             else:
                 out.g_delta.append(ZERO3)
                 out.s_delta.append(0.0)
             out.r0.append(len(rows))
-            self._emit(out, t, T, width, means, curved)
+            self._emit(out, s, T, width, means, curved)
             out.r1.append(len(rows))
             if k in holes:
                 out.forks.append((len(rows), T))
-            if t > self._t_net + TIME_EPS_NS:
+            if t > self._t_net + TIME_EPS_NS:  # the newest row carried to the stamp (beyond s the newest gyro held)
                 out.g_carry.append(tuple(hist.mean(self._t_net, t, means, 3, 6)))  # type: ignore[arg-type]
                 out.s_carry.append((t - self._t_net) * 1e-9)
             else:
@@ -85,8 +91,20 @@ class Grid:
             hist.trim(self._t_net - max(width * 1e9, T * 1e9) - 1.0)
         return out
 
+    def _delta(self, span: float, s_prev: float, s: float, d_prev: float, d: float, w_prev: Sample,
+               means: bool) -> tuple[float, float, float]:
+        """Mean gyro from the previous sample's stamp to this one's (``span`` ns): the outputs there are the signal
+        at ``s_prev`` and ``s`` carried on by the gyro held over the delays ``d_prev`` and ``d``, so the step is
+        the signal from ``s_prev`` to ``s`` less the previous carry plus this one (the steps add up exactly)."""
+        g = self.hist.mean(s_prev, s, means, 3, 6) if s > s_prev else [0.0, 0.0, 0.0]
+        if d == 0.0 and d_prev == 0.0:
+            return g[0], g[1], g[2]
+        w = self._w
+        a = (s - s_prev) / span
+        return tuple(a * g[j] + (w[j] * d - w_prev[j] * d_prev) / span for j in range(3))  # type: ignore[return-value]
+
     def _emit(self, out: GridBlock, t: float, T: float, width: float, means: bool, curved: bool) -> None:
-        """Append every grid row up to the newest stamp ``t``."""
+        """Append every grid row up to the newest signal time ``t``."""
         T_ns = T * 1e9
         w_ns = width * 1e9
         hist = self.hist

@@ -76,7 +76,9 @@ def restart_table() -> str:
     return "\n".join(lines)
 
 
-GridSpec = tuple[float, float, bool, bool]  # grid step T (s), box width (s), interval means, curved (see s2_grid)
+# grid step T (s), box width (s), interval means, curved, sample delay D (s: the sample is the signal at its stamp
+# minus D; see s1_timeline and s2_grid)
+GridSpec = tuple[float, float, bool, bool, float]
 Row6 = tuple[float, ...]  # acc xyz (m/s²), gyr xyz (rad/s) of a sample or a grid point
 
 

@@ -16,6 +16,11 @@ sequence, after the scenario and before the estimators:
     The same stamps, but each sample is the signal *at* its stamp (interpolated linearly between the
     recording's samples) instead of its mean over the interval: a sensor read at irregular times, which
     is what a ROS stamp means (the measurement time).
+``rate:50:lowpass``
+    The same stamps, each sample the signal at its stamp after a first-order low-pass of time constant
+    half a step (10 ms at 50 Hz), computed exactly for the piecewise-linear signal: a MEMS sensor whose
+    anti-alias filter has a group delay of half a step, stamped at data-ready. The reference is taken at
+    the stamp, so the samples lag it by about half a step, as interval means do.
 ``latency:0-20ms``
     Receive-time stamps: each sample keeps its values and its reference, but its stamp is the
     measurement time plus a delivery delay drawn uniformly from the range (stamps kept in order, at

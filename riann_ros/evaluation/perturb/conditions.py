@@ -20,6 +20,9 @@ DEFINITIONS = {
     "rate": "rate:HZ: a regular stream at HZ made like jitter (interval means), causal, chunk by chunk",
     "points": "jitter:...:points, rate:HZ:points: the same stamps, each sample the signal at its stamp (linear "
     "between the recording's samples) instead of the interval mean",
+    "lowpass": "rate:HZ:lowpass: the same stamps, each sample the signal at its stamp after a first-order low-pass "
+    "of time constant half a step (a MEMS sensor's anti-alias filter, stamped at data-ready: a group delay of "
+    "half a step, like interval means); reference at the stamp",
     "latency": "latency:LO-HIms: each stamp = the measurement time + a delay drawn uniformly from LO-HI (kept in "
     "order); samples and reference unchanged",
     "fifo": "fifo:Pms: the FIFO read every P ms from the first stamp; each message stamped at its read time, "
@@ -38,6 +41,7 @@ EXAMPLES = {
     "jitter": ("jitter:10/20/30ms", "jitter:8-32ms"),
     "rate": ("rate:50",),
     "points": ("jitter:5-15ms:points", "rate:50:points"),
+    "lowpass": ("rate:50:lowpass",),
     "latency": ("latency:0-20ms",),
     "fifo": ("fifo:20ms",),
     "bias": ("bias:3,3,0", "bias:random:2 (deg/s)"),
@@ -88,6 +92,19 @@ def _points(parse: Callable[[str], Perturbation | None]) -> Callable[[str], Pert
         if sep and tail == "points":
             p = parse(base)
             return replace(p, points=True) if isinstance(p, Jitter) else None
+        return parse(args)
+
+    return wrapped
+
+
+def _lowpass(parse: Callable[[str], Perturbation | None]) -> Callable[[str], Perturbation | None]:
+    """``parse`` (rate) that also takes a ``:lowpass`` suffix (a first-order low-pass sensor's samples)."""
+
+    def wrapped(args: str) -> Perturbation | None:
+        base, sep, tail = args.rpartition(":")
+        if sep and tail == "lowpass":
+            p = parse(base)
+            return replace(p, lowpass=True) if isinstance(p, Rate) and not p.points else None
         return parse(args)
 
     return wrapped
@@ -153,8 +170,8 @@ def _magnetic(args: str) -> Perturbation | None:
     return Magnetic(strength=strength, t0=t0, t1=t1) if t0 < t1 else None
 
 
-_PARSERS = {"jitter": _points(_jitter), "rate": _points(_rate), "latency": _latency, "fifo": _fifo, "bias": _bias,
-            "dropout": _dropout, "magnetic": _magnetic}
+_PARSERS = {"jitter": _points(_jitter), "rate": _lowpass(_points(_rate)), "latency": _latency, "fifo": _fifo,
+            "bias": _bias, "dropout": _dropout, "magnetic": _magnetic}
 
 
 def parse_perturbation(text: str) -> Perturbation:

@@ -1,5 +1,6 @@
 """Perturbations of the stamps (ROS-free): irregular stamps with interval means or point samples (``jitter:``),
-a regular stream at another rate (``rate:``), receive-time stamps (``latency:``) and FIFO read-out (``fifo:``).
+a regular stream at another rate (``rate:``: interval means, point samples or a low-pass sensor's samples),
+receive-time stamps (``latency:``) and FIFO read-out (``fifo:``).
 Definitions: :data:`~riann_ros.evaluation.perturb.conditions.DEFINITIONS`."""
 
 from __future__ import annotations
@@ -56,13 +57,18 @@ class Jitter(Perturbation):
 
 @dataclass(frozen=True)
 class Rate(Jitter):
-    """A regular stream at ``hz``."""
+    """A regular stream at ``hz``; ``lowpass``: each sample the signal at its stamp after a first-order low-pass
+    of time constant half a step (a MEMS sensor's anti-alias filter, stamped at data-ready)."""
 
     hz: float = 100.0
+    lowpass: bool = False
     kind = "rate"
 
     def text(self) -> str:
-        return f"rate:{self.hz:g}" + self._suffix()
+        return f"rate:{self.hz:g}" + (":lowpass" if self.lowpass else self._suffix())
+
+    def start(self, rng: np.random.Generator) -> Transform:
+        return _IntervalMeans(self.draw(rng), self.points, 0.5 / self.hz if self.lowpass else 0.0)
 
     def mean_interval(self) -> float:
         return 1.0 / self.hz
@@ -82,13 +88,15 @@ class Rate(Jitter):
 
 class _IntervalMeans(Transform):
     """New stamps t_k = t_{k-1} + interval; sample k = mean of the signal over (t_{k-1}, t_k] (``points``: the
-    signal at t_k)."""
+    signal at t_k; ``tau`` > 0: the signal low-passed with that time constant (s), at t_k)."""
 
-    def __init__(self, draw: Callable[[], NDArray[np.int64]], points: bool = False) -> None:
+    def __init__(self, draw: Callable[[], NDArray[np.int64]], points: bool = False, tau: float = 0.0) -> None:
         self._draw = draw
         self._points = points
+        self._tau = tau
         self._queue = np.zeros(0, np.int64)
         self._tail: Recording | None = None  # the samples needed again: from the last at or before t_prev
+        self._y: NDArray[np.float64] | None = None  # the low-passed signal at the tail's samples (tau > 0)
         self._t_prev: int | None = None
         self.emitted = 0
 
@@ -116,26 +124,50 @@ class _IntervalMeans(Transform):
         if self._t_prev is None:  # the first sample starts the new stream as it is
             first, self._t_prev = rec.slice(0, 1), int(rec.stamps_ns[0])
         buf = rec if self._tail is None else concat(self._tail, rec)
+        y = self._lowpass(buf, rec) if self._tau > 0.0 else None
         times = self._times(self._t_prev, int(buf.stamps_ns[-1]))
-        out = _interval_means(buf, np.concatenate([[self._t_prev], times]), self._points) if len(times) else None
+        edges = np.concatenate([[self._t_prev], times])
+        out = _interval_means(buf, edges, self._points, y, self._tau) if len(times) else None
         if len(times):
             self._t_prev = int(times[-1])
         keep_from = max(0, int(np.searchsorted(buf.stamps_ns, self._t_prev, side="right")) - 1)
         self._tail = buf.slice(keep_from)
+        self._y = None if y is None else y[keep_from:]
         parts = [p for p in (first, out) if p is not None]
         result = concat(*parts) if len(parts) > 1 else (parts[0] if parts else rec.slice(0, 0))
         self.emitted += len(result)
         return result
 
+    def _lowpass(self, buf: Recording, rec: Recording) -> NDArray[np.float64]:
+        """The low-passed signal at ``buf``'s samples: the tail's kept, ``rec``'s continued from it (exact for
+        the piecewise-linear signal; the filter starts settled on the first sample)."""
+        x = np.concatenate([buf.acc, buf.gyr], axis=1)
+        t = buf.stamps_ns * 1e-9
+        y = np.empty_like(x)
+        n0 = len(buf) - len(rec)
+        if self._y is None or n0 == 0:
+            y[0] = x[0]
+            n0 = 1
+        else:
+            y[:n0] = self._y
+        tau = self._tau
+        for i in range(n0, len(x)):
+            h = t[i] - t[i - 1]
+            st = (x[i] - x[i - 1]) * (tau / h) if h > 0.0 else np.zeros(6)
+            y[i] = x[i] - st + (y[i - 1] - x[i - 1] + st) * np.exp(-h / tau)
+        return y
+
     def info(self) -> dict[str, Any]:
         return {"samples": self.emitted}
 
 
-def _interval_means(buf: Recording, edges: NDArray[np.int64], points: bool = False) -> Recording:
+def _interval_means(buf: Recording, edges: NDArray[np.int64], points: bool = False,
+                    y: NDArray[np.float64] | None = None, tau: float = 0.0) -> Recording:
     """Samples at ``edges[1:]``: means of acc and gyr (piecewise linear between ``buf``'s samples) over each
-    (edges[k-1], edges[k]] (``points``: their values at the edge); reference slerped at the edge, score mask
-    of the nearest sample, magnetic field of the latest sample at or before the edge (a magnetometer read
-    when the sample is made)."""
+    (edges[k-1], edges[k]] (``points``: their values at the edge; ``y``: the signal low-passed with time constant
+    ``tau``, ``y`` at ``buf``'s samples, at the edge); reference slerped at the edge, score mask of the nearest
+    sample, magnetic field of the latest sample at or before the edge (a magnetometer read when the sample is
+    made)."""
     t0 = int(buf.stamps_ns[0])
     t = (buf.stamps_ns - t0) * 1e-9
     x = np.concatenate([buf.acc, buf.gyr], axis=1)
@@ -151,7 +183,10 @@ def _interval_means(buf: Recording, edges: NDArray[np.int64], points: bool = Fal
     else:  # a single sample: constant signal
         integral = x[0] * (q - t[0])[:, None]
         s = np.zeros(len(q))
-    if not points:
+    if y is not None and len(t) > 1:  # the first-order filter's response to the line through the segment
+        st = slope * tau
+        means = (x[i] + slope * d[:, None] - st + (y[i] - x[i] + st) * np.exp(-d / tau)[:, None])[1:]
+    elif not points:
         means = np.diff(integral, axis=0) / np.diff(q)[:, None]
     elif len(t) > 1:
         means = (x[i] + slope * d[:, None])[1:]
