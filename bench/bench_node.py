@@ -189,6 +189,12 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def _remap(node: str) -> list[str]:
+    """The classical filters publish imu/<name>/attitude (docs/node.md): remapped to the harness's imu/attitude."""
+    name = node.removesuffix("_node")
+    return [] if name == "riann" else ["-r", f"imu/{name}/attitude:=imu/attitude"]
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rates", default="200,1000,2000,4000")
@@ -214,7 +220,7 @@ def main() -> int:
     print("| what | " + " | ".join(cols) + " |")
     print("|---" * (len(cols) + 1) + "|")
     for rate in [float(r) for r in args.rates.split(",")]:
-        runs = [(node, [*pin, str(BIN / node), "--ros-args", "-p", f"nominal_rate:={rate}"])
+        runs = [(node, [*pin, str(BIN / node), "--ros-args", "-p", f"nominal_rate:={rate}", *_remap(node)])
                 for node in args.node.split(",")]
         if not args.no_echo:
             runs.append(("echo (reference)", [*pin, sys.executable, "-c", ECHO]))
