@@ -116,10 +116,11 @@ def shifted(tmp_path_factory) -> dict[int, Path]:
 
 @pytest.mark.slow
 def test_best_offset_and_the_sample_time_note(shifted, tmp_path, capsys):
-    """RIANN's best offset follows the reference's shift; near half a step it points at the sample-time setting."""
+    """RIANN's best offset follows the reference's shift; near half a step it points at the sample-time setting.
+    The bags hold point samples, so RIANN is told so (at its default it would read them a quarter step early)."""
     out = tmp_path / "out"
-    assert main([str(shifted[0]), str(shifted[15]), "-e", "riann", "-s", "as-recorded", "--out", str(out),
-                 "--no-plots"]) == 0
+    assert main([str(shifted[0]), str(shifted[15]), "-e", "riann:input_model=points", "-s", "as-recorded", "--out",
+                 str(out), "--no-plots"]) == 0
     text = capsys.readouterr().out
     rows = {(r["sequence"]): r for r in json.loads((out / "results.json").read_text())["results"]}
     a, b = rows["ahead0ms"], rows["ahead15ms"]
@@ -129,6 +130,7 @@ def test_best_offset_and_the_sample_time_note(shifted, tmp_path, capsys):
     notes = [x for x in text.split("\n\n") if x.startswith("timing:")]
     assert len(notes) == 1 and notes[0].startswith("timing: ahead15ms, as-recorded: riann")
     assert "sample-time convention" in notes[0] and "input_model" in notes[0] and "docs/riann.md" in notes[0]
+    assert "sample_delay" in notes[0]
     assert "- " + notes[0].removeprefix("timing: ") in (out / "report.md").read_text().split("## Timing")[1]
     # --offset-steps 0: no search, no columns
     assert main([str(shifted[15]), "-e", "riann", "-s", "as-recorded", "--offset-steps", "0", "--no-plots"]) == 0

@@ -211,8 +211,9 @@ def _group_notes(where: str, grp: Sequence, steps: int, riann_name: str) -> list
                 f"{_ms(offsets[r.estimator])}, {rel:+.2f} steps of {step * 1e3:.3g} ms from {against}: e_α RMSE "
                 f"{r.score.best_t_offset_rmse_deg:.2f}° instead of {r.rmse_deg:.2f}°. A shift near half a step is "
                 "what the driver's sample-time convention gives when it is read the other way (point samples at "
-                "their stamps, or means over the interval before each stamp): RIANN reads a regular stream as point "
-                "samples unless its input_model parameter says otherwise (docs/riann.md)")
+                "their stamps, or means over the interval before each stamp): RIANN reads a regular stream below about "
+                "180 Hz a quarter step before its stamps (sample_delay), between the two, unless its input_model "
+                "parameter names the convention (input_model=points or means; docs/riann.md, stage 1)")
     filters = {r.estimator_name for r in grp} - {"recorded"}
     if len(filters) > 1 and all(abs(v) / step >= 0.25 for v in offsets.values()):
         if max(offsets.values()) - min(offsets.values()) <= 0.25 * step:
