@@ -189,9 +189,10 @@ class TopicTool:
             self.spin_for(0.1)
 
     def no_message(self, topic: str, type_name: str, timeout: float) -> TopicError:
-        """The error when nothing came: a type the graph now shows for the topic (it may have shown up after the
-        subscription, on a slow discovery) is named, else that no message came."""
-        types = self.topics().get(topic)
+        """The error when nothing came: a type the topic's publishers have (they may have shown up only after the
+        subscription, on a slow discovery; the graph's type list would include this reader's own type) is named,
+        else that no message came."""
+        types = sorted({i.topic_type for i in self.node.get_publishers_info_by_topic(topic)})  # not our own reader
         if types and type_name not in types and _short(type_name) not in map(_short, types):
             return TopicError(f"{topic} has type {', '.join(types)}, not {type_name}")
         return TopicError(f"no message on {topic} ({type_name}) in {timeout:g} s")
