@@ -112,6 +112,10 @@ class GyroBiasFrontEnd:
         assert vqf is not None
         out = vqf.updateBatch(np.ascontiguousarray(g), np.ascontiguousarray(acc, dtype=float))
         before = np.vstack([np.asarray(self.bias)[None, :], out["bias"][:-1]])
+        self._took_batch(out)
         b = out["bias"][-1]
         self.bias = (float(b[0]), float(b[1]), float(b[2]))
         return before
+
+    def _took_batch(self, out: dict[str, Array]) -> None:
+        """What a subclass keeps of VQF's batch outputs (``updateBatch``'s dict), before :attr:`bias` moves on."""

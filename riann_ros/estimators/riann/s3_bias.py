@@ -47,21 +47,11 @@ class FrontEnd(GyroBiasFrontEnd):
         super().update(acc, gyr, dt)
         self.sigma = self._sigma_now()
 
-    def update_batch(self, acc: Array, gyr: Array, dt: Array | None = None) -> Array:
-        """Take N samples; return the bias known before each of them (N, 3); :attr:`sigma_rows` its σ."""
-        g = np.asarray(gyr, dtype=float)
-        if dt is not None:
-            g = g * (np.asarray(dt, dtype=float) / self.ts)[:, None]
-        vqf = self._vqf
-        assert vqf is not None
-        out = vqf.updateBatch(np.ascontiguousarray(g), np.ascontiguousarray(acc, dtype=float))
-        before = np.vstack([np.asarray(self.bias)[None, :], out["bias"][:-1]])
+    def _took_batch(self, out: dict[str, Array]) -> None:
+        """Per row of the batch the σ before it (:attr:`sigma_rows`), then the σ after the last."""
         sig = out["biasSigma"]
         self.sigma_rows = [self.sigma, *sig[:-1].tolist()]
         self.sigma = float(sig[-1])
-        b = out["bias"][-1]
-        self.bias = (float(b[0]), float(b[1]), float(b[2]))
-        return before
 
 
 class Bias:
