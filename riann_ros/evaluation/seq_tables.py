@@ -43,11 +43,14 @@ def format_heading_table(rows: Sequence[ResultRow], markdown_table: bool = False
     if markdown_table:
         return "\n".join(["| " + " | ".join(HEADING_HEADERS) + " |", "|---|---|---:|---|" + "---:|" * 6]
                          + ["| " + " | ".join(c) + " |" for c in cells])
-    widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(HEADING_HEADERS)]
-    lines = ["9D runs (magnetometer): heading and total error RMSE (°) per sequence",
-             "  ".join(h.ljust(w) for h, w in zip(HEADING_HEADERS, widths, strict=True))]
-    lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in cells]
-    return "\n".join(lines)
+    return "\n".join(["9D runs (magnetometer): heading and total error RMSE (°) per sequence",
+                      *aligned(HEADING_HEADERS, cells)])
+
+
+def aligned(headers: Sequence[str], cells: Sequence[Sequence[str]]) -> list[str]:
+    """A plain-text table: the header line and a line per row, each column left-aligned to its widest cell."""
+    widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(headers)]
+    return ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in [headers, *cells]]
 
 
 ERROR_TITLES = {"inclination": "inclination e_α", "heading": "heading", "total": "total angle"}

@@ -11,6 +11,7 @@ import numpy as np
 from riann_ros.evaluation import plots as pl
 from riann_ros.evaluation.aggregate import rate_label
 from riann_ros.evaluation.results import ResultRow
+from riann_ros.evaluation.seq_tables import aligned
 from riann_ros.evaluation.uncertainty import BINS, decile_errors
 
 NOTE = ("Roll and pitch errors as a 2-D Gaussian with the reported σ per axis: the share of scored samples inside the "
@@ -98,11 +99,8 @@ def format_uncertainty_table(rows: Sequence[ResultRow], markdown_table: bool = F
     if markdown_table:
         return "\n".join(["| " + " | ".join(TABLE_HEADERS) + " |", "|---|---|---:|---|" + "---:|" * 8]
                          + ["| " + " | ".join(c) + " |" for c in cells])
-    widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(TABLE_HEADERS)]
-    lines = ["uncertainty (the σ each estimator reports): 95 % coverage, NEES per DOF, sharpness",
-             "  ".join(h.ljust(w) for h, w in zip(TABLE_HEADERS, widths, strict=True))]
-    lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in cells]
-    return "\n".join(lines)
+    return "\n".join(["uncertainty (the σ each estimator reports): 95 % coverage, NEES per DOF, sharpness",
+                      *aligned(TABLE_HEADERS, cells)])
 
 
 def format_uncertainty_comparison(pairs: Sequence[tuple[ResultRow, ResultRow]]) -> list[str]:
@@ -121,10 +119,8 @@ def format_uncertainty_comparison(pairs: Sequence[tuple[ResultRow, ResultRow]]) 
         fa, fb = _formatter(sa), _formatter(sb)
         rows.append([g[0], g[1], g[2], str(len(sel)), fa("cover95_pct"), fb("cover95_pct"), fa("nees", ".2f"),
                      fb("nees", ".2f"), fa("sharpness", ".2f"), fb("sharpness", ".2f")])
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(headers)]
     return ["", "uncertainty (the σ each estimator reports): 95 % coverage, NEES per DOF, sharpness; A and B",
-            "  ".join(h.ljust(w) for h, w in zip(headers, widths, strict=True)),
-            *("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows)]
+            *aligned(headers, rows)]
 
 
 def plot_error_vs_sigma(rows: Sequence[ResultRow], out_dir: Path, stem: str = "error_vs_sigma",
