@@ -84,6 +84,7 @@ def test_combine_per_row_in_floats_equals_the_vectorised_combination():
         assert np.abs(part - whole[i : i + FLOAT_ROWS]).max() < 1e-12
 
 
+@pytest.mark.slow
 def test_estimator_output_is_the_four_network_copies_combined(broad_trial):
     """At 285.7 Hz the grid rows are the samples: without the bias front end the output's inclination is the
     combination of the official network run directly on the four turned copies of the IMU."""
@@ -103,6 +104,7 @@ def test_estimator_output_is_the_four_network_copies_combined(broad_trial):
     assert np.degrees(quat.inclination_error(outs[0], ref)).max() > 0.1
 
 
+@pytest.mark.slow
 def test_ensemble_is_more_accurate_than_one_network_on_broad(broad_trial):
     """Measured on trial 07 (fast rotation): 0.93° with four copies, 1.47° with one."""
     rec = broad_trial("07")

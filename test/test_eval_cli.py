@@ -27,6 +27,7 @@ def bags(tmp_path_factory) -> list[Path]:
     return [make_bag(d, "seq_a"), make_bag(d, "seq_b", gyr_bias=(-0.01, 0.0, 0.02))]
 
 
+@pytest.mark.slow
 def test_offline_run_writes_table_and_files(bags, tmp_path, capsys):
     out = tmp_path / "out"
     rc = main(
@@ -68,6 +69,7 @@ def test_offline_run_writes_table_and_files(bags, tmp_path, capsys):
     assert "| realistic |" in (out / "report.md").read_text()
 
 
+@pytest.mark.slow
 def test_same_seed_same_numbers_parallel_or_not(bags, tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
     args = ["--estimators", "madgwick", "--scenarios", "partially-restrictive", "--no-plots", "-q"]
@@ -341,6 +343,7 @@ def test_broad_bag_scores_equal_file_scores(broad_dir, tmp_path):
     assert outs["file"]["sequences"][0]["scenarios"] == outs["bag"]["sequences"][0]["scenarios"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("chunk", "t0_ns"), [(1000, 1_700_000_000_000_000_000), (257, 0)])
 def test_streamed_bag_equals_whole_recording(tmp_path, chunk, t0_ns):
     """Bags are evaluated chunk by chunk (bounded memory): the same rows, scenario infos, plot series and estimates

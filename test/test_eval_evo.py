@@ -49,6 +49,7 @@ def run1(tmp_path_factory) -> tuple[Path, np.ndarray]:
     return d, np.degrees(tilt)[rec.score_mask]
 
 
+@pytest.mark.slow
 def test_estimate_files_are_scored_with_evo_statistics(run1, capsys):
     d, tilt = run1
     out = d / "out"
@@ -156,6 +157,7 @@ def _imu_count(err: str) -> int:
     return int(word.split()[-2].replace(",", ""))
 
 
+@pytest.mark.slow
 def test_truncated_mcap(long_rec, tmp_path, capsys):
     whole = bagio.write_recording(tmp_path / "long.mcap", long_rec)
     cut = _cut(whole, tmp_path / "cut.mcap", 0.6)

@@ -26,6 +26,7 @@ def bag(tmp_path_factory) -> Path:
 
 
 # -- --out ----------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_out_with_an_earlier_run_is_refused_without_force(bag, tmp_path, capsys):
     out = tmp_path / "out"
     args = [str(bag), "-e", "madgwick", "-s", "realistic", "--out", str(out), "-q"]
@@ -39,6 +40,7 @@ def test_out_with_an_earlier_run_is_refused_without_force(bag, tmp_path, capsys)
     assert (out / "results.json").read_bytes() == first
 
 
+@pytest.mark.slow
 def test_force_replaces_only_the_result_files(bag, tmp_path):
     out = tmp_path / "out"
     assert main([str(bag), "-e", "madgwick", "-s", "realistic", "--out", str(out), "-q"]) == 0
@@ -175,6 +177,7 @@ def test_rmse_vs_rate_is_linear(three, monkeypatch):
     assert fig.legends[0].get_texts()[0].get_text() == "madgwick (n=1)"
 
 
+@pytest.mark.slow
 def test_roll_pitch_plot_per_sequence(three, tmp_path):
     out = tmp_path / "all"
     assert main([*map(str, three), "-e", "madgwick,vqf", "--plot-sequence", "all", "--out", str(out), "-q"]) == 0
@@ -294,6 +297,7 @@ def params_runs(three, tmp_path_factory) -> tuple[Path, Path, Path]:
     return d / "a", d / "b", d / "p"
 
 
+@pytest.mark.slow
 def test_compare_two_runs_with_different_parameters(params_runs, tmp_path, capsys):
     a, b, _ = params_runs
     assert main(["--compare", str(a), str(b)]) == 0  # as before: the shared labels pair, the others are listed
@@ -379,6 +383,7 @@ def _svg_colour(path: Path, gid: str) -> str:
     return next(c for c in re.findall(r"(?:stroke|fill): (#[0-9a-f]{6})", styles) if c != "#000000")
 
 
+@pytest.mark.slow
 def test_every_perturbation_condition_is_plotted(three, tmp_path, capsys):
     out = tmp_path / "all"
     args = [*map(str, three[:2]), "-e", "madgwick", "-s", "as-recorded,realistic", "-p", "none", "-p",
@@ -399,6 +404,7 @@ def test_every_perturbation_condition_is_plotted(three, tmp_path, capsys):
     assert "not an evaluated condition" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_estimator_colours_do_not_depend_on_the_order(three, tmp_path):
     from riann_ros.evaluation import plots
 

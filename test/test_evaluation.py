@@ -246,6 +246,7 @@ def test_offline_runner_is_the_node_stream():
     np.testing.assert_allclose(q, q3, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_evaluate_source_rows_and_rates():
     rec = synthetic(rate=200.0)
     settings = ev.EvalSettings(

@@ -387,6 +387,7 @@ def test_evaluator_interrupted_half_way_writes_nothing_and_rerun_succeeds(long_b
 # ---- corrupt inputs --------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_corrupt_bags_are_named_and_the_good_one_still_evaluated(tmp_path):
     from rosbags.rosbag2 import StoragePlugin, Writer
 

@@ -92,6 +92,7 @@ def is_unit(q) -> bool:
 # ---- the gate -------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @FAST
 @given(seq=sequences(60), cfg=CONFIGS, with_receive=st.booleans())
 def test_gate_invariants(seq, cfg, with_receive):
@@ -141,6 +142,7 @@ def _stream_props(name: str, seq, cfg) -> None:
     assert per.gate.rejected == batch.gate.rejected and per.gate.resets == batch.gate.resets
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ESTIMATORS)
 def test_stream_never_raises_outputs_unit_and_batch_equals_per_sample(name):
     @_settings(name)
@@ -151,6 +153,7 @@ def test_stream_never_raises_outputs_unit_and_batch_equals_per_sample(name):
     prop()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ESTIMATORS)
 def test_stream_continues_across_calls(name):
     """Feeding a sequence in two process_batch calls equals one call (state carried between calls)."""
@@ -182,6 +185,7 @@ FINITE = st.one_of(st.floats(-30, 30), st.sampled_from([0.0, BIG, -BIG, 5e-324])
 DT_OK = st.one_of(st.floats(1e-6, 0.5), st.sampled_from([1e-9, 0.0025, 0.02, 0.5]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ESTIMATORS)
 def test_estimator_finite_inputs_of_any_magnitude_give_unit_quaternions(name):
     """Finite acc/gyr of any magnitude, dt in (0, max_dt] (what the gate passes on): unit output."""
@@ -203,6 +207,7 @@ ANY_VQF = st.one_of(FINITE, SPECIAL.filter(lambda v: not math.isfinite(v) or abs
 DT_ANY = st.one_of(DT_OK, st.sampled_from([0.0, -0.01, math.nan, math.inf, -math.inf]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["madgwick", "mahony", "vqf"])
 def test_filters_documented_degenerate_input_gives_unit_quaternions(name):
     """docs/filters.md: non-finite acc → zero, non-finite gyr → zero rate, non-finite/negative dt → 0."""

@@ -345,6 +345,7 @@ def mixed_sequence() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return stamps[keep], rec.acc[keep], rec.gyr[keep], mag[keep]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ESTIMATORS)
 def test_stream_process_equals_batch_with_field(name: str) -> None:
     skip_without_mag(name)
@@ -453,6 +454,7 @@ def test_riann_9d_inclination_equals_6d_synthetic() -> None:
     assert heading_change_deg(q6, q9).max() > 1.0  # the heading did change
 
 
+@pytest.mark.slow
 @pytest.mark.broad
 def test_riann_9d_inclination_equals_6d_broad(broad_trial) -> None:
     rec = broad_trial("01")
@@ -483,6 +485,7 @@ def test_riann_heading_converges_static(yaw_deg: float) -> None:
     assert est.heading_observed()
 
 
+@pytest.mark.slow
 def test_riann_heading_converges_slow_motion() -> None:
     # (slow here still means faster than RIANN's bias front end takes for rest: a steady turn below its 8 °/s
     # bias_clip can be learned as gyro bias, and the heading then lags the field by about bias · tau_mag)
@@ -527,6 +530,7 @@ def disturbed_run(reject: bool) -> tuple[np.ndarray, list[bool], bool]:
     return heading_change_deg(q[1499], q[1500:2000]), observed, clean_observed
 
 
+@pytest.mark.slow
 def test_riann_disturbed_field_rejected() -> None:
     moved, observed, clean_observed = disturbed_run(reject=True)
     assert clean_observed
@@ -618,6 +622,7 @@ def test_latency_estimate_holds_at_rest_and_skips_gaps() -> None:
     assert lat.windows == before + 1
 
 
+@pytest.mark.slow
 def test_riann_compensates_estimated_latency() -> None:
     """A field 20 ms late: with the online estimate RIANN's 9D heading follows the true heading much more
     closely than with the latency uncompensated, and /diagnostics shows the estimate."""
@@ -808,6 +813,7 @@ def evaluate(rec: Recording, use_mag: str) -> list[ev.ResultRow]:
     return res.rows
 
 
+@pytest.mark.slow
 def test_evaluator_9d_rows() -> None:
     rec = moving(duration=20.0, seed=12)
     nine = evaluate(rec, "auto")

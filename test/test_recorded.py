@@ -124,6 +124,7 @@ def copy_with_estimates(tmp_path_factory) -> tuple[Path, Path]:
     return bag, full
 
 
+@pytest.mark.slow
 def test_recorded_estimates_score_like_the_filter_in_process(copy_with_estimates, tmp_path, capsys):
     _, full = copy_with_estimates
     out = tmp_path / "out"
@@ -146,6 +147,7 @@ def test_recorded_estimates_score_like_the_filter_in_process(copy_with_estimates
     assert {r["estimator"] for r in rows if r["scenario"] != "as-recorded"} == {"madgwick", "vqf"}
 
 
+@pytest.mark.slow
 def test_t_offset_decimated_and_late_estimates(copy_with_estimates, capsys):
     _, full = copy_with_estimates
     settings = ev.EvalSettings(estimators=ev.parse_estimators("madgwick"), scenarios=[ev.AS_RECORDED],
@@ -212,6 +214,7 @@ def ev_slerp(rec: Recording, t: np.ndarray) -> np.ndarray:
     return tp.interpolate(rec.stamps_ns, rec.quat_ref, t, 10**9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gt_type", ["pose", "odom"])
 def test_foreign_bag_with_a_ground_truth_topic(tmp_path, gt_type, capsys):
     rec = noisy(name="foreign", move_s=15.0)

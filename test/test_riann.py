@@ -50,6 +50,7 @@ def test_tilted_rest_is_recognised():
     assert np.degrees(quat.inclination_error(q_true, q[-1])) < 2.0
 
 
+@pytest.mark.slow
 def test_streaming_equals_batch_on_broad(broad_trial):
     rec = broad_trial("02").slice(0, 4000)
     est = create("riann")
@@ -76,6 +77,7 @@ def test_reset_clears_the_hidden_state(broad_trial):
     assert np.abs(a - b).max() > 1e-4  # without reset the state carries over
 
 
+@pytest.mark.slow
 def test_a_clean_stream_in_the_trained_range_gives_the_network_inclination(broad_trial):
     """At 285.7 Hz the grid rows are the samples: without the bias front end the output's inclination
     is the network's own (the heading stage only replaces its yaw)."""

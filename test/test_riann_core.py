@@ -203,6 +203,7 @@ def test_a_regular_stream_with_a_few_lost_messages_is_never_taken_for_a_clock():
     assert min(ratios) > 0.5, min(ratios)
 
 
+@pytest.mark.slow
 def test_short_holes_are_bridged_like_the_samples_they_lost():
     """The swing losing 2-13 samples every 1500 (so that each hole is alone among the tracker's 1024 steps) gives
     what the stream filled by linear interpolation gives: the grid bridges the hole on the stamps' time, not
@@ -226,6 +227,7 @@ def test_short_holes_are_bridged_like_the_samples_they_lost():
     assert np.abs(roll_h - roll_f)[len(t) // 4:].max() < 0.5, np.abs(roll_h - roll_f).max()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("delivery", ["delays", "fifo"])
 def test_lost_messages_of_a_clock_stamped_on_arrival_advance_its_timeline(delivery):
     """The 200 Hz swing stamped on arrival (0-10 ms late, or a FIFO read 6 at a time) loses 3-14 messages every
@@ -367,6 +369,7 @@ def test_a_clean_stream_at_the_grid_step_is_fed_straight_in():
         (3, "fifo"),  # a 285.7 Hz FIFO read 4 at a time (the grid step equals the clock period up to rounding)
     ],
 )
+@pytest.mark.slow
 def test_jittery_streaming_equals_batch_and_gives_unit_quaternions(seed, steps):
     rng = np.random.default_rng(seed)
     n = 1500 if not steps else 600
@@ -421,6 +424,7 @@ def test_default_vqf_clip_would_not_learn_the_3_deg_s_bias():
     assert np.abs(np.degrees(fe.bias)).max() <= 2.0 + 1e-9
 
 
+@pytest.mark.slow
 def test_riann_with_the_front_end_does_not_drift_with_a_gyro_bias():
     n = 200 * 60
     acc, q_true = _tilted_rest(n)
@@ -485,6 +489,7 @@ def _hole_stream(restart_gap: float) -> tuple[RiannEstimator, np.ndarray, np.nda
     return est, t_after, err
 
 
+@pytest.mark.slow
 def test_after_a_hole_a_fresh_network_takes_over_and_converges_faster():
     est, t, err = _hole_stream(0.1)
     assert est.network.holes == 1
@@ -534,6 +539,7 @@ def test_after_a_hole_at_rest_the_fresh_network_takes_over_within_a_tenth_of_a_s
     assert err[(t >= 0.1) & (t < 3.0)].max() < 1.0
 
 
+@pytest.mark.slow
 def test_the_hand_over_is_the_same_per_sample_and_in_chunks():
     acc, gyr, dt, after, _ = _shaken_with_a_hole(rate=100.0)
     gyr = gyr + np.random.default_rng(5).normal(0.0, 0.5, gyr.shape)  # turning too: a real blend on both paths
@@ -627,6 +633,7 @@ def _roll_rmse_deg(model: str, data_means: bool, rate: float = 50.0, **kw: float
     return _roll_rmse(RiannEstimator(input_model=model, gyro_bias_estimation=False, **kw), *_swing(rate, data_means))
 
 
+@pytest.mark.slow
 def test_input_model_matches_what_a_sample_is():
     """A regular 50 Hz stream: interval means stamped at the end of their interval lag by half a step when read as
     points, and point samples lead when read as means; 'auto' without a sample delay reads points."""
@@ -642,6 +649,7 @@ def test_input_model_matches_what_a_sample_is():
     assert est.diagnostics()["input model"] == "interval means (set)"
 
 
+@pytest.mark.slow
 def test_the_default_sample_delay_halves_the_worst_timing_error():
     """25 Hz: point samples and end-stamped interval means are half a step (20 ms) apart, and nothing on the stream
     tells which it is. Either fixed reading is 20 ms off on the other; the default (a quarter step early) is 10 ms
@@ -672,6 +680,7 @@ def _jittered_swing(means: bool, seconds: float = 30.0, seed: int = 0) -> tuple[
     return acc, np.stack([gx, np.zeros_like(t), np.zeros_like(t)], 1), dt, roll(t)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("data_means", [False, True])
 def test_the_gyro_tells_point_samples_from_interval_means_when_the_stamps_jitter(data_means):
     """Irregular stamps: only the right reading puts each gyro sample where the smooth signal passes through it.
@@ -738,6 +747,7 @@ def test_at_rest_the_model_test_decides_nothing():
 
 
 # -- stamps on arrival ------------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("delivery", ["delays", "fifo"])
 def test_a_clock_stamped_on_arrival_is_integrated_on_its_own_period(delivery):
     """Samples taken every 5 ms but stamped on arrival, 0-10 ms late or read out of a FIFO 12 at a time: the

@@ -186,6 +186,7 @@ def test_heading_plain_floats_equal_the_vectorised_form():
     assert one.mag.started
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jitter", [True, False])
 def test_estimator_block_equals_samples(model, jitter):
     x, dt = _stream(1500, jitter=jitter)

@@ -168,6 +168,7 @@ def test_riann_heading_sigma_follows_the_field():
     assert np.allclose(heading_sigma(yf, s[:, 0], est.uncertainty.features[:, 4]), s[:, 1], rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_error_vs_sigma_plot_from_the_histograms_of_the_rows(tmp_path):
     from riann_ros.evaluation.results import ResultRow
     from riann_ros.evaluation.scoring import Accumulator
