@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from test_evaluation import synthetic
 
+from riann_ros import defaults
 from riann_ros import evaluation as ev
 from riann_ros import quaternion as quat
 from riann_ros.cli.evaluate import main
@@ -45,10 +46,10 @@ def _quat_obj(q):
     return _ts().types["geometry_msgs/msg/Quaternion"](w=float(q[0]), x=float(q[1]), y=float(q[2]), z=float(q[3]))
 
 
-def imu_msg(stamp: int, acc=(0.0, 0.0, 9.81), gyr=(0.0, 0.0, 0.0), q=None):
+def imu_msg(stamp: int, acc=(0.0, 0.0, 9.81), gyr=(0.0, 0.0, 0.0), q=None, ocov=None):
     ts = _ts()
     v3 = ts.types["geometry_msgs/msg/Vector3"]
-    ocov = np.zeros(9)
+    ocov = np.zeros(9) if ocov is None else np.asarray(ocov, dtype=np.float64)
     if q is None:
         ocov[0] = -1.0
         q = (1.0, 0.0, 0.0, 0.0)
@@ -66,11 +67,12 @@ def pose_msg(stamp: int, q):
     return ts.types["geometry_msgs/msg/PoseStamped"](header=_header(stamp, "mocap"), pose=pose)
 
 
-def odom_msg(stamp: int, q):
+def odom_msg(stamp: int, q, cov=None):
     ts = _ts()
     pose = ts.types["geometry_msgs/msg/Pose"](position=ts.types["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
                                               orientation=_quat_obj(q))
-    pwc = ts.types["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36))
+    cov = np.zeros(36) if cov is None else np.asarray(cov, dtype=np.float64)
+    pwc = ts.types["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov)
     tw = ts.types["geometry_msgs/msg/Twist"](linear=ts.types["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
                                              angular=ts.types["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0))
     twc = ts.types["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=np.zeros(36))
@@ -119,8 +121,13 @@ def copy_with_estimates(tmp_path_factory) -> tuple[Path, Path]:
     imu = [(int(s), imu_msg(int(s), q=qq)) for s, qq in zip(stamps[ok], q[ok], strict=True)]
     late = [(int(s) + 3_000_000, imu_msg(int(s) - 500_000_000, q=qq))
             for s, qq in zip(stamps[ok][::2], q[ok][::2], strict=True)]
+    # madgwick's estimates with the covariance madgwick_node publishes: its documented constants
+    sd = np.radians([defaults.INCLINATION_SD_DEG, defaults.INCLINATION_SD_DEG, defaults.YAW_FREE_SD_DEG])
+    cov = [(int(s), imu_msg(int(s), q=qq, ocov=np.diag(sd**2).ravel())) for s, qq in zip(stamps[ok], q[ok],
+                                                                                        strict=True)]
     full = write_bag(d / "with_imu_estimates", {"/my_filter/imu": ("sensor_msgs/msg/Imu", imu),
-                                                  "/late/imu": ("sensor_msgs/msg/Imu", late)}, copy_from=copy)
+                                                  "/late/imu": ("sensor_msgs/msg/Imu", late),
+                                                  "/cov/imu": ("sensor_msgs/msg/Imu", cov)}, copy_from=copy)
     return bag, full
 
 
@@ -165,6 +172,54 @@ def test_t_offset_decimated_and_late_estimates(copy_with_estimates, capsys):
     assert main([str(full), "-e", "madgwick", "--estimate-topic", "/late/imu", "--t-offset", "1000", "-q"]) == 1
     err = capsys.readouterr().err
     assert "recorded estimate /late/imu: no estimate near any scored sample" in err and "--t-offset" in err
+
+
+def test_a_recorded_covariance_is_scored_like_the_estimator_in_process(copy_with_estimates):
+    """The σ of an estimate topic's orientation_covariance gets the uncertainty scores (NEES, coverage) the same
+    estimator's in-process σ gets; a topic whose covariance is all zero (unknown) gets none."""
+    _, full = copy_with_estimates
+    settings = ev.EvalSettings(estimators=ev.parse_estimators("madgwick"), scenarios=[ev.AS_RECORDED],
+                               topics=ev.BagTopics(estimates=("/cov/imu", "/my_filter/imu")))
+    res = ev.evaluate_source(full, settings)
+    assert res.error is None
+    own, cov, unknown = res.rows
+    assert cov.estimator == "/cov/imu" and unknown.estimator == "/my_filter/imu"
+    mine, theirs = own.score, cov.score
+    assert mine.nees is not None and mine.nees > 0.0
+    assert theirs.nees == pytest.approx(mine.nees, rel=1e-3)
+    assert theirs.cover95_pct == pytest.approx(mine.cover95_pct, abs=0.2)
+    assert unknown.score.nees is None and unknown.score.cover95_pct is None
+
+
+def test_parse_orientations_sigma_from_the_covariance():
+    ts = _ts()
+    qs = quat.from_rotvec(np.array([[0.1, 0.2, 0.3], [0.0, 0.0, 0.0], [-0.3, 0.1, 0.0]]))
+    imu_cov = np.diag([0.01, 0.03, 0.25]).ravel()  # rad²: inclination σ √0.02, heading σ 0.5
+    pose_cov = np.zeros((6, 6))
+    pose_cov[3:, 3:] = np.diag([0.01, 0.03, 0.25])
+    pose_cov[0, 0] = 99.0  # position variance: not an orientation's
+    want = np.array([np.sqrt(0.02), 0.5])
+    for msgtype, make in (("sensor_msgs/msg/Imu", lambda s, q: imu_msg(s, q=q, ocov=imu_cov)),
+                          ("nav_msgs/msg/Odometry", lambda s, q: odom_msg(s, q, cov=pose_cov.ravel()))):
+        raws = [bytes(ts.serialize_cdr(make(T0 + k, q), msgtype)) for k, q in enumerate(qs)]
+        _, got = tp.parse_orientations(raws, msgtype, sigma=True)
+        np.testing.assert_allclose(got[:, :4], qs, atol=1e-15)
+        np.testing.assert_allclose(got[:, 4:], np.tile(want, (3, 1)), rtol=1e-12)
+        m = make(T0, qs[0])
+        m.header.frame_id = "another_frame"  # other length: the generic path gives the same
+        _, got2 = tp.parse_orientations([*raws, bytes(ts.serialize_cdr(m, msgtype))], msgtype, sigma=True)
+        np.testing.assert_allclose(got2[:, 4:], np.tile(want, (4, 1)), rtol=1e-12)
+    # no covariance: an all-zero one (ROS: unknown), a type without one, a negative variance
+    negative = np.diag([0.01, -1e-3, 0.1]).ravel()
+    for msgtype, make in (("sensor_msgs/msg/Imu", lambda s, q: imu_msg(s, q=q, ocov=np.zeros(9))),
+                          ("geometry_msgs/msg/PoseStamped", pose_msg),
+                          ("sensor_msgs/msg/Imu", lambda s, q: imu_msg(s, q=q, ocov=negative))):
+        _, got = tp.parse_orientations([bytes(ts.serialize_cdr(make(T0, qs[0]), msgtype))], msgtype, sigma=True)
+        assert np.isfinite(got[0, :4]).all() and np.isnan(got[0, 4:]).all(), msgtype
+    # σ between two messages: linear where the orientation is slerped
+    st = np.array([0, 10], np.int64)
+    rows = np.hstack([np.vstack([qs[1], qs[1]]), np.array([[0.1, 1.0], [0.3, 2.0]])])
+    np.testing.assert_allclose(tp.interpolate(st, rows, np.array([5], np.int64), 20)[0, 4:], [0.2, 1.5])
 
 
 def test_estimators_none_scores_only_the_recorded_topic(copy_with_estimates, tmp_path):

@@ -6,6 +6,13 @@ Types with an orientation (:data:`ORIENTATION_TYPES`): ``sensor_msgs/msg/Imu`` (
 PoseStamped``, ``geometry_msgs/msg/PoseWithCovarianceStamped`` and ``nav_msgs/msg/Odometry``. The header stamp
 is the message's time (plus ``offset``), not the log time.
 
+An estimate topic's σ (``sigma=True``, :func:`sigmas_of_variances`): from the orientation covariance of the types
+that carry one (:data:`COVARIANCE_FIELDS`: ``Imu.orientation_covariance``, the rotation block of a pose
+covariance), the inclination σ as the root of the mean of the variances about x and y (the covariance is about
+the fixed frame's axes, REP-145, and an inclination error turns about a horizontal axis) and the heading σ as
+the root of the variance about z; NaN where the covariance says nothing (all zero: unknown; negative or not
+finite) or the type has none.
+
 Alignment onto a sample at stamp ``t`` (:func:`interpolate`): a message stamped exactly ``t`` gives its
 orientation; otherwise the two messages around ``t`` are slerped when they are at most ``max_gap`` apart;
 otherwise the nearer one is held if it is at most ``max_gap / 2`` away (the ends of a topic, the edges of a
@@ -42,6 +49,12 @@ ORIENTATION_TYPES: dict[str, tuple[str, ...]] = {
     "geometry_msgs/msg/PoseWithCovarianceStamped": ("pose", "pose", "orientation"),
     "nav_msgs/msg/Odometry": ("pose", "pose", "orientation"),
 }
+#: message type → the attribute path of its orientation covariance and the indices of the variances about x, y, z
+COVARIANCE_FIELDS: dict[str, tuple[tuple[str, ...], tuple[int, int, int]]] = {
+    IMU_TYPE: (("orientation_covariance",), (0, 4, 8)),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": (("pose", "covariance"), (21, 28, 35)),
+    "nav_msgs/msg/Odometry": (("pose", "covariance"), (21, 28, 35)),
+}
 READ_BATCH = 4096  # messages parsed at a time
 _MARK = (1.0 + 1 / 1024 + 3e-13, 1.0 + 2 / 1024 + 5e-13, 1.0 + 3 / 1024 + 7e-13, 1.0 + 4 / 1024 + 11e-13,
          1.0 + 5 / 1024 + 13e-13)
@@ -67,21 +80,44 @@ def _orientation(msg, msgtype: str):
     return obj
 
 
+def _covariance(msg, msgtype: str):
+    obj = msg
+    for name in COVARIANCE_FIELDS[msgtype][0]:
+        obj = getattr(obj, name)
+    return obj
+
+
 def _template(raw: bytes, msgtype: str) -> tuple[int, list[int], int | None]:
-    """The length of ``raw`` and the byte offsets of its orientation x, y, z, w (and of Imu's
-    ``orientation_covariance[0]``), found by serialising it again with marker values."""
+    """The length of ``raw``, the byte offsets of its orientation x, y, z, w and of its orientation covariance's
+    first element (None: the type has none), found by serialising it again with marker values."""
     ts = typestore()
     msg = ts.deserialize_cdr(raw, msgtype)
     o = _orientation(msg, msgtype)
     o.x, o.y, o.z, o.w = _MARK[:4]
-    if msgtype == IMU_TYPE:
-        msg.orientation_covariance = np.array(msg.orientation_covariance, dtype=np.float64)
-        msg.orientation_covariance[0] = _MARK[4]
+    has_cov = msgtype in COVARIANCE_FIELDS
+    if has_cov:
+        *parents, name = COVARIANCE_FIELDS[msgtype][0]
+        holder = msg
+        for p in parents:
+            holder = getattr(holder, p)
+        cov = np.array(getattr(holder, name), dtype=np.float64)
+        cov[0] = _MARK[4]
+        setattr(holder, name, cov)
     buf = bytes(ts.serialize_cdr(msg, msgtype))
-    offs = [buf.find(struct.pack("<d", m)) for m in _MARK[: 5 if msgtype == IMU_TYPE else 4]]
+    offs = [buf.find(struct.pack("<d", m)) for m in _MARK[: 5 if has_cov else 4]]
     if min(offs) < 0 or any(buf.find(struct.pack("<d", m), o + 1) >= 0 for m, o in zip(_MARK, offs, strict=False)):
         raise RuntimeError("orientation template markers not found once")  # pragma: no cover - defensive
-    return len(buf), offs[:4], (offs[4] if msgtype == IMU_TYPE else None)
+    return len(buf), offs[:4], (offs[4] if has_cov else None)
+
+
+def sigmas_of_variances(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """σ (N, 2) rad, inclination and heading, from the variances (N, 3) rad² about x, y, z (module docstring)."""
+    v = np.asarray(v, dtype=np.float64)
+    out = np.full((len(v), 2), np.nan)
+    ok = np.isfinite(v).all(axis=1) & (v >= 0.0).all(axis=1) & (v > 0.0).any(axis=1)
+    out[ok, 0] = np.sqrt((v[ok, 0] + v[ok, 1]) / 2.0)
+    out[ok, 1] = np.sqrt(v[ok, 2])
+    return out
 
 
 def _clean(q: NDArray[np.float64], no_orientation: NDArray[np.bool_] | None) -> NDArray[np.float64]:
@@ -95,22 +131,32 @@ def _clean(q: NDArray[np.float64], no_orientation: NDArray[np.bool_] | None) -> 
     return out
 
 
-def parse_orientations(raws: Sequence[bytes], msgtype: str) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+def parse_orientations(raws: Sequence[bytes], msgtype: str,
+                       sigma: bool = False) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Header stamps (ns) and orientations (N, 4) w, x, y, z of serialised messages of an orientation type (NaN
-    rows: no orientation). Vectorised when the messages share one length and frame_id, generic otherwise."""
+    rows: no orientation); with ``sigma``, (N, 6): the σ of :func:`sigmas_of_variances` appended (NaN: none).
+    Vectorised when the messages share one length and frame_id, generic otherwise."""
+    width = 6 if sigma else 4
     if not raws:
-        return np.zeros(0, np.int64), np.zeros((0, 4))
+        return np.zeros(0, np.int64), np.zeros((0, width))
+    var_idx = COVARIANCE_FIELDS[msgtype][1] if msgtype in COVARIANCE_FIELDS else None
     fast = raws[0][1] == 1  # little-endian CDR
     if fast:
         length, offs, cov = _template(raws[0], msgtype)
         rows = _uniform_rows(list(raws), length)
         if rows is not None:
             xyzw = _f64_cols(rows, offs)
-            missing = _f64_cols(rows, [cov])[:, 0] == -1.0 if cov is not None else None
-            return _stamps_of(rows), _clean(xyzw[:, [3, 0, 1, 2]], missing)
+            missing = _f64_cols(rows, [cov])[:, 0] == -1.0 if cov is not None and msgtype == IMU_TYPE else None
+            q = _clean(xyzw[:, [3, 0, 1, 2]], missing)
+            if sigma:
+                var = (_f64_cols(rows, [cov + 8 * k for k in var_idx]) if cov is not None and var_idx is not None
+                       else np.full((len(q), 3), np.nan))
+                q = np.hstack([q, sigmas_of_variances(var)])
+            return _stamps_of(rows), q
     ts = typestore()
     stamps = np.empty(len(raws), np.int64)
     q = np.empty((len(raws), 4))
+    var = np.full((len(raws), 3), np.nan)
     missing = np.zeros(len(raws), bool)
     for i, r in enumerate(raws):
         m = ts.deserialize_cdr(r, msgtype)
@@ -119,13 +165,16 @@ def parse_orientations(raws: Sequence[bytes], msgtype: str) -> tuple[NDArray[np.
         q[i] = (o.w, o.x, o.y, o.z)
         if msgtype == IMU_TYPE:
             missing[i] = m.orientation_covariance[0] == -1.0
-    return stamps, _clean(q, missing)
+        if var_idx is not None:
+            var[i] = np.asarray(_covariance(m, msgtype), dtype=np.float64)[list(var_idx)]
+    q = _clean(q, missing)
+    return stamps, (np.hstack([q, sigmas_of_variances(var)]) if sigma else q)
 
 
-def iter_orientations(path: str | os.PathLike[str], topic: str,
-                      batch: int = READ_BATCH) -> Iterator[tuple[NDArray[np.int64], NDArray[np.float64]]]:
+def iter_orientations(path: str | os.PathLike[str], topic: str, batch: int = READ_BATCH,
+                      sigma: bool = False) -> Iterator[tuple[NDArray[np.int64], NDArray[np.float64]]]:
     """``(stamps_ns, quats)`` of ``topic`` in batches of at most ``batch`` messages, in log-time order, with a
-    reader of its own."""
+    reader of its own; with ``sigma`` each row has the σ columns of :func:`parse_orientations`."""
     path = Path(path)
     with _opened(path) as reader:
         msgtype, conns = orientation_topic(path, reader, topic)
@@ -134,10 +183,10 @@ def iter_orientations(path: str | os.PathLike[str], topic: str,
             for _, _, raw in reader.messages(connections=conns):
                 raws.append(raw)
                 if len(raws) >= batch:
-                    yield parse_orientations(raws, msgtype)
+                    yield parse_orientations(raws, msgtype, sigma)
                     raws = []
             if raws:
-                yield parse_orientations(raws, msgtype)
+                yield parse_orientations(raws, msgtype, sigma)
         except (BagError, KeyboardInterrupt, GeneratorExit):
             raise
         except Exception as e:
@@ -146,8 +195,9 @@ def iter_orientations(path: str | os.PathLike[str], topic: str,
 
 def interpolate(st: NDArray[np.int64], q: NDArray[np.float64], t: NDArray[np.int64],
                 max_gap_ns: int) -> NDArray[np.float64]:
-    """Orientations at stamps ``t`` from messages at sorted, unique stamps ``st`` (rules in the module docstring)."""
-    out = np.full((len(t), 4), np.nan)
+    """Orientations at stamps ``t`` from messages at sorted, unique stamps ``st`` (rules in the module docstring);
+    columns after the first four (σ) are interpolated linearly where the quaternions are slerped."""
+    out = np.full((len(t), q.shape[1]), np.nan)
     n = len(st)
     if n == 0 or len(t) == 0:
         return out
@@ -161,7 +211,9 @@ def interpolate(st: NDArray[np.int64], q: NDArray[np.float64], t: NDArray[np.int
     both = ~exact & has_a & has_b & (span <= max_gap_ns)
     out[exact] = q[jb[exact]]
     if both.any():
-        out[both] = quat.slerp(q[ja[both]], q[jb[both]], da[both] / span[both])
+        w = da[both] / span[both]
+        out[both, :4] = quat.slerp(q[ja[both], :4], q[jb[both], :4], w)
+        out[both, 4:] = q[ja[both], 4:] * (1.0 - w)[:, None] + q[jb[both], 4:] * w[:, None]
     rest = ~exact & ~both
     half = max_gap_ns / 2
     use_a = rest & has_a & (da <= half) & (~has_b | (da <= db))
@@ -176,12 +228,12 @@ class Aligner:
     as far as needed and forgetting those no later sample can use."""
 
     def __init__(self, batches: Iterator[tuple[NDArray[np.int64], NDArray[np.float64]]], offset_ns: int = 0,
-                 max_gap_ns: int = round(defaults.MAX_GAP_S * 1e9)) -> None:
-        self.batches = batches
+                 max_gap_ns: int = round(defaults.MAX_GAP_S * 1e9), width: int = 4) -> None:
+        self.batches = batches  # rows of ``width`` columns: a quaternion, then σ columns (``sigma=True`` reads)
         self.offset = int(offset_ns)
         self.gap = int(max_gap_ns)
         self.st = np.zeros(0, np.int64)
-        self.q = np.zeros((0, 4))
+        self.q = np.zeros((0, width))
         self.latest: int | None = None  # the largest stamp read so far
         self.exhausted = False
         self.messages = 0  # read so far, with an orientation
@@ -195,7 +247,7 @@ class Aligner:
             except StopIteration:
                 self.exhausted = True
                 break
-            ok = np.isfinite(q).all(axis=1)
+            ok = np.isfinite(q[:, :4]).all(axis=1)
             s, q = s[ok] + self.offset, q[ok]
             if len(s):
                 self.messages += len(s)
@@ -214,7 +266,7 @@ class Aligner:
     def at(self, stamps: NDArray[np.int64]) -> NDArray[np.float64]:
         """Orientations (N, 4) at ``stamps`` (increasing, after those of the previous call); NaN rows: none."""
         if not len(stamps):
-            return np.zeros((0, 4))
+            return np.zeros((0, self.q.shape[1]))
         last = int(stamps[-1])
         self._read_until(last + self.gap)
         out = interpolate(self.st, self.q, stamps, self.gap)
@@ -233,8 +285,9 @@ def iter_topic_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu
                       max_gap_ns: int = round(defaults.MAX_GAP_S * 1e9), pair_mag: MagPairer | None = None,
                       ) -> Iterator[tuple[Recording, dict[str, NDArray[np.float64]]]]:
     """The IMU samples of ``imu_topic`` in chunks, each with the orientations of ``estimate_topics`` at its samples
-    (stamps + ``t_offset_ns``) and, with ``reference_topic``, that topic as its reference (instead of the layout's
-    ``/ground_truth/attitude``). The score mask is the layout's ``/ground_truth/scored`` if present, else all scored;
+    (stamps + ``t_offset_ns``; (N, 6): w, x, y, z and the σ of :func:`sigmas_of_variances`) and, with
+    ``reference_topic``, that topic as its reference (instead of the layout's ``/ground_truth/attitude``). The
+    score mask is the layout's ``/ground_truth/scored`` if present, else all scored;
     the magnetometer is paired by ``pair_mag`` (:func:`~riann_ros.bagio.read.iter_imu_chunks`). BagError for missing
     topics or topics without an orientation."""
     path = Path(path)
@@ -243,7 +296,8 @@ def iter_topic_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu
         for t in topics:
             orientation_topic(path, reader, t)
     ref = Aligner(iter_orientations(path, reference_topic), 0, max_gap_ns) if reference_topic else None
-    ests = {t: Aligner(iter_orientations(path, t), t_offset_ns, max_gap_ns) for t in estimate_topics}
+    ests = {t: Aligner(iter_orientations(path, t, sigma=True), t_offset_ns, max_gap_ns, width=6)
+            for t in estimate_topics}
     try:
         for rec in iter_imu_chunks(path, chunk, imu_topic=imu_topic, reference=reference_topic is None,
                                    pair_mag=pair_mag):

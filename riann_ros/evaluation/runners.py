@@ -88,12 +88,16 @@ class OfflineRunner:
 class _RecordedRun:
     def __init__(self, specs: list[EstimatorSpec]) -> None:
         self.keys = [s.label for s in specs]  # a topic's label is the topic; a file's, its label
+        self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimate (N, 2)
         self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
 
     def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
         recorded = rec.recorded if isinstance(rec, Chunk) else {}
         none = np.full((len(rec), 4), np.nan)
-        return [recorded.get(k, none) for k in self.keys]
+        rows = [recorded.get(k, none) for k in self.keys]
+        # a topic's rows carry the σ of its recorded covariance after the quaternion (NaN: none); a file's do not
+        self.sigmas = [r[:, 4:6] if r.shape[1] >= 6 and np.isfinite(r[:, 4]).any() else None for r in rows]
+        return [r[:, :4] for r in rows]
 
     def finish(self) -> list[RunStats]:
         return self.stats
@@ -129,7 +133,8 @@ class Joined:
 
 
 def run_sigmas(run: Run, n: int) -> list[NDArray[np.float64] | None]:
-    """The σ (N, 2) of the last feed of each of the ``n`` estimators of ``run``: those of an offline run, None for
-    estimates that carry none (recorded, live)."""
+    """The σ (N, 2) of the last feed of each of the ``n`` estimators of ``run``: those of an offline run and of the
+    covariance recorded with an estimate topic, None for estimates that carry none (files, a recorded topic without
+    a covariance, live)."""
     sig = getattr(run, "sigmas", None)
     return list(sig) if isinstance(sig, list) and len(sig) == n else [None] * n
