@@ -82,6 +82,47 @@ def test_riann_sigma_never_changes_the_attitude():
     assert np.abs(q_a - np.array(q_b)).max() == 0.0
 
 
+def test_riann_sigma_after_a_gap_is_the_fresh_network_s_until_it_has_converged():
+    """A gap (longer than the gate's max_dt) restarts the network without a bridge: the output is the fresh
+    network, whose σ_f (stage 6) is reported from the first sample on and decays with its re-convergence time; per
+    sample equals batch; the attitude is the same as without asking for σ; the bias σ (kept over a gap) is not what
+    raises it."""
+    from riann_ros.estimators.riann.s6_handover import FRESH_DONE, S_REST, TAU
+
+    n = 2500
+    acc, gyr, dt = _motion(n, seed=7)
+    cut = 1300  # a gap before this sample (in motion, which starts at sample 1250)
+    batch = RiannEstimator()
+    batch.update_batch(acc[:cut], gyr[:cut], dt[:cut])
+    before = batch.sigma(np.zeros(cut, dtype=bool))[-1, 0]
+    batch.on_gap()
+    q_b = batch.update_batch(acc[cut:], gyr[cut:], dt[cut:])
+    s_b = batch.sigma(np.zeros(n - cut, dtype=bool))[:, 0]
+    one = RiannEstimator(model=batch.model)
+    for i in range(cut):
+        one.update(acc[i], gyr[i], dt[i])
+    one.on_gap()
+    q_1, s_1 = [], []
+    for i in range(cut, n):
+        q_1.append(one.update(acc[i], gyr[i], dt[i]))
+        s_1.append(one.sigma(np.zeros(1, dtype=bool))[0, 0])
+    assert np.abs(np.array(s_1) - s_b).max() < 1e-6  # the network's call-length rounding (BENCHMARKS, network)
+    assert np.abs(np.array(q_1) - q_b).max() < 1e-6
+    # the fresh network's σ: at least S_REST at the restart, far above the converged network's σ before the gap
+    assert s_b[0] >= math.radians(S_REST) and s_b[0] > 3.0 * before
+    peak = int(np.argmax(s_b))  # it grows while faster rotation is seen, then decays with TAU
+    k = peak + round(2 * TAU * RATE)
+    assert s_b[k] < 0.2 * s_b[peak]
+    # ended once below FRESH_DONE (deg): the base model again, as it was before the gap
+    assert one.handover.fresh is None and batch.handover.fresh is None
+    assert max(one.handover.fresh_sd) < FRESH_DONE
+    # without the gap the same samples report the converged network's σ: far below at the restart, alike at the end
+    plain = RiannEstimator(model=batch.model)
+    plain.update_batch(acc, gyr, dt)
+    s_p = plain.sigma(np.zeros(n, dtype=bool))[cut:, 0]
+    assert s_p[0] < 0.5 * s_b[0] and abs(s_b[-1] - s_p[-1]) < 0.5 * s_p[-1]
+
+
 # -- the evaluator's scores -------------------------------------------------------------------------------------
 def _gaussian_errors(sig_i: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Inclination errors (rad) of a calibrated isotropic 2-D Gaussian with per-axis σ ``sig_i``."""

@@ -170,7 +170,8 @@ class RiannEstimator(AttitudeEstimator):
         dts = [d if math.isfinite(d) and d > 0.0 else 0.0 for d in dt]  # the heading's step (0 for a bad dt)
         qc, tilt_sd, bridges = self.handover.run(qc, delta, dts, [(r[0], r[1], r[2]) for r in x], holes)
         q = self.heading.run(qc, delta, dts, mag, bridges, tilt_sd)
-        self.uncertainty.run(g, self.network.spread, self.bias.sigma, x, bias, dts, tilt_sd, self.heading.observed,
+        hand_sd = [h + f for h, f in zip(tilt_sd, self.handover.fresh_sd, strict=True)]  # never both non-zero
+        self.uncertainty.run(g, self.network.spread, self.bias.sigma, x, bias, dts, hand_sd, self.heading.observed,
                              self.heading.dip)
         return q
 

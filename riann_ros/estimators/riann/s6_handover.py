@@ -28,6 +28,7 @@ S_LIN = 10.0  # × the tilt (deg) that the largest | |a| - g | seen since the ho
 S_FLOOR = 1.0  # deg: the bridge's smallest uncertainty (the network's own error before the hole)
 ROT_SHARE = 0.25  # share of the rotation at the faster end rate that the bridge may miss
 DONE = 1e-3  # the blend ends when 1 - K is below this
+FRESH_DONE = 0.01  # deg: after a gap, σ_f is reported until it falls below this
 
 
 def bridge_sigma(w_before: Sequence[float], w_after: Sequence[float], hole_s: float) -> float:
@@ -38,44 +39,58 @@ def bridge_sigma(w_before: Sequence[float], w_after: Sequence[float], hole_s: fl
     return math.sqrt(S_FLOOR**2 + (RAD * dw * hole_s / 2.0) ** 2 + (RAD * ROT_SHARE * w * hole_s) ** 2)
 
 
+class FreshNetwork:
+    """A fresh network's inclination uncertainty ``σ_f(t)`` (deg) since its start: ``S_REST`` plus what the fastest
+    rotation rate and the largest | |a| − g | seen since can add, decaying with the re-convergence time
+    :data:`TAU`."""
+
+    def __init__(self, w_max: float = 0.0, acc: Vec | None = None) -> None:
+        self.t = 0.0
+        self.w_max = w_max
+        self.lin = 0.0
+        if acc is not None:
+            self.see(acc)
+
+    def see(self, acc: Vec) -> None:
+        self.lin = max(self.lin, abs(math.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) - G))
+
+    def advance(self, delta: Quat, dt: float, acc: Vec) -> None:
+        """The next sample: bias-corrected gyro increment ``delta`` over ``dt`` s, accelerometer ``acc``."""
+        self.t += dt
+        self.see(acc)
+        if dt > 0.0:
+            s = math.sqrt(delta[1] * delta[1] + delta[2] * delta[2] + delta[3] * delta[3])
+            self.w_max = max(self.w_max, 2.0 * math.atan2(s, abs(delta[0])) / dt)
+
+    def sigma(self) -> float:
+        """σ_f (deg) now."""
+        s0 = S_REST + S_RATE * self.w_max + S_LIN * RAD * math.atan2(self.lin, G)
+        return s0 * math.exp(-self.t / TAU)
+
+
 class HoleBlend:
     """The hand-over after one hole: started at the sample that ends the hole with the bridged attitude."""
 
     def __init__(self, sigma_b: float, q_bridge: Quat, w_max: float, acc: Vec) -> None:
         self.sb2 = sigma_b * sigma_b
         self.v = gravity(q_bridge)
-        self.t = 0.0
-        self.w_max = w_max
-        self.lin = 0.0
-        self._see(acc)
-
-    def _see(self, acc: Vec) -> None:
-        self.lin = max(self.lin, abs(math.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) - G))
-
-    def _sf(self) -> float:
-        """σ_f(t) (deg), the fresh network's uncertainty now."""
-        s0 = S_REST + S_RATE * self.w_max + S_LIN * RAD * math.atan2(self.lin, G)
-        return s0 * math.exp(-self.t / TAU)
+        self.fresh = FreshNetwork(w_max, acc)
 
     def weight(self) -> float:
         """K: how far the output moves to the network's inclination at the current time."""
-        sf = self._sf()
+        sf = self.fresh.sigma()
         return self.sb2 / (self.sb2 + sf * sf)
 
     def sigma(self) -> float:
         """Uncertainty (deg) of the output's inclination now, as the fusion of the two estimates sees it:
         ``σ_b σ_f / √(σ_b² + σ_f²)`` (the heading stage weighs the field's heading with it)."""
-        sf2 = self._sf() ** 2
+        sf2 = self.fresh.sigma() ** 2
         return math.sqrt(self.sb2 * sf2 / (self.sb2 + sf2))
 
     def step(self, q_net: Quat, delta: Quat, dt: float, acc: Vec) -> tuple[Quat, bool]:
         """The output attitude for the next sample (network attitude ``q_net``, bias-corrected gyro increment
         ``delta`` since the previous sample over ``dt`` s) and whether the blend goes on."""
-        self.t += dt
-        self._see(acc)
-        if dt > 0.0:
-            s = math.sqrt(delta[1] * delta[1] + delta[2] * delta[2] + delta[3] * delta[3])
-            self.w_max = max(self.w_max, 2.0 * math.atan2(s, abs(delta[0])) / dt)
+        self.fresh.advance(delta, dt, acc)
         w, x, y, z = delta
         carried = rotate((w, -x, -y, -z), self.v)  # the bridge's gravity direction in the new sensor frame
         k = self.weight()
@@ -94,18 +109,28 @@ class Handover:
     def __init__(self, enabled: bool) -> None:
         self.enabled = enabled
         self.blend: HoleBlend | None = None
+        # after a gap the output is the fresh network itself: its σ_f until it is negligible, for stage 8 only (the
+        # attitude and the heading's weighting are not touched); after a reset the bias front end starts anew and its
+        # σ already covers the fresh network's
+        self.fresh: FreshNetwork | None = None
+        self.fresh_started = False
+        self.fresh_sd: list[float] = []  # of the last block: σ_f (deg) while a gap's fresh network is young, else 0
 
     def restart(self, cause: Cause) -> None:
         self.blend = None
+        self.fresh = FreshNetwork() if cause is Cause.GAP else None
+        self.fresh_started = False
 
     def run(self, qc: list[Quat], delta: list[Quat], dt: list[float], acc: list[Vec], holes: list[Hole]
             ) -> tuple[list[Quat], list[float], dict[int, float]]:
         """The attitudes after the hand-over (in place), each sample's inclination uncertainty (deg; 0 where no
-        hand-over runs), and per sample that ends a hole the uncertainty of its bridge (deg)."""
+        hand-over runs), and per sample that ends a hole the uncertainty of its bridge (deg); :attr:`fresh_sd` the
+        fresh network's σ after a gap."""
         starts = {}
         for h in holes:
             w_max = max(math.hypot(*h.w_before), math.hypot(*h.w_after))
             starts[h.index] = (bridge_sigma(h.w_before, h.w_after, h.seconds), w_max)
+        self.fresh_sd = self._fresh_sd(delta, dt, acc, min(starts, default=len(qc)))
         sd = [0.0] * len(qc)
         i = 0 if self.blend is not None else min(starts, default=len(qc))
         while i < len(qc):
@@ -124,6 +149,25 @@ class Handover:
                 sd[i] = self.blend.sigma()
             i += 1
         return qc, sd, {k: v[0] for k, v in starts.items()}
+
+    def _fresh_sd(self, delta: list[Quat], dt: list[float], acc: list[Vec], end: int) -> list[float]:
+        """Each sample's σ_f (deg) while a fresh network started by a gap is young (0 elsewhere), up to ``end``
+        (the next hole's sample: a blend takes over from there)."""
+        sd = [0.0] * len(delta)
+        fresh = self.fresh
+        i = 0
+        while fresh is not None and i < end:
+            if self.fresh_started:
+                fresh.advance(delta[i], dt[i], acc[i])
+            else:  # the first sample after the gap starts the network: no time or turn before it
+                fresh.see(acc[i])
+                self.fresh_started = True
+            sd[i] = fresh.sigma()
+            if sd[i] < FRESH_DONE:
+                fresh = None
+            i += 1
+        self.fresh = fresh if end >= len(delta) else None
+        return sd
 
     def diagnostics(self) -> dict[str, str]:
         return {}

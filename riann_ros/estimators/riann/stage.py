@@ -55,7 +55,7 @@ RESTARTS: dict[str, dict[Cause, str]] = {
     },
     "handover": {
         Cause.HOLE: "starts: the output moves from the gyro bridge to the fresh network",
-        Cause.GAP: "ends (a gap has no bridge)",
+        Cause.GAP: "ends (a gap has no bridge); the fresh network's σ_f goes to stage 8 until below 0.01°",
         Cause.RESET: "ends",
     },
     "heading": {
