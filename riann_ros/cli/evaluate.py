@@ -28,6 +28,7 @@ from pathlib import Path
 from riann_ros import defaults
 from riann_ros import evaluation as ev
 from riann_ros.cli import eval_inputs
+from riann_ros.cli.pipe import quiet_when_reader_leaves
 from riann_ros.evaluation import outdir, perturb, report, seq_tables
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
 from riann_ros.mag import USE_MAG_CHOICES
@@ -324,9 +325,11 @@ def _print_summary(rep: report.Report, live: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The CLI. Ctrl-C exits with status 130 and a one-line message, leaving no result files of this run."""
+    """The CLI. Ctrl-C exits with status 130 and a one-line message, leaving no result files of this run. A reader
+    that closes stdout early (``| head``) ends only the printing: the result files are still written."""
     try:
-        return _main(argv)
+        with quiet_when_reader_leaves():
+            return _main(argv)
     except KeyboardInterrupt:
         _err("interrupted; no results written")
         return 130
