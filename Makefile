@@ -28,7 +28,7 @@ demo: $(BIN)/.installed
 	$(BIN)/riann-bag-eval bags/*.mcap --scenarios realistic --out demo_out
 
 # ruff (style, imports, complexity ≤ 10) on the whole tree, mypy on the package, vulture (dead code: the package
-# and bench/, the tests counting as users; framework-only names in vulture_whitelist.py; pyproject [tool.vulture])
+# and bench/, the tests and launch files counting as users; framework-only names in vulture_whitelist.py; pyproject [tool.vulture])
 lint: $(BIN)/.installed
 	$(BIN)/ruff check .
 	$(BIN)/mypy

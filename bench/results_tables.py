@@ -31,6 +31,9 @@ RESULTS = ROOT / "docs" / "results"
 PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md")
 FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_deg", "heading_rmse_deg",
           "total_rmse_deg")
+#: the uncertainty scores a file keeps when trimmed with ``--uncertainty`` (riann_ros/evaluation/uncertainty.py)
+UNCERTAINTY_FIELDS = ("n_scored", "nees", "cover95_pct", "err_bottom_decile_deg", "err_top_decile_deg", "yaw_nees",
+                      "yaw_cover95_mag_pct", "yaw_cover95_held_pct", "n_yaw_mag", "n_yaw_held", "sigma_hist")
 ESTIMATORS = ("riann", "vqf", "madgwick", "mahony")
 NAMES = {"riann": "RIANN", "vqf": "VQF", "madgwick": "Madgwick", "mahony": "Mahony"}
 DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")  # the issue's six trials with movement throughout
@@ -75,12 +78,23 @@ def load(name: str) -> Rows:
     return Rows(tuple({**same, **dict(zip(cols, row, strict=True))} for row in data["rows"]))
 
 
-def trim(name: str, sources: list[Path], command: str) -> Path:
-    """results.json files (of one command, or of runs that together make one) cut down to :data:`FIELDS` (RMSEs
-    to 6 decimals) in docs/results/NAME.json, one row per line."""
-    rows = [{k: round(v, 6) if isinstance(v, float) else v for k, v in r.items()}
-            for src in sources for r in json.loads(src.read_text())["results"]]
-    present = [f for f in FIELDS if any(f in r for r in rows)]
+def _rounded(v: object) -> object:
+    if isinstance(v, float):
+        return round(v, 6)
+    if isinstance(v, list):
+        return [_rounded(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _rounded(x) for k, x in v.items()}
+    return v
+
+
+def trim(name: str, sources: list[Path], command: str, uncertainty: bool = False) -> Path:
+    """results.json files (of one command, or of runs that together make one) cut down to :data:`FIELDS` (and
+    with ``uncertainty`` :data:`UNCERTAINTY_FIELDS`; numbers to 6 decimals) in docs/results/NAME.json, one row per
+    line."""
+    rows = [{k: _rounded(v) for k, v in r.items()} for src in sources for r in json.loads(src.read_text())["results"]]
+    keep = FIELDS + (UNCERTAINTY_FIELDS if uncertainty else ())
+    present = [f for f in keep if any(f in r for r in rows)]
     # a field with one value in every row is stored once ("same")
     same = {f: rows[0].get(f) for f in present if len({json.dumps(r.get(f)) for r in rows}) == 1}
     cols = [f for f in present if f not in same]
@@ -237,6 +251,54 @@ def readme_table() -> str:
     return _table(["condition", *(NAMES[e] for e in ESTIMATORS)], body)
 
 
+UNCERTAINTY_CONDITIONS = {  # perturbation → label; the classical filters' inclination σ is a constant: shown once
+    "none": "as recorded", "dropout:0.1-0.6s@10s": "dropout 0.1–0.6 s every 10 s",
+    "bias:3,3,0": "gyro bias 3, 3, 0 °/s", "magnetic:offset:20,0,-10": "magnetic offset 20, 0, −10 µT",
+    "magnetic:disturb:40@10-20s": "magnetic disturbance 40 µT, 10–20 s"}
+MAGNETIC = ("magnetic:offset:20,0,-10", "magnetic:disturb:40@10-20s")
+
+
+def _uncertainty_groups() -> list[tuple[str, str, dict[str, float | None]]]:
+    """(condition label, estimator label, the evaluator's pooled scores) per condition × estimator of
+    docs/results/uncertainty.json, RIANN first."""
+    from types import SimpleNamespace
+
+    from riann_ros.evaluation.scoring import Score
+    from riann_ros.evaluation.uncertainty_report import group_scores
+
+    rows = load("uncertainty")
+    out = []
+    for cond, label in UNCERTAINTY_CONDITIONS.items():
+        for est in ESTIMATORS:
+            grp = [SimpleNamespace(score=Score(n_samples=r["n_scored"], n_scored=r["n_scored"], n_unestimated=0,
+                                               rmse_deg=r["rmse_deg"], max_err_deg=float("nan"),
+                                               **{k: r.get(k) for k in UNCERTAINTY_FIELDS if k != "n_scored"}))
+                   for r in rows.where(perturbation=cond, estimator=est).rows]
+            if grp:
+                out.append((label, f"**{NAMES[est]}**" if est == "riann" else NAMES[est], group_scores(grp)))
+    return out
+
+
+def _pct(v: float | None) -> str:
+    return "–" if v is None else f"{v:.1f}"
+
+
+def uncertainty_inclination() -> str:
+    body = [[cond, est, _pct(g["cover95_pct"]), f"{g['cover95_min']:.1f}–{g['cover95_max']:.1f}", f"{g['nees']:.2f}",
+             f"{g['sharpness']:.2f}"]
+            for cond, est, g in _uncertainty_groups()
+            if est.startswith("**") or cond not in (UNCERTAINTY_CONDITIONS[m] for m in MAGNETIC)]
+    return _table(["condition", "estimator", "coverage 95 %", "per trial", "NEES/DOF", "top / bottom decile error"],
+                  body, left=2)
+
+
+def uncertainty_heading() -> str:
+    body = [[cond, est, _pct(g["yaw_mag"]), _pct(g["yaw_held"]), "–" if g["yaw_nees"] is None else
+             f"{g['yaw_nees']:.2f}"] for cond, est, g in _uncertainty_groups()
+            if g["yaw_mag"] is not None or g["yaw_held"] is not None]
+    return _table(["condition", "estimator", "field used", "held", "NEES"], body, left=2)
+
+
 # ---- figures within sentences ----------------------------------------------------------------------
 def _fig(rows: Rows, est: str) -> str:
     return rows.mean_max(est)
@@ -333,6 +395,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "frontend": frontend_table,
     "mag-summary": mag_summary,
     "mag-trials": mag_trials,
+    "uncertainty-inclination": uncertainty_inclination,
+    "uncertainty-heading": uncertainty_heading,
 }
 
 
@@ -370,9 +434,10 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("name")
     t.add_argument("sources", type=Path, nargs="+")
     t.add_argument("--command", required=True, help="the command that made them (as the docs show it)")
+    t.add_argument("--uncertainty", action="store_true", help="keep the uncertainty scores too (σ histograms)")
     args = ap.parse_args(argv)
     if args.cmd == "trim":
-        print(f"wrote {trim(args.name, args.sources, args.command)}")
+        print(f"wrote {trim(args.name, args.sources, args.command, args.uncertainty)}")
         return 0
     bad = stale()
     if args.check:

@@ -21,6 +21,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
+from riann_ros.params import launch_overrides
 
 PACKAGE = "riann_ros"
 NODE = "riann"  # executable riann_node, parameters config/riann.yaml
@@ -38,24 +39,10 @@ PARAMETER_ARGUMENTS = {
 }
 
 
-def parameter_value(name: str, text: str):
-    """A launch argument's text as the typed parameter value (ValueError when it does not parse)."""
-    kind = PARAMETER_ARGUMENTS[name][0]
-    if kind == "float":
-        return float(text)
-    if kind == "bool":
-        if text.strip().lower() not in ("true", "false"):
-            raise ValueError(f"{name} must be true or false, got {text!r}")
-        return text.strip().lower() == "true"
-    return text
-
 
 def _node(context):
-    overrides = {}
-    for name in PARAMETER_ARGUMENTS:
-        text = LaunchConfiguration(name).perform(context)
-        if text != "":
-            overrides[name] = parameter_value(name, text)
+    overrides = launch_overrides(PARAMETER_ARGUMENTS,
+                                 {name: LaunchConfiguration(name).perform(context) for name in PARAMETER_ARGUMENTS})
     parameters = [LaunchConfiguration("params_file").perform(context)]
     if overrides:
         parameters.append(overrides)

@@ -23,6 +23,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
+from riann_ros.params import launch_overrides
 
 PACKAGE = "riann_ros"
 NODES = ("riann", "madgwick", "mahony", "vqf")  # executable <name>_node, parameters config/<name>.yaml
@@ -39,25 +40,11 @@ PARAMETER_ARGUMENTS = {
 }
 
 
-def parameter_value(name: str, text: str):
-    """A launch argument's text as the typed parameter value (ValueError when it does not parse)."""
-    kind = PARAMETER_ARGUMENTS[name][0]
-    if kind == "float":
-        return float(text)
-    if kind == "bool":
-        if text.strip().lower() not in ("true", "false"):
-            raise ValueError(f"{name} must be true or false, got {text!r}")
-        return text.strip().lower() == "true"
-    return text
-
 
 def _nodes(context):
     share = get_package_share_directory(PACKAGE)
-    given = {}
-    for name in PARAMETER_ARGUMENTS:
-        text = LaunchConfiguration(name).perform(context)
-        if text != "":
-            given[name] = parameter_value(name, text)
+    given = launch_overrides(PARAMETER_ARGUMENTS,
+                             {name: LaunchConfiguration(name).perform(context) for name in PARAMETER_ARGUMENTS})
     remappings = [(INPUT_TOPIC, LaunchConfiguration("input_topic").perform(context)),
                   (MAG_TOPIC, LaunchConfiguration("mag_topic").perform(context))]
     nodes = []

@@ -142,3 +142,23 @@ def find(specs: tuple[ParamSpec, ...], name: str) -> ParamSpec:
         if p.name == name:
             return p
     raise KeyError(name)
+
+
+def launch_overrides(arguments: dict[str, tuple[str, str]], texts: dict[str, str]) -> dict[str, Any]:
+    """The launch arguments given (``texts``: name → the argument's text; empty = not given, the parameter file's
+    value stands) as typed node parameters; ``arguments``: name → (type ``float`` | ``bool`` | ``str``,
+    description), the launch files' ``PARAMETER_ARGUMENTS``. ValueError when a text does not parse."""
+    out: dict[str, Any] = {}
+    for name, (kind, _) in arguments.items():
+        text = texts.get(name, "")
+        if text == "":
+            continue
+        if kind == "float":
+            out[name] = float(text)
+        elif kind == "bool":
+            if text.strip().lower() not in ("true", "false"):
+                raise ValueError(f"{name} must be true or false, got {text!r}")
+            out[name] = text.strip().lower() == "true"
+        else:
+            out[name] = text
+    return out
