@@ -316,6 +316,9 @@ def test_live_equals_offline(bags, tmp_path, monkeypatch, capsys):
         assert (a["scenario"], a["estimator"]) == (b["scenario"], b["estimator"])
         assert b["mode"] == "live" and b["lost"] == 0
         assert abs(a["rmse_deg"] - b["rmse_deg"]) < 0.01, (a, b)
+        # the σ comes from the covariance the node published on imu/data: the same scores as offline
+        assert b["nees"] is not None and abs(a["nees"] - b["nees"]) < 0.01 * a["nees"], (a, b)
+        assert abs(a["cover95_pct"] - b["cover95_pct"]) < 0.5, (a, b)
 
 
 @pytest.mark.broad

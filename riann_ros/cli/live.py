@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import math
 import shutil
 import signal
 import subprocess
@@ -23,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros import stamps
+from riann_ros.bagio.topics import sigmas_of_variances
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.results import RunStats
 from riann_ros.evaluation.specs import EstimatorSpec
@@ -33,7 +35,14 @@ LIVE_NS = "/riann_eval"
 LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt), besides the ~/reset call
 IDLE_S = 5.0  # give up waiting for outputs after this long without a new one
 
-Output = tuple[int, float, float, float, float]  # stamp_ns, w, x, y, z
+Output = tuple[float, ...]  # stamp_ns, w, x, y, z, σ_i, σ_ψ (rad; NaN: the topic carries no covariance)
+NO_SIGMA = (math.nan, math.nan)
+
+
+def _sigmas(xx: float, yy: float, zz: float) -> tuple[float, float]:
+    """σ_i, σ_ψ (rad) of a message's orientation variances about x, y, z (NaN where they say nothing)."""
+    si, sy = sigmas_of_variances(np.array([[xx, yy, zz]]))[0]
+    return float(si), float(sy)
 
 
 def ros_param(value: Any) -> str:
@@ -149,7 +158,10 @@ class LiveRunner:
         self.close()
 
     # -- nodes ----------------------------------------------------------------------------------
-    def _subscribe(self, topics: list[str]) -> None:
+    def _subscribe(self, topics: list[str], imu: bool = False) -> None:
+        """Collect each topic's outputs: ``imu`` ones are the nodes' ``sensor_msgs/Imu`` output, whose orientation
+        covariance gives the σ (:func:`~riann_ros.bagio.topics.sigmas_of_variances`, as for a recorded topic);
+        otherwise ``QuaternionStamped`` attitude topics (no σ)."""
         for s in self._subs:
             self.node.destroy_subscription(s)
         self._subs, self.got = [], []
@@ -157,11 +169,16 @@ class LiveRunner:
             box: list[Output] = []
             self.got.append(box)
 
-            def cb(m: Any, box: list[Output] = box) -> None:
+            def on_quat(m: Any, box: list[Output] = box) -> None:
                 q = m.quaternion
-                box.append((stamps.to_ns(m.header.stamp), q.w, q.x, q.y, q.z))
+                box.append((stamps.to_ns(m.header.stamp), q.w, q.x, q.y, q.z, *NO_SIGMA))
 
-            self._subs.append(self.node.create_subscription(self._Quat, topic, cb, self._qos))
+            def on_imu(m: Any, box: list[Output] = box) -> None:
+                q, c = m.orientation, m.orientation_covariance
+                box.append((stamps.to_ns(m.header.stamp), q.w, q.x, q.y, q.z, *_sigmas(c[0], c[4], c[8])))
+
+            kind, cb = (self._Imu, on_imu) if imu else (self._Quat, on_quat)
+            self._subs.append(self.node.create_subscription(kind, topic, cb, self._qos))
 
     def _node_command(self, i: int, spec: EstimatorSpec, rate: float) -> list[str]:
         att_topic, imu_topic = node_topics(spec.name)
@@ -190,7 +207,7 @@ class LiveRunner:
             with open(self.log_dir / f"node_{i}_{spec.name}.log", "w") as log:  # the child keeps its own fd
                 self._procs.append(subprocess.Popen(self._node_command(i, spec, rate), stdout=log,
                                                     stderr=subprocess.STDOUT))
-        self._subscribe([f"{LIVE_NS}/e{i}/attitude" for i in range(len(specs))])
+        self._subscribe([f"{LIVE_NS}/e{i}/imu" for i in range(len(specs))], imu=True)
         self._wait_connected()
         self._started_for = key
 
@@ -262,6 +279,7 @@ class _LiveRun:
         self.published = 0
         self.received = [0] * len(runner.got)
         self.unexpected = [0] * len(runner.got)
+        self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimator (N, 2)
 
     def _publish(self, st: NDArray[np.int64], rec: Recording) -> None:
         r = self.r
@@ -306,17 +324,19 @@ class _LiveRun:
         self._wait(self.last_ns)
         index = {s: k for k, s in enumerate(st.tolist())}
         out = []
+        self.sigmas = []
         for j, box in enumerate(self.r.got):
-            q = np.full((len(st), 4), np.nan)
+            qs = np.full((len(st), 6), np.nan)
             outputs, box[:] = list(box), []
-            for s, w, x, y, z in outputs:
-                k = index.get(s)
+            for o in outputs:
+                k = index.get(int(o[0]))
                 if k is None:
                     self.unexpected[j] += 1
                 else:
-                    q[k] = (w, x, y, z)
-            self.received[j] += int(np.isfinite(q).all(axis=1).sum())
-            out.append(q)
+                    qs[k] = o[1:]
+            self.received[j] += int(np.isfinite(qs[:, :4]).all(axis=1).sum())
+            out.append(qs[:, :4])
+            self.sigmas.append(qs[:, 4:] if np.isfinite(qs[:, 4]).any() else None)
         return out
 
     def finish(self) -> list[RunStats]:

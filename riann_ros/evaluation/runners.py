@@ -134,7 +134,7 @@ class Joined:
 
 def run_sigmas(run: Run, n: int) -> list[NDArray[np.float64] | None]:
     """The σ (N, 2) of the last feed of each of the ``n`` estimators of ``run``: those of an offline run and of the
-    covariance recorded with an estimate topic, None for estimates that carry none (files, a recorded topic without
-    a covariance, live)."""
+    covariance recorded with an estimate topic or published by a live node, None for estimates that carry none
+    (files, a topic without a covariance, --live-topics attitude topics)."""
     sig = getattr(run, "sigmas", None)
     return list(sig) if isinstance(sig, list) and len(sig) == n else [None] * n
