@@ -50,8 +50,10 @@ def quiet_when_reader_leaves() -> Iterator[None]:
         yield
         return
     real = sys.stdout
-    sys.stdout = QuietPipe(real)
+    quiet = QuietPipe(real)
+    sys.stdout = quiet
     try:
         yield
     finally:
+        quiet.flush()  # what is still buffered: a reader gone by now must not make the exit's flush fail
         sys.stdout = real
