@@ -660,6 +660,29 @@ def test_the_default_sample_delay_halves_the_worst_timing_error():
     assert err[("points", 0)] < err[("auto", 0)] and err[("means", 1)] < err[("auto", 1)], err  # each at its own
 
 
+@pytest.mark.parametrize("rate", [285.7, 100.0])
+def test_a_clocked_stream_keeps_one_sample_delay(rate):
+    """Stamps on arrival (a regular clock plus 0–10 ms delivery delays): fed straight in (285.7 Hz) the stream is
+    read at its de-jittered stamps throughout, no delay; up-sampled (100 Hz) a quarter step early throughout. The
+    grid step of such a stream is the running median of its jittered steps, a hair above or below the clock period:
+    the delay must not switch with it."""
+    rng = np.random.default_rng(3)
+    n = 6000
+    t = np.arange(n) / rate + rng.uniform(0.0, 0.010, n)
+    t = np.maximum.accumulate(t + np.arange(n) * 1e-9)  # stamps never go back
+    dt = np.diff(t, prepend=t[0] - 1.0 / rate)
+    est = RiannEstimator()
+    acc = np.array([0.0, 0.0, G])
+    delays = []
+    for k in range(n):
+        est.update(acc, np.zeros(3), float(dt[k]))
+        delays.append(est.timeline.delay())
+    settled = np.array(delays[2000:])  # the clock is found within the first 1024 steps
+    assert est.timeline.clock.clocked
+    want = 0.0 if rate > 200 else 0.25 / rate
+    assert np.allclose(settled, want, rtol=0.01, atol=1e-9), (settled.min(), settled.max())
+
+
 def _jittered_swing(means: bool, seconds: float = 30.0, seed: int = 0) -> tuple[np.ndarray, ...]:
     """The 1 Hz, 60° roll swing sampled at random times 10, 20 or 30 ms apart: point samples at the stamps,
     or interval means over the preceding interval (gyro exact, accelerometer averaged on a fine grid)."""

@@ -20,6 +20,7 @@ HOLE_STEPS = 4.0  # a hole is also longer than this many median input steps
 SAMPLE_DELAY = 0.25  # input steps: an up-sampled regular stream's sample is read as the signal this long before
 # its stamp (point samples sit at 0, interval means and a MEMS low-pass at about half a step: a quarter halves the
 # worst timing error of either; docs/riann.md, stage 1, "Sample delay")
+UPSAMPLED = 1.5  # an input step this many grid steps or more is up-sampled (integer ratios: 2, 3, …)
 
 
 class Timeline:
@@ -92,7 +93,10 @@ class Timeline:
         if self.sample_delay == 0.0 or not steps.judged or (steps.jittery and not self.clock.clocked):
             return 0.0
         d = self.input_step
-        return self.sample_delay * d if steps.step < d * (1.0 - REL_EPS) else 0.0
+        # up-sampled: the grid takes an integer number (>= 2) of rows per input step. A clocked stream fed straight in
+        # has a grid step (the running median of its jittered stamps) hovering around its period, a hair above or
+        # below it: comparing the two directly switched the delay on and off from sample to sample.
+        return self.sample_delay * d if d > UPSAMPLED * steps.step else 0.0
 
     def spec(self) -> GridSpec:
         assert self.steps is not None
