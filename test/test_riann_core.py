@@ -660,6 +660,7 @@ def test_the_default_sample_delay_halves_the_worst_timing_error():
     assert err[("points", 0)] < err[("auto", 0)] and err[("means", 1)] < err[("auto", 1)], err  # each at its own
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rate", [285.7, 100.0])
 def test_a_clocked_stream_keeps_one_sample_delay(rate):
     """Stamps on arrival (a regular clock plus 0–10 ms delivery delays): fed straight in (285.7 Hz) the stream is

@@ -84,9 +84,8 @@ def test_riann_sigma_never_changes_the_attitude():
 
 def test_riann_sigma_after_a_gap_is_the_fresh_network_s_until_it_has_converged():
     """A gap (longer than the gate's max_dt) restarts the network without a bridge: the output is the fresh
-    network, whose σ_f (stage 6) is reported from the first sample on and decays with its re-convergence time; per
-    sample equals batch; the attitude is the same as without asking for σ; the bias σ (kept over a gap) is not what
-    raises it."""
+    network, whose σ_f (stage 6) is reported from the first sample on and decays with its re-convergence time, then
+    the converged network's σ again; per sample equals batch, in σ and in the attitude."""
     from riann_ros.estimators.riann.s6_handover import FRESH_DONE, S_REST, TAU
 
     n = 2500
