@@ -38,7 +38,7 @@ lint: $(BIN)/.installed
 test: $(BIN)/.installed lint
 	$(BIN)/python -m pytest -n $(JOBS)
 
-# the tests that need no DDS and are not marked slow (46 s on 2 cores with lint, warm): while you work
+# the tests that need no DDS and are not marked slow (41 s on 2 cores with lint, warm): while you work
 test-fast: $(BIN)/.installed
 	$(BIN)/python -m pytest -m "not ros and not slow" -q -n $(JOBS)
 
