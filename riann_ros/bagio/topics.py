@@ -80,11 +80,17 @@ def _orientation(msg, msgtype: str):
     return obj
 
 
+def _covariance_slot(msg, msgtype: str) -> tuple[object, str]:
+    """The message (or sub-message) holding the orientation covariance of ``msg``, and the field's name."""
+    *parents, name = COVARIANCE_FIELDS[msgtype][0]
+    holder = msg
+    for p in parents:
+        holder = getattr(holder, p)
+    return holder, name
+
+
 def _covariance(msg, msgtype: str):
-    obj = msg
-    for name in COVARIANCE_FIELDS[msgtype][0]:
-        obj = getattr(obj, name)
-    return obj
+    return getattr(*_covariance_slot(msg, msgtype))
 
 
 def _template(raw: bytes, msgtype: str) -> tuple[int, list[int], int | None]:
@@ -96,10 +102,7 @@ def _template(raw: bytes, msgtype: str) -> tuple[int, list[int], int | None]:
     o.x, o.y, o.z, o.w = _MARK[:4]
     has_cov = msgtype in COVARIANCE_FIELDS
     if has_cov:
-        *parents, name = COVARIANCE_FIELDS[msgtype][0]
-        holder = msg
-        for p in parents:
-            holder = getattr(holder, p)
+        holder, name = _covariance_slot(msg, msgtype)
         cov = np.array(getattr(holder, name), dtype=np.float64)
         cov[0] = _MARK[4]
         setattr(holder, name, cov)

@@ -35,14 +35,10 @@ LIVE_NS = "/riann_eval"
 LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt), besides the ~/reset call
 IDLE_S = 5.0  # give up waiting for outputs after this long without a new one
 
-Output = tuple[float, ...]  # stamp_ns, w, x, y, z, σ_i, σ_ψ (rad; NaN: the topic carries no covariance)
-NO_SIGMA = (math.nan, math.nan)
-
-
-def _sigmas(xx: float, yy: float, zz: float) -> tuple[float, float]:
-    """σ_i, σ_ψ (rad) of a message's orientation variances about x, y, z (NaN where they say nothing)."""
-    si, sy = sigmas_of_variances(np.array([[xx, yy, zz]]))[0]
-    return float(si), float(sy)
+# stamp_ns, w, x, y, z and the orientation variances about x, y, z (rad²; NaN: the topic carries no covariance),
+# turned into σ once per piece (sigmas_of_variances), not in the callback
+Output = tuple[float, ...]
+NO_VARIANCES = (math.nan, math.nan, math.nan)
 
 
 def ros_param(value: Any) -> str:
@@ -171,11 +167,11 @@ class LiveRunner:
 
             def on_quat(m: Any, box: list[Output] = box) -> None:
                 q = m.quaternion
-                box.append((stamps.to_ns(m.header.stamp), q.w, q.x, q.y, q.z, *NO_SIGMA))
+                box.append((stamps.to_ns(m.header.stamp), q.w, q.x, q.y, q.z, *NO_VARIANCES))
 
             def on_imu(m: Any, box: list[Output] = box) -> None:
                 q, c = m.orientation, m.orientation_covariance
-                box.append((stamps.to_ns(m.header.stamp), q.w, q.x, q.y, q.z, *_sigmas(c[0], c[4], c[8])))
+                box.append((stamps.to_ns(m.header.stamp), q.w, q.x, q.y, q.z, c[0], c[4], c[8]))
 
             kind, cb = (self._Imu, on_imu) if imu else (self._Quat, on_quat)
             self._subs.append(self.node.create_subscription(kind, topic, cb, self._qos))
@@ -326,7 +322,7 @@ class _LiveRun:
         out = []
         self.sigmas = []
         for j, box in enumerate(self.r.got):
-            qs = np.full((len(st), 6), np.nan)
+            qs = np.full((len(st), 7), np.nan)
             outputs, box[:] = list(box), []
             for o in outputs:
                 k = index.get(int(o[0]))
@@ -336,7 +332,8 @@ class _LiveRun:
                     qs[k] = o[1:]
             self.received[j] += int(np.isfinite(qs[:, :4]).all(axis=1).sum())
             out.append(qs[:, :4])
-            self.sigmas.append(qs[:, 4:] if np.isfinite(qs[:, 4]).any() else None)
+            sig = sigmas_of_variances(qs[:, 4:])
+            self.sigmas.append(sig if np.isfinite(sig[:, 0]).any() else None)
         return out
 
     def finish(self) -> list[RunStats]:

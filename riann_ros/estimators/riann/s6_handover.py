@@ -48,16 +48,22 @@ class FreshNetwork:
         self.t = 0.0
         self.w_max = w_max
         self.lin = 0.0
+        self.started = acc is not None  # its first sample seen (given here, or the first advance)
         if acc is not None:
-            self.see(acc)
+            self._see(acc)
 
-    def see(self, acc: Vec) -> None:
+    def _see(self, acc: Vec) -> None:
         self.lin = max(self.lin, abs(math.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) - G))
 
     def advance(self, delta: Quat, dt: float, acc: Vec) -> None:
-        """The next sample: bias-corrected gyro increment ``delta`` over ``dt`` s, accelerometer ``acc``."""
+        """The next sample: bias-corrected gyro increment ``delta`` over ``dt`` s, accelerometer ``acc``. The first
+        sample starts the network: no time or turn before it."""
+        if not self.started:
+            self.started = True
+            self._see(acc)
+            return
         self.t += dt
-        self.see(acc)
+        self._see(acc)
         if dt > 0.0:
             s = math.sqrt(delta[1] * delta[1] + delta[2] * delta[2] + delta[3] * delta[3])
             self.w_max = max(self.w_max, 2.0 * math.atan2(s, abs(delta[0])) / dt)
@@ -113,13 +119,11 @@ class Handover:
         # attitude and the heading's weighting are not touched); after a reset the bias front end starts anew and its
         # σ already covers the fresh network's
         self.fresh: FreshNetwork | None = None
-        self.fresh_started = False
         self.fresh_sd: list[float] = []  # of the last block: σ_f (deg) while a gap's fresh network is young, else 0
 
     def restart(self, cause: Cause) -> None:
         self.blend = None
         self.fresh = FreshNetwork() if cause is Cause.GAP else None
-        self.fresh_started = False
 
     def run(self, qc: list[Quat], delta: list[Quat], dt: list[float], acc: list[Vec], holes: list[Hole]
             ) -> tuple[list[Quat], list[float], dict[int, float]]:
@@ -157,11 +161,7 @@ class Handover:
         fresh = self.fresh
         i = 0
         while fresh is not None and i < end:
-            if self.fresh_started:
-                fresh.advance(delta[i], dt[i], acc[i])
-            else:  # the first sample after the gap starts the network: no time or turn before it
-                fresh.see(acc[i])
-                self.fresh_started = True
+            fresh.advance(delta[i], dt[i], acc[i])
             sd[i] = fresh.sigma()
             if sd[i] < FRESH_DONE:
                 fresh = None
