@@ -269,19 +269,21 @@ def test_timeline_gives_jittery_sample_times_no_delay_and_a_clock_its_delay():
 
 def test_grid_reads_a_delayed_sample_as_the_signal_that_much_before_its_stamp():
     """Regular 50 Hz point samples of a ramp read a quarter step (5 ms) early: the rows (5 ms grid) are the ramp's
-    cell means on the shifted timeline, made as soon as the signal time reaches them; the newest row is carried to
-    the stamp with the newest sample held over the 5 ms; from stamp to stamp the gyro is the signal between the
-    two signal times less the previous carry plus the new one (the carries and the steps add up)."""
+    means over the cells centred on the grid points of the shifted timeline, made as soon as the signal time reaches
+    a cell's end; the newest row is carried to the stamp (half a cell on the signal, then the newest sample held
+    over the 5 ms); from stamp to stamp the gyro is the signal between the two signal times less the previous carry
+    plus the new one (the carries and the steps add up)."""
     x, dt = _regular(50.0, 200)
     g = Grid().run(x, Timeline(0.1, "auto", 0.25).run(x, dt))  # the delay from sample 16 on (judged regular)
     tau = 0.005 * np.arange(len(g.rows))  # the first grid point on the first sample
     rows = np.array(g.rows)
     later = np.arange(len(rows)) >= g.r0[20]
-    np.testing.assert_allclose(rows[later, 3], 0.5 + 0.1 * (tau[later] - 0.0025 + 0.005), atol=1e-9)
+    np.testing.assert_allclose(rows[later, 3], 0.5 + 0.1 * (tau[later] + 0.005), atol=1e-9)
     for k in range(20, 200):
-        assert g.r1[k] - g.r0[k] == 4 and tau[g.r1[k] - 1] == pytest.approx(k / 50 - 0.005, abs=1e-9)
-        assert g.s_carry[k] == pytest.approx(0.005, abs=1e-9)
-        assert g.g_carry[k][0] == pytest.approx(0.5 + 0.1 * k / 50, abs=1e-9)
+        assert g.r1[k] - g.r0[k] == 4 and tau[g.r1[k] - 1] == pytest.approx(k / 50 - 0.010, abs=1e-9)
+        assert g.s_carry[k] == pytest.approx(0.010, abs=1e-9)
+        on_signal = 0.5 + 0.1 * (k / 50 - 0.0025)  # the ramp's mean over the half cell before the signal time
+        assert g.g_carry[k][0] == pytest.approx(0.5 * (on_signal + 0.5 + 0.1 * k / 50), abs=1e-9)
         w_prev, w = 0.5 + 0.1 * (k - 1) / 50, 0.5 + 0.1 * k / 50
         want = 0.5 * (w_prev + w) * 0.020 - w_prev * 0.005 + w * 0.005
         assert g.g_delta[k][0] * g.s_delta[k] == pytest.approx(want, abs=1e-9)

@@ -4,8 +4,10 @@ The network runs on grid points ``tau_m = anchor + m·T`` (``T`` and how to read
 recent samples are held as a signal over time (:class:`SignalHistory`): piecewise linear through point samples,
 or piecewise constant over ``(t_{k-1}, t_k]`` for interval means; up-sampled point samples are read *curved*
 (the parabola through the newest three samples: at 25–50 Hz a line cuts the corners of fast rotations). A grid
-point becomes a row as soon as a sample at or after it has arrived, from the samples up to that stamp only: the
-resampling is causal. A grid value is the signal at the grid point, or its mean over the box width before it.
+point becomes a row as soon as the samples cover its window, from the samples up to that stamp only: the
+resampling is causal. A grid value is the signal at the grid point, or its mean over the box width: for up-sampled
+point samples the cell *centred* on the grid point (the network reads a row as the signal at its time, as it reads
+a sample fed straight in; a cell ending there made every row half a cell late), for blocks the width before it.
 Each sample also gets the raw gyro means the carry stage (5) turns into rotations. After a hole the grid goes on
 across it (the rows in the hole are interpolated: the *bridge*) and marks where a fresh network starts.
 
@@ -78,7 +80,7 @@ class Grid:
                 out.g_delta.append(ZERO3)
                 out.s_delta.append(0.0)
             out.r0.append(len(rows))
-            self._emit(out, s, T, width, means, curved)
+            self._emit(out, s, T, width, means, curved, tl.start[k])
             out.r1.append(len(rows))
             if k in holes:
                 out.forks.append((len(rows), T))
@@ -103,16 +105,22 @@ class Grid:
         a = (s - s_prev) / span
         return tuple(a * g[j] + (w[j] * d - w_prev[j] * d_prev) / span for j in range(3))  # type: ignore[return-value]
 
-    def _emit(self, out: GridBlock, t: float, T: float, width: float, means: bool, curved: bool) -> None:
-        """Append every grid row up to the newest signal time ``t``."""
+    def _emit(self, out: GridBlock, t: float, T: float, width: float, means: bool, curved: bool,
+              first: bool = False) -> None:
+        """Append every grid row whose window ends by the newest signal time ``t`` (on a stream's ``first`` sample
+        its first row, the signal held before and after that sample)."""
         T_ns = T * 1e9
         w_ns = width * 1e9
+        half = 0.5 * w_ns if curved else 0.0  # up-sampled point samples: the cell centred on the grid point
         hist = self.hist
         while True:
             tau = self._anchor + (self._m + 1) * T_ns
-            if tau > t + TIME_EPS_NS:
+            if tau + half > t + TIME_EPS_NS and not (first and self._m == 0):
                 return
-            v = hist.mean(tau - w_ns, tau, means, curved=curved) if w_ns > 0.0 else hist.value(tau, means)
+            if w_ns > 0.0:
+                v = hist.mean(tau + half - w_ns, tau + half, means, curved=curved)
+            else:
+                v = hist.value(tau, means)
             out.rows.append(v)  # type: ignore[arg-type]
             out.steps.append(T)
             self._m += 1
