@@ -1,4 +1,5 @@
-"""The result tables and figures of README.md, docs/results.md and BENCHMARKS.md, written from committed results.
+"""The result tables and figures of README.md, docs/results.md, BENCHMARKS.md and docs/riann.md, written from
+committed results.
 
 Usage::
 
@@ -27,10 +28,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY  # noqa: E402
+
 RESULTS = ROOT / "docs" / "results"
-PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md")
+PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md")
 FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_deg", "heading_rmse_deg",
-          "total_rmse_deg")
+          "total_rmse_deg", "best_t_offset_s")
 #: the uncertainty scores a file keeps when trimmed with ``--uncertainty`` (riann_ros/evaluation/uncertainty.py)
 UNCERTAINTY_FIELDS = ("n_scored", "nees", "cover95_pct", "err_bottom_decile_deg", "err_top_decile_deg", "yaw_nees",
                       "yaw_cover95_mag_pct", "yaw_cover95_held_pct", "n_yaw_mag", "n_yaw_held", "sigma_hist")
@@ -157,6 +162,41 @@ def rates_table(name: str, estimators: Iterable[str]) -> Callable[[], str]:
         return _table(["rate", *ests], [[f"{f:g} Hz", *(rows.where(rate=f).mean_max(e) for e in ests)]
                                         for f in sorted(rows.ordered("rate"))])
     return make
+
+
+STREAMS = (("", "interval means (`rate:HZ`)"), (":points", "point samples (`:points`)"),
+           (":lowpass", "MEMS low-pass (`:lowpass`)"))
+
+
+def sample_delay_table() -> str:
+    """Regular streams made three ways at each rate: RIANN at every ``sample_delay`` of the run, and VQF."""
+    rows = load("sample_delay")
+    delays = sorted((e for e in rows.estimators() if e.startswith("riann")), key=_delay_of)
+    rates = sorted({int(p.split(":")[1]) for p in rows.ordered("perturbation")})
+    head = [f"`sample_delay={_delay_of(e):g}`" + (" (default)" if e == "riann" else "") for e in delays]
+    body = [[f"{hz} Hz", label, *(rows.where(perturbation=f"rate:{hz}{suffix}").mean_max(e) for e in [*delays, "vqf"])]
+            for hz in rates for suffix, label in STREAMS]
+    return _table(["rate", "stream", *head, "VQF"], body, left=2)
+
+
+def sample_delay_timing() -> str:
+    """The median over the trials of the best time offset (ms; + the estimate leads) per rate and stream kind, of
+    RIANN at its default and of VQF."""
+    rows = load("sample_delay")
+    rates = sorted({int(p.split(":")[1]) for p in rows.ordered("perturbation")})
+
+    def ms(p: str, est: str) -> str:
+        return f"{1e3 * statistics.median(rows.where(perturbation=p).values(est, 'best_t_offset_s')):+.1f}"
+
+    body = [[f"{hz} Hz", *(f"{ms(f'rate:{hz}{sfx}', 'riann')} / {ms(f'rate:{hz}{sfx}', 'vqf')}" for sfx, _ in STREAMS)]
+            for hz in rates]
+    return _table(["rate", *(label for _, label in STREAMS)], body)
+
+
+def _delay_of(estimator: str) -> float:
+    """The sample delay of a RIANN spec label (``riann`` is the default's)."""
+    m = re.search(r"sample_delay=([\d.]+)", estimator)
+    return float(m[1]) if m else SAMPLE_DELAY
 
 
 def scenarios_table() -> str:
@@ -382,6 +422,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "readme-9d": mag_figures,
     "as-recorded-pair": as_recorded_pair,
     "scenarios": scenarios_table,
+    "sample-delay": sample_delay_table,
+    "sample-delay-timing": sample_delay_timing,
     "realistic-lead": realistic_lead,
     "perturbed-as-recorded": perturbed("as-recorded"),
     "perturbed-realistic": perturbed("realistic"),
@@ -414,8 +456,12 @@ def render(text: str, made: dict[str, str] | None = None) -> str:
         if name not in made:
             made[name] = TABLES[name]()
         inline = "\n" not in m["body"]
-        body = made[name] if inline else f"\n{made[name]}\n"
-        return f"<!-- results:{name} -->{body}<!-- /results:{name} -->"
+        if inline:
+            return f"<!-- results:{name} -->{made[name]}<!-- /results:{name} -->"
+        line = text[text.rfind("\n", 0, m.start()) + 1:m.start()]
+        indent = line if not line.strip() else ""  # a table inside a list item keeps the item's indent
+        body = "".join(f"{indent}{row}\n" for row in made[name].split("\n"))
+        return f"<!-- results:{name} -->\n{body}{indent}<!-- /results:{name} -->"
 
     return MARKER.sub(sub, text)
 
