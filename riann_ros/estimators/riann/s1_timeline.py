@@ -72,13 +72,13 @@ class Timeline:
 
     def box_width(self) -> float:
         """Averaging window (s) of a grid value: 0 = the signal at the grid point, else its mean over that much time
-        before it. Point samples: up-sampled (T < d), the mean over the grid cell; blocks (T = k·d), the mean over
-        T − d (the k samples of the block); T = d, the sample itself. Interval means: the whole cell when T spans
-        several samples, else the sample covering the grid point."""
+        around or before it. Up-sampled (T < d), the mean over the grid cell centred on the grid point (the step
+        signal of interval means, the curve through point samples). Blocks (T = k·d): point samples, the mean over
+        T − d (the k samples of the block); interval means, the whole cell. T = d: the sample itself."""
         assert self.steps is not None
         d, step = self.input_step, self.steps.step
         if self.means:
-            return step if step > d * (1.0 + REL_EPS) else 0.0
+            return step if abs(step / d - 1.0) > REL_EPS else 0.0
         if step < d * (1.0 - REL_EPS):
             return step
         return step - d if step > d * (1.0 + REL_EPS) else 0.0
@@ -101,7 +101,8 @@ class Timeline:
     def spec(self) -> GridSpec:
         assert self.steps is not None
         means, step = self.means, self.steps.step
-        return step, self.box_width(), means, not means and step < self.input_step * (1.0 - REL_EPS), self.delay()
+        up = step < self.input_step * (1.0 - REL_EPS)
+        return step, self.box_width(), means, not means and up, self.delay(), up
 
     # -- the stage ---------------------------------------------------------------------------------
     def run(self, x: list[Row6], dt: list[float]) -> TimelineBlock:

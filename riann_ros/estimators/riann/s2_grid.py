@@ -5,9 +5,10 @@ recent samples are held as a signal over time (:class:`SignalHistory`): piecewis
 or piecewise constant over ``(t_{k-1}, t_k]`` for interval means; up-sampled point samples are read *curved*
 (the parabola through the newest three samples: at 25–50 Hz a line cuts the corners of fast rotations). A grid
 point becomes a row as soon as the samples cover its window, from the samples up to that stamp only: the
-resampling is causal. A grid value is the signal at the grid point, or its mean over the box width: for up-sampled
-point samples the cell *centred* on the grid point (the network reads a row as the signal at its time, as it reads
-a sample fed straight in; a cell ending there made every row half a cell late), for blocks the width before it.
+resampling is causal. A grid value is the signal at the grid point, or its mean over the box width: up-sampled
+(point samples or interval means), the cell *centred* on the grid point (the network reads a row as the signal at
+its time, as it reads a sample fed straight in; a cell ending there, or the interval mean holding the grid point,
+made the rows half a cell late on average); for blocks the width before it.
 Each sample also gets the raw gyro means the carry stage (5) turns into rotations. After a hole the grid goes on
 across it (the rows in the hole are interpolated: the *bridge*) and marks where a fresh network starts.
 
@@ -56,7 +57,7 @@ class Grid:
         holes = {h.index for h in tl.holes}
         rows = out.rows
         for k, xk in enumerate(x):
-            T, width, means, curved, delay = tl.spec[k]
+            T, width, means, curved, delay, centred = tl.spec[k]
             t = tl.t[k]
             if tl.start[k]:
                 s = t - delay * 1e9
@@ -80,7 +81,7 @@ class Grid:
                 out.g_delta.append(ZERO3)
                 out.s_delta.append(0.0)
             out.r0.append(len(rows))
-            self._emit(out, s, T, width, means, curved, tl.start[k])
+            self._emit(out, s, T, width, means, curved, centred, tl.start[k])
             out.r1.append(len(rows))
             if k in holes:
                 out.forks.append((len(rows), T))
@@ -105,13 +106,13 @@ class Grid:
         a = (s - s_prev) / span
         return tuple(a * g[j] + (w[j] * d - w_prev[j] * d_prev) / span for j in range(3))  # type: ignore[return-value]
 
-    def _emit(self, out: GridBlock, t: float, T: float, width: float, means: bool, curved: bool,
+    def _emit(self, out: GridBlock, t: float, T: float, width: float, means: bool, curved: bool, centred: bool,
               first: bool = False) -> None:
         """Append every grid row whose window ends by the newest signal time ``t`` (on a stream's ``first`` sample
         its first row, the signal held before and after that sample)."""
         T_ns = T * 1e9
         w_ns = width * 1e9
-        half = 0.5 * w_ns if curved else 0.0  # up-sampled point samples: the cell centred on the grid point
+        half = 0.5 * w_ns if centred else 0.0  # up-sampled: the cell centred on the grid point
         hist = self.hist
         while True:
             tau = self._anchor + (self._m + 1) * T_ns

@@ -77,8 +77,8 @@ def restart_table() -> str:
 
 
 # grid step T (s), box width (s), interval means, curved, sample delay D (s: the sample is the signal at its stamp
-# minus D; see s1_timeline and s2_grid)
-GridSpec = tuple[float, float, bool, bool, float]
+# minus D), centred (up-sampled: the box is centred on the grid point, else it ends there); see s1_timeline, s2_grid
+GridSpec = tuple[float, float, bool, bool, float, bool]
 Row6 = tuple[float, ...]  # acc xyz (m/s²), gyr xyz (rad/s) of a sample or a grid point
 
 
