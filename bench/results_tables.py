@@ -172,7 +172,7 @@ def sample_delay_table() -> str:
     """Regular streams made three ways at each rate: RIANN at every ``sample_delay`` of the run, and VQF."""
     rows = load("sample_delay")
     delays = sorted((e for e in rows.estimators() if e.startswith("riann")), key=_delay_of)
-    rates = sorted({int(p.split(":")[1]) for p in rows.ordered("perturbation")})
+    rates = _regular_rates(rows)
     head = [f"`sample_delay={_delay_of(e):g}`" + (" (default)" if e == "riann" else "") for e in delays]
     body = [[f"{hz} Hz", label, *(rows.where(perturbation=f"rate:{hz}{suffix}").mean_max(e) for e in [*delays, "vqf"])]
             for hz in rates for suffix, label in STREAMS]
@@ -183,7 +183,7 @@ def sample_delay_timing() -> str:
     """The median over the trials of the best time offset (ms; + the estimate leads) per rate and stream kind, of
     RIANN at its default and of VQF."""
     rows = load("sample_delay")
-    rates = sorted({int(p.split(":")[1]) for p in rows.ordered("perturbation")})
+    rates = _regular_rates(rows)
 
     def ms(p: str, est: str) -> str:
         return f"{1e3 * statistics.median(rows.where(perturbation=p).values(est, 'best_t_offset_s')):+.1f}"
@@ -191,6 +191,11 @@ def sample_delay_timing() -> str:
     body = [[f"{hz} Hz", *(f"{ms(f'rate:{hz}{sfx}', 'riann')} / {ms(f'rate:{hz}{sfx}', 'vqf')}" for sfx, _ in STREAMS)]
             for hz in rates]
     return _table(["rate", *(label for _, label in STREAMS)], body)
+
+
+def _regular_rates(rows: Rows) -> list[int]:
+    """The rates (Hz) of the ``rate:HZ[:kind]`` conditions in ``rows``."""
+    return sorted({int(p.split(":")[1]) for p in rows.ordered("perturbation")})
 
 
 def _delay_of(estimator: str) -> float:

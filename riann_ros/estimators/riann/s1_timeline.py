@@ -77,11 +77,18 @@ class Timeline:
         T − d (the k samples of the block); interval means, the whole cell. T = d: the sample itself."""
         assert self.steps is not None
         d, step = self.input_step, self.steps.step
-        if self.means:
-            return step if abs(step / d - 1.0) > REL_EPS else 0.0
-        if step < d * (1.0 - REL_EPS):
+        if self.upsampled:
             return step
-        return step - d if step > d * (1.0 + REL_EPS) else 0.0
+        if step > d * (1.0 + REL_EPS):  # blocks
+            return step if self.means else step - d
+        return 0.0
+
+    @property
+    def upsampled(self) -> bool:
+        """The grid step is shorter than the input step: several rows per sample, each over a cell centred on its
+        grid point (the box width is the grid step)."""
+        assert self.steps is not None
+        return self.steps.step < self.input_step * (1.0 - REL_EPS)
 
     def delay(self) -> float:
         """How long before its stamp a sample is read (s): ``sample_delay`` input steps for a regular stream (or a
@@ -100,9 +107,7 @@ class Timeline:
 
     def spec(self) -> GridSpec:
         assert self.steps is not None
-        means, step = self.means, self.steps.step
-        up = step < self.input_step * (1.0 - REL_EPS)
-        return step, self.box_width(), means, not means and up, self.delay(), up
+        return self.steps.step, self.box_width(), self.means, self.upsampled, self.delay()
 
     # -- the stage ---------------------------------------------------------------------------------
     def run(self, x: list[Row6], dt: list[float]) -> TimelineBlock:

@@ -57,7 +57,7 @@ class Grid:
         holes = {h.index for h in tl.holes}
         rows = out.rows
         for k, xk in enumerate(x):
-            T, width, means, curved, delay, centred = tl.spec[k]
+            T, width, means, up, delay = tl.spec[k]
             t = tl.t[k]
             if tl.start[k]:
                 s = t - delay * 1e9
@@ -81,7 +81,7 @@ class Grid:
                 out.g_delta.append(ZERO3)
                 out.s_delta.append(0.0)
             out.r0.append(len(rows))
-            self._emit(out, s, T, width, means, curved, centred, tl.start[k])
+            self._emit(out, s, T, width, means, up, tl.start[k])
             out.r1.append(len(rows))
             if k in holes:
                 out.forks.append((len(rows), T))
@@ -106,13 +106,14 @@ class Grid:
         a = (s - s_prev) / span
         return tuple(a * g[j] + (w[j] * d - w_prev[j] * d_prev) / span for j in range(3))  # type: ignore[return-value]
 
-    def _emit(self, out: GridBlock, t: float, T: float, width: float, means: bool, curved: bool, centred: bool,
+    def _emit(self, out: GridBlock, t: float, T: float, width: float, means: bool, up: bool,
               first: bool = False) -> None:
         """Append every grid row whose window ends by the newest signal time ``t`` (on a stream's ``first`` sample
         its first row, the signal held before and after that sample)."""
         T_ns = T * 1e9
         w_ns = width * 1e9
-        half = 0.5 * w_ns if centred else 0.0  # up-sampled: the cell centred on the grid point
+        half = 0.5 * w_ns if up else 0.0  # up-sampled: the cell centred on the grid point
+        curved = up and not means  # up-sampled point samples: the parabola through the newest three
         hist = self.hist
         while True:
             tau = self._anchor + (self._m + 1) * T_ns

@@ -76,9 +76,10 @@ def restart_table() -> str:
     return "\n".join(lines)
 
 
-# grid step T (s), box width (s), interval means, curved, sample delay D (s: the sample is the signal at its stamp
-# minus D), centred (up-sampled: the box is centred on the grid point, else it ends there); see s1_timeline, s2_grid
-GridSpec = tuple[float, float, bool, bool, float, bool]
+# grid step T (s), box width (s), interval means, up-sampled (the box is centred on the grid point, else it ends
+# there; point samples are read curved), sample delay D (s: the sample is the signal at its stamp minus D); see
+# s1_timeline and s2_grid
+GridSpec = tuple[float, float, bool, bool, float]
 Row6 = tuple[float, ...]  # acc xyz (m/s²), gyr xyz (rad/s) of a sample or a grid point
 
 
