@@ -7,7 +7,9 @@ error per quintile of the input), then fits the constants of ``σ_i² = σ₀² 
 2 degrees of freedom) over all scored samples, each trial weighted equally, and prints coverage and NEES per
 trial with the fitted and with the current constants (riann_ros/estimators/riann/s8_uncertainty.py). Then the
 heading: the field's σ fitted by maximum likelihood on the samples whose heading the field corrects, and the
-heading's coverage while the field corrects it and while the gyro holds it after one.
+heading's coverage while the field corrects it and while the gyro holds it after one. Last the heading's share of a
+hole's gyro bridge (``K_BRIDGE``: the bridge's σ is a bound made for the inclination's hand-over), fitted by maximum
+likelihood on the trials run again with holes (``dropout:0.1-0.6s@10s``, one fixed draw), the field's σ as fitted.
 
     RIANN_BROAD_DIR=... python bench/fit_uncertainty.py [--step 5] [--cache DIR]
 
@@ -32,6 +34,7 @@ from riann_ros.estimators.riann.s8_uncertainty import (
     FREE,
     HELD,
     K_BIAS,
+    K_BRIDGE,
     K_SPREAD,
     MAG_SD,
     SIGMA0,
@@ -39,15 +42,43 @@ from riann_ros.estimators.riann.s8_uncertainty import (
     heading_sigma,
     inclination_sigma,
 )
+from riann_ros.evaluation.perturb import parse_condition
+from riann_ros.mag import MagConfig
+from riann_ros.stream import EstimatorStream, GateConfig
 
 CHI2_2_95 = 5.991  # χ²₂(0.95)
 CHI2_1_95 = 3.841  # χ²₁(0.95)
+HOLES = "dropout:0.1-0.6s@10s"
 
 
-def trial_features(path: Path, est: RiannEstimator) -> dict[str, np.ndarray]:
-    """Of the scored samples of one trial, run in 9D (the inclination is the same as in 6D): stage 8's inclination
-    features ``f`` and heading features ``yf``, the inclination error ``e`` and the heading error ``eh`` (rad)."""
+def trial_features(path: Path, est: RiannEstimator, holes: bool = False) -> dict[str, np.ndarray]:
+    """Of the scored samples of one trial, run in 9D (the inclination is the same as in 6D), as recorded or with
+    holes: stage 8's inclination features ``f`` and heading features ``yf``, the inclination error ``e`` and the
+    heading error ``eh`` (rad)."""
     rec = read_broad(path)
+    if holes:  # through the evaluator's gate, as it scores them: a hole past max_dt is a gap
+        rec = parse_condition(HOLES).start([np.random.default_rng(0)])[0](rec)
+        est.reset()
+        f: list[np.ndarray] = []
+        yf: list[np.ndarray] = []
+        run = est.update_batch
+
+        def kept(*args: object) -> np.ndarray:  # stage 8's features of each run between restarts
+            out = run(*args)  # type: ignore[arg-type]
+            f.append(est.uncertainty.features.copy())
+            yf.append(est.uncertainty.yaw_features.copy())
+            return out
+
+        est.update_batch = kept  # type: ignore[method-assign]
+        q, acc = EstimatorStream(est, GateConfig(), MagConfig(use_mag="auto")).process_batch(
+            rec.stamps_ns, rec.acc, rec.gyr, rec.mag)
+        del est.update_batch
+        ff, yy = np.full((len(q), len(FEATURES)), np.nan), np.full((len(q), yf[0].shape[1]), np.nan)
+        ff[acc], yy[acc] = np.vstack(f), np.vstack(yf)
+        assert rec.quat_ref is not None
+        e = quat.inclination_error(rec.quat_ref, q)
+        ok = np.asarray(rec.score_mask, dtype=bool) & acc & np.isfinite(e)
+        return {"f": ff[ok], "yf": yy[ok], "e": e[ok], "eh": quat.heading_error(rec.quat_ref, q)[ok]}
     dt = np.diff(rec.stamps_ns, prepend=rec.stamps_ns[0]) * 1e-9
     dt[0] = float(np.median(dt[1:]))
     est.reset()
@@ -59,18 +90,18 @@ def trial_features(path: Path, est: RiannEstimator) -> dict[str, np.ndarray]:
             "eh": quat.heading_error(rec.quat_ref, q)[ok]}
 
 
-def load(step: int, cache: Path | None) -> dict[str, dict[str, np.ndarray]]:
+def load(step: int, cache: Path | None, holes: bool = False) -> dict[str, dict[str, np.ndarray]]:
     d = find_broad_dir()
     if d is None:
         sys.exit("no BROAD trials: set RIANN_BROAD_DIR")
     est = RiannEstimator()
     out = {}
     for p in broad_files(d):
-        c = cache / f"{p.stem}.npz" if cache else None
+        c = cache / f"{p.stem}{'_holes' if holes else ''}.npz" if cache else None
         if c is not None and c.exists():
             z = dict(np.load(c))
         else:
-            z = trial_features(p, est)
+            z = trial_features(p, est, holes)
             if c is not None:
                 np.savez(c, **z)
         out[p.stem[:2]] = {k: v[::step] for k, v in z.items()}
@@ -132,17 +163,30 @@ def heading_nll(log_sd: np.ndarray, data: dict[str, dict[str, np.ndarray]]) -> f
     for v in data.values():
         used = v["yf"][:, 0] == USED
         if used.any():
-            s = heading_sigma(v["yf"][used], inclination_sigma(v["f"][used]), v["f"][used, 4], float(np.exp(log_sd[0])))
+            s = heading_sigma(v["yf"][used], inclination_sigma(v["f"][used]), float(np.exp(log_sd[0])))
             total += float(np.mean(2.0 * np.log(s) + (v["eh"][used] / s) ** 2))
     return total
 
 
-def heading_report(mag_sd: float, data: dict[str, dict[str, np.ndarray]], label: str) -> None:
-    print(f"{label}: heading σ of the field {np.degrees(mag_sd):.2f}°")
+def bridge_nll(log_k: np.ndarray, data: dict[str, dict[str, np.ndarray]], mag_sd: float) -> float:
+    """Minus the log-likelihood (1 DOF, per trial weighted equally) of the heading errors that carry a bridge's share,
+    with the bridges' σ scaled by ``exp(log_k)``."""
+    total = 0.0
+    for v in data.values():
+        sel = (v["yf"][:, 0] != FREE) & (v["yf"][:, 1] > 0.0)
+        if sel.any():
+            s = heading_sigma(v["yf"][sel], inclination_sigma(v["f"][sel]), mag_sd, float(np.exp(log_k[0])))
+            total += float(np.mean(2.0 * np.log(s) + (v["eh"][sel] / s) ** 2))
+    return total
+
+
+def heading_report(mag_sd: float, data: dict[str, dict[str, np.ndarray]], label: str,
+                   k_bridge: float = K_BRIDGE) -> None:
+    print(f"{label}: heading σ of the field {np.degrees(mag_sd):.2f}°, bridge share {k_bridge:.3f}")
     print("  trial  samples used/held  coverage95 used  held   NEES")
     tot: dict[str, list[float]] = {"used": [0, 0], "held": [0, 0]}
     for name, v in data.items():
-        s = heading_sigma(v["yf"], inclination_sigma(v["f"]), v["f"][:, 4], mag_sd)
+        s = heading_sigma(v["yf"], inclination_sigma(v["f"]), mag_sd, k_bridge)
         r = (v["eh"] / s) ** 2
         cells = []
         for key, state in (("used", USED), ("held", HELD)):
@@ -173,7 +217,13 @@ def main() -> None:
     report(tuple(np.exp(r.x)), data, "fitted (maximum likelihood)")
     h = minimize(heading_nll, np.log([MAG_SD]), args=(data,), method="Powell")
     heading_report(MAG_SD, data, "heading, current constant")
-    heading_report(float(np.exp(h.x[0])), data, "heading, fitted (maximum likelihood while the field corrects)")
+    mag_sd = float(np.exp(h.x[0]))
+    heading_report(mag_sd, data, "heading, fitted (maximum likelihood while the field corrects)")
+    holes = load(a.step, a.cache, holes=True)
+    b = minimize(bridge_nll, np.log([K_BRIDGE]), args=(holes, mag_sd), method="Powell")
+    heading_report(MAG_SD, holes, f"with holes ({HOLES}), current constants")
+    heading_report(mag_sd, holes, f"with holes ({HOLES}), fitted (maximum likelihood where a bridge counts)",
+                   float(np.exp(b.x[0])))
 
 
 if __name__ == "__main__":

@@ -699,6 +699,90 @@ def test_reacquire_drops_a_bridge_the_field_contradicts() -> None:
     assert math.degrees(corr) == pytest.approx(-60.0, abs=1e-6)
 
 
+def test_reacquire_does_not_start_while_the_field_is_rejected() -> None:
+    """A bridged hole while the field is being rejected (an attached magnet, say) starts no re-acquisition: the
+    first field to pass the norm and dip test again gets the usual gain dt / tau_mag, not the mean's weight that
+    would let it set the heading at once. Without a bridge (a gap) the heading is unknown, so it still does."""
+    q = (1.0, 0.0, 0.0, 0.0)
+    for bridge in (2.0, None):
+        h = _settled_heading()
+        for _ in range(100):  # a strong extra field: rejected
+            h.step(q, q, 0.01, (0.0, 40e-6, -40e-6))
+        assert h.disturbed and h.gain == 0.0
+        h.reacquire(bridge)
+        gains = []
+        for _ in range(200):  # the field is back
+            h.step(q, q, 0.01, (0.0, 20e-6, -40e-6))
+            gains.append(h.gain)
+        first = next(k for k in gains if k > 0.0)
+        if bridge is None:
+            assert first == 1.0 and h.reacq
+        else:
+            assert first == pytest.approx(0.01 / 9.0) and not h.reacq
+
+
+def test_riann_heading_sigma_after_a_hole_and_a_gap() -> None:
+    """RIANN in 9D: a bridged hole adds K_BRIDGE × the bridge's σ to the heading's σ, and each correction toward the
+    field with gain k leaves (1 − k) of it (re-acquiring, the first fields weigh a lot); after a gap (no bridge)
+    the heading is unknown (180°) until a field sets it again, and stays so while none comes."""
+    from riann_ros.estimators.riann.s8_uncertainty import FREE, HELD, USED, heading_sigma
+
+    q_a = quat.from_rotvec(np.radians([10.0, 5.0, 0.0]))
+    q_b = quat.multiply(rot_z(math.radians(2.0)), q_a)  # a small turn inside the hole: the bridge is kept
+    a, b = static(q_a, 1500, seed=1), static(q_b, 300, seed=2)
+    assert a.mag is not None and b.mag is not None
+    est = create("riann")
+    est.update_batch(a.acc, a.gyr, a.dt, a.mag)
+    s_a = est.sigma(np.ones(1500, dtype=bool))[-1]
+    gain = []
+    for i in range(100):  # the node's path, a sample at a time
+        est.update(b.acc[i], b.gyr[i], 0.3 if i == 0 else float(b.dt[i]), b.mag[i])
+        gain.append(est.heading.gain[0])
+    x_one = est.uncertainty.yaw_features[0, 1]
+    est2 = create("riann", model=est.model)
+    est2.update_batch(a.acc, a.gyr, a.dt, a.mag)
+    est2.update_batch(b.acc[:100], b.gyr[:100], np.concatenate([[0.3], b.dt[1:100]]), b.mag[:100])
+    yf, s = est2.uncertainty.yaw_features, est2.sigma(np.ones(100, dtype=bool))
+    k = np.array(gain)
+    assert (yf[:, 0] == USED).all() and k[1] > 10 * 0.01 / 9.0  # re-acquiring: far above dt / tau_mag
+    bridge = yf[0, 1] / (1.0 - k[0])  # the bridge's σ (rad) before the first field after it
+    assert math.radians(1.0) <= bridge < math.radians(1.5)  # the bridge's floor: at rest on either side
+    assert np.allclose(yf[:, 1], bridge * np.cumprod(1.0 - k), rtol=1e-6, atol=1e-12)
+    assert x_one == pytest.approx(yf[-1, 1], rel=1e-6, abs=1e-12)  # per sample as in a block
+    assert s[0, 1] > s_a[1] and s[-1, 1] < s[0, 1]
+    assert np.allclose(heading_sigma(yf, s[:, 0]), s[:, 1], rtol=1e-12)
+    # a gap: the heading is unknown until the next field; without one it stays unknown
+    est2.on_gap()
+    est2.update_batch(b.acc[100:200], b.gyr[100:200], b.dt[100:200], np.full((100, 3), np.nan))
+    assert (est2.uncertainty.yaw_features[:, 0] == FREE).all()
+    assert np.allclose(est2.sigma(np.zeros(100, dtype=bool))[:, 1], math.pi)
+    est2.update_batch(b.acc[200:], b.gyr[200:], b.dt[200:], b.mag[200:])
+    yg = est2.uncertainty.yaw_features
+    assert yg[0, 0] == USED and (yg[:, 0] != HELD).all() and yg[0, 1] == 0.0 and yg[0, 2] == 0.0
+
+
+def test_riann_heading_sigma_stays_wide_when_the_field_returns_only_after_the_reacquisition() -> None:
+    """After a gap the heading re-acquires the field for tau_mag s. A field that only comes back after that pulls
+    the heading in at dt / tau_mag, so the heading is still as unknown as after the gap: its σ stays near 180° and
+    shrinks by (1 − k) per correction, not down to the field's σ at once. (A missing field does not run the
+    re-acquisition's clock; a rejected one does.)"""
+    q_a = quat.from_rotvec(np.radians([10.0, 5.0, 0.0]))
+    a, b = static(q_a, 1000, seed=1), static(q_a, 1400, seed=2)
+    assert a.mag is not None and b.mag is not None
+    est = create("riann")
+    est.update_batch(a.acc, a.gyr, a.dt, a.mag)
+    est.on_gap()
+    mag = b.mag.copy()
+    mag[:1000] *= 2.0  # 10 s of a disturbed field (rejected): longer than tau_mag (9 s)
+    est.update_batch(b.acc, b.gyr, b.dt, mag)
+    s = np.degrees(est.sigma(np.ones(len(mag), dtype=bool))[:, 1])
+    k = np.array(est.heading.gain)
+    first = int(np.argmax(k > 0.0))  # the field accepted again (after half a second undisturbed)
+    assert 1000 < first < 1100 and np.allclose(s[:first], 180.0) and k[first] == pytest.approx(0.01 / 9.0)
+    assert s[first] > 170.0 and 120.0 < s[-1] < s[first]
+    assert s[-1] == pytest.approx(180.0 * np.prod(1.0 - k[first:]), rel=0.02)
+
+
 @pytest.mark.slow
 def test_riann_heading_after_holes_weighs_bridge_and_field_broad(broad_trial) -> None:
     """BROAD 24 with holes of 0.1–0.6 s every ~10 s (four draws): the weighted re-acquisition (bridge against

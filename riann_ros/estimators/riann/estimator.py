@@ -171,8 +171,8 @@ class RiannEstimator(AttitudeEstimator):
         qc, tilt_sd, bridges = self.handover.run(qc, delta, dts, [(r[0], r[1], r[2]) for r in x], holes)
         q = self.heading.run(qc, delta, dts, mag, bridges, tilt_sd)
         hand_sd = [h + f for h, f in zip(tilt_sd, self.handover.fresh_sd, strict=True)]  # never both non-zero
-        self.uncertainty.run(g, self.network.spread, self.bias.sigma, x, bias, dts, hand_sd, self.heading.observed,
-                             self.heading.dip)
+        self.uncertainty.run(g, self.network.spread, self.bias.sigma, x, bias, dts, hand_sd, self.heading.gain,
+                             self.heading.dip, bridges)
         return q
 
     # -- public API -----------------------------------------------------------------------------

@@ -38,7 +38,7 @@ class Heading:
         self.mag = mag
         self.psi = 0.0  # heading of the output (rad)
         self.q_prev: Quat | None = None  # the previous sample's carried network attitude
-        self.observed: list[bool] = []  # per sample of the last block: its heading was corrected by the field
+        self.gain: list[float] = []  # per sample of the last block: its gain toward the field (0: not corrected)
         self.dip: list[float] = []  # per sample of the last block: the field reference's dip (rad; 0 before a field)
 
     def restart(self, cause: Cause) -> None:
@@ -54,7 +54,7 @@ class Heading:
         """The output attitudes (n, 4), w >= 0. ``mag``: per sample its field or None; ``bridges``: samples that end
         a hole → the uncertainty of the bridge over it (deg); ``tilt_sd``: each sample's inclination uncertainty
         after a hole (deg, 0: converged)."""
-        self.observed = [False] * len(qc)
+        self.gain = [0.0] * len(qc)
         self.dip = [0.0] * len(qc)
         if len(qc) <= SCALAR_MAX:
             return np.array([self._one(i, qc[i], delta[i], dt[i], None if mag is None else mag[i], bridges.get(i),
@@ -73,7 +73,7 @@ class Heading:
         if mag is not None or self.mag.started:
             qo = qmul(about_z(self.psi), qc)
             self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), TWO_PI)
-            self.observed[i] = self.mag.observed
+            self.gain[i] = self.mag.gain
             self.dip[i] = self.mag.ref_dip
         w, x, y, z = qmul(about_z(self.psi), qc)
         n = math.sqrt(w * w + x * x + y * y + z * z)
@@ -126,7 +126,7 @@ class Heading:
             q = qc[i]
             qo = (c * q[0] - s * q[3], c * q[1] - s * q[2], c * q[2] + s * q[1], c * q[3] + s * q[0])
             psi += step(qo, delta[i], dt[i], None if mag is None else mag[i], tilt_sd[i])
-            self.observed[first + i] = self.mag.observed
+            self.gain[first + i] = self.mag.gain
             self.dip[first + i] = self.mag.ref_dip
             out[i] = psi
         return out

@@ -5,10 +5,11 @@ latency (stage 7b), tilt-compensated with the output attitude (``m_w = R(q) m``;
 ``atan2(m_w,x, m_w,y)``, zero when the horizontal field points along +y, magnetic north in ENU), tested for
 disturbance against a reference norm and dip learned online (VQF's rules and constants: then the heading follows
 the gyro only), and the heading moves toward it with the gain ``dt / tau_mag`` (the running mean during the first
-``tau_mag`` seconds). After a hole (:meth:`MagHeading.reacquire`) it re-converges as the inverse-variance weighted
-mean of the bridged heading and each field heading since, a field weighing less while the inclination is
-uncertain (``1 / (σ_m² + tan²(dip) σ_t²)``, ``σ_m`` = :data:`MAG_HEADING_SD`). The correction is a rotation about
-the world vertical: the inclination is never changed by the field. docs/magnetometer.md has the physics.
+``tau_mag`` seconds). After a hole (:meth:`MagHeading.reacquire`; not while the field is rejected) it re-converges
+as the inverse-variance weighted mean of the bridged heading and each field heading since, a field weighing less
+while the inclination is uncertain (``1 / (σ_m² + tan²(dip) σ_t²)``, ``σ_m`` = :data:`MAG_HEADING_SD`). The
+correction is a rotation about the world vertical: the inclination is never changed by the field.
+docs/magnetometer.md has the physics.
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ class MagHeading:
         self.gyr_lp = 0.0
         self.hist: list[tuple[float, float, float, float]] = []  # (dt, rotation vector of the increment)
         self.observed = False  # the last sample's heading was corrected by the field
+        self.gain = 0.0  # the last sample's gain toward the field (1: the field set the heading)
         self.reacq = False  # re-acquiring the heading after a hole (start phase without reference learning)
         self.weight = 0.0  # while re-acquiring: Σ of the weights (1/deg²) of the bridge and the fields since the hole
         self.gate = False  # the next field is tested against the bridge
@@ -74,8 +76,11 @@ class MagHeading:
         field as at the start (for ``tau_mag`` s, the weighted mean of the module docstring; without a bridge,
         the first undisturbed field sets it), keeping the learned field reference and the latency estimate.
         ``bridge_sd``: standard deviation (deg) of the heading the gyro carried across the hole; None: no
-        bridge (its weight is 0)."""
-        if self.started:
+        bridge (its weight is 0). A bridged hole while the field is rejected starts no re-acquisition: the first
+        field to pass the norm and dip test again would set the heading at once, and a field that passes after
+        being rejected is not a trusted one (an attached magnet's field passes in some orientations). The heading
+        then carries on over the bridge, and takes the field at the usual gain once it is accepted."""
+        if self.started and not (self.disturbed and bridge_sd):
             self.t, self.reacq = 0.0, True
             self.weight = 1.0 / (bridge_sd * bridge_sd) if bridge_sd else 0.0
             self.gate = self.weight > 0.0
@@ -102,7 +107,7 @@ class MagHeading:
         """The heading correction (rad, about world z) for the output ``q`` of this sample before correction;
         ``delta`` is the sample's bias-corrected gyro increment (sensor frame), ``mag`` its field or None,
         ``tilt_sd`` the standard deviation (deg) of ``q``'s inclination after a hole (0: converged)."""
-        self.observed = False
+        self.observed, self.gain = False, 0.0
         w = to_rotvec(delta)
         rate = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / dt if dt > 0.0 else 0.0
         self.gyr_lp += dt / (GYR_LP_TAU + dt) * (rate - self.gyr_lp)
@@ -125,7 +130,7 @@ class MagHeading:
             self.t, self.n = 0.0, 1
             self.norm_lp = self.ref_norm = self.cand_norm = mn
             self.dip_lp = self.ref_dip = self.cand_dip = dip
-            self.observed = True
+            self.observed, self.gain = True, 1.0
             return err
         self.t += dt
         k = dt / self.tau_mag
@@ -139,7 +144,7 @@ class MagHeading:
             k = self._disturbance(mn, dip, dt, k, initial)
         if self.reacq and k > 0.0 and not self.disturbed:  # (not the half gain after a long rejection)
             k = max(k, self._reacquire_gain(err, mw, tilt_sd))
-        self.observed = k > 0.0
+        self.observed, self.gain = k > 0.0, k
         return k * err
 
     def _reacquire_gain(self, err: float, mw: Vec, tilt_sd: float) -> float:

@@ -59,7 +59,7 @@ RESTARTS: dict[str, dict[Cause, str]] = {
         Cause.RESET: "ends",
     },
     "heading": {
-        Cause.HOLE: "kept; with a field, re-acquired weighing the bridge",
+        Cause.HOLE: "kept; with a field, re-acquired weighing the bridge (not while the field is rejected)",
         Cause.GAP: "kept; with a field, re-acquired without a bridge",
         Cause.RESET: "anew (starts at zero, or at the first field)",
     },
