@@ -1,15 +1,15 @@
 """Fit RIANN's inclination uncertainty model (stage 8) on the shared BROAD trials, and show what chose its inputs.
 
 Runs RIANN (default parameters, 9D: the inclination is the same as without a field) over each trial, keeps stage 8's
-inputs per scored sample and the inclination error ``e``, prints how the error grows with each input (the mean
-error per quintile of the input), then fits the constants of ``σ_i² = σ₀² + (k_s·s)² + (k_b·σ_b)²``
-(+ the hand-over's σ after a hole, no constant) by maximum likelihood of the 2-D Gaussian (``e²/σ_i²`` is χ² with
-2 degrees of freedom) over all scored samples, each trial weighted equally, and prints coverage and NEES per
-trial with the fitted and with the current constants (riann_ros/estimators/riann/s8_uncertainty.py). Then the
-heading: the field's σ fitted by maximum likelihood on the samples whose heading the field corrects, and the
-heading's coverage while the field corrects it and while the gyro holds it after one. Last the heading's share of a
-hole's gyro bridge (``K_BRIDGE``: the bridge's σ is a bound made for the inclination's hand-over), fitted by maximum
-likelihood on the trials run again with holes (``dropout:0.1-0.6s@10s``, one fixed draw), the field's σ as fitted.
+inputs per scored sample and the inclination error ``e``, prints how the error grows with each input (the mean error per
+quintile of the input), then fits the constants of ``σ_i² = σ₀² + (k_s·s)² + (k_b·σ_b)² + (k_r·ω)²`` (+ the hand-over's
+σ after a hole, no constant) by maximum likelihood of the 2-D Gaussian (``e²/σ_i²`` is χ² with 2 degrees of freedom)
+over all scored samples, each trial weighted equally, and prints coverage and NEES per trial with the fitted and with
+the current constants (riann_ros/estimators/riann/s8_uncertainty.py). Then the heading: the field's σ fitted by maximum
+likelihood on the samples whose heading the field corrects, and the heading's coverage while the field corrects it and
+while the gyro holds it after one. Last the heading's share of a hole's gyro bridge (``K_BRIDGE``: the bridge's σ is a
+bound made for the inclination's hand-over), fitted by maximum likelihood on the trials run again with holes
+(``dropout:0.1-0.6s@10s``, one fixed draw), the field's σ as fitted.
 
     RIANN_BROAD_DIR=... python bench/fit_uncertainty.py [--step 5] [--cache DIR]
 
@@ -35,6 +35,7 @@ from riann_ros.estimators.riann.s8_uncertainty import (
     HELD,
     K_BIAS,
     K_BRIDGE,
+    K_RATE,
     K_SPREAD,
     MAG_SD,
     SIGMA0,
@@ -134,7 +135,7 @@ def nll(logk: np.ndarray, data: dict[str, dict[str, np.ndarray]]) -> float:
 
 
 def report(k: tuple[float, ...], data: dict[str, dict[str, np.ndarray]], label: str) -> None:
-    print(f"{label}: σ₀ {np.degrees(k[0]):.3f}°, k_s {k[1]:.3f}, k_b {k[2]:.3f} s")
+    print(f"{label}: σ₀ {np.degrees(k[0]):.3f}°, k_s {k[1]:.3f}, k_b {k[2]:.3f} s, k_r {k[3]:.5f} s")
     cov_all, nees_all, n_all = 0.0, 0.0, 0
     es: list[np.ndarray] = []
     ss: list[np.ndarray] = []
@@ -211,9 +212,9 @@ def main() -> None:
         os.makedirs(a.cache, exist_ok=True)
     data = load(a.step, a.cache)
     quintiles(data)
-    x0 = np.log([SIGMA0, K_SPREAD, K_BIAS])
+    x0 = np.log([max(SIGMA0, 0.1 * np.pi / 180), K_SPREAD, K_BIAS, K_RATE])
     r = minimize(nll, x0, args=(data,), method="Powell")
-    report((SIGMA0, K_SPREAD, K_BIAS), data, "current constants")
+    report((SIGMA0, K_SPREAD, K_BIAS, K_RATE), data, "current constants")
     report(tuple(np.exp(r.x)), data, "fitted (maximum likelihood)")
     h = minimize(heading_nll, np.log([MAG_SD]), args=(data,), method="Powell")
     heading_report(MAG_SD, data, "heading, current constant")

@@ -3,16 +3,17 @@
 Read-only: it takes what the other stages already computed and never changes the attitude. Inclination: roll and
 pitch errors as an isotropic 2-D Gaussian with per-axis standard deviation ``σ_i``::
 
-    σ_i² = σ₀² + (k_s·s)² + (k_b·σ_b)² + σ_h²
+    σ_i² = σ₀² + (k_s·s)² + (k_b·σ_b)² + (k_r·ω)² + σ_h²
 
 ``s`` the spread of the ensemble copies' gravity directions at the sample's network row (stage 4: where the copies
 disagree the network is off), ``σ_b`` the bias front end's σ of its gyro-bias estimate before the sample (stage 3:
-a bias error tilts the network's estimate by about the bias times its memory, ``k_b`` seconds), ``σ_h`` the
-hand-over's σ after a hole (stage 6). The constants are fitted on the 12 shared BROAD trials by maximum likelihood
-(``bench/fit_uncertainty.py``). The rotation rate |ω − b| and the linear acceleration | |a| − g | (low-passed with
-:data:`TAU_MOTION`) were measured as candidates too and are kept as features: with the copies' spread in the model
-they add nothing (the fit gives them ~0 for the linear acceleration and lowers per-trial coverage with the rate);
-docs/riann.md, stage 8.
+a bias error tilts the network's estimate by about the bias times its memory, ``k_b`` seconds), ``ω`` the rotation
+rate |ω − b| low-passed with :data:`TAU_MOTION` (the network's error grows with the motion it has to follow, as the
+paper's fast trials show), ``σ_h`` the hand-over's σ after a hole (stage 6). The constants are fitted on the 12
+shared BROAD trials by maximum likelihood (``bench/fit_uncertainty.py``); the fit puts the constant floor σ₀ at
+zero: the bias σ's share (VQF's σ_b stays above about 0.03°/s) and the spread keep σ_i above about 0.1°. The linear
+acceleration | |a| − g | (low-passed alike) was measured as a candidate too and is kept as a feature: the fit gives
+it no weight; docs/riann.md, stage 8.
 
 Heading (:func:`heading_sigma`): without a field the heading is unobservable (:data:`YAW_FREE_SD`), and so it is
 again after a gap (no bridge) until a field corrects it. From then on ``σ_ψ² = σ_m² + (tan(dip)·σ_i)² + x²``:
@@ -48,9 +49,10 @@ G = 9.81  # m/s²
 DEG = math.pi / 180.0
 TAU_MOTION = 0.5  # s; low-pass of the rotation rate and the linear acceleration
 # the fitted constants (bench/fit_uncertainty.py on the 12 shared BROAD trials)
-SIGMA0 = 0.187 * DEG  # rad
-K_SPREAD = 0.865  # rad per rad of spread
-K_BIAS = 2.77  # s: rad of tilt per rad/s of bias σ
+SIGMA0 = 0.153 * DEG  # rad: a floor (the reference's own error and the network's at rest)
+K_SPREAD = 0.569  # rad per rad of spread
+K_BIAS = 2.82  # s: rad of tilt per rad/s of bias σ
+K_RATE = 0.00152  # s: rad of tilt per rad/s of (low-passed) rotation rate
 YAW_FREE_SD = YAW_FREE_SD_DEG * DEG  # rad: the heading without a field
 MAG_SD = 2.5 * DEG  # rad: the field heading's σ (fitted; the tilt's share and the carried error are added per sample)
 K_BRIDGE = 0.46  # the bridge's σ (a bound, stage 6) as the heading's σ (fitted on the trials with holes)
@@ -90,7 +92,7 @@ class Uncertainty:
         yrows: list[tuple[float, float, float, float]] = []
         sig: list[tuple[float, float]] = []
         sp = spread.tolist()
-        s0, ks, kb, ms, kh = SIGMA0 * SIGMA0, K_SPREAD, K_BIAS, MAG_SD * MAG_SD, K_BRIDGE
+        s0, ks, kb, kr, ms, kh = SIGMA0 * SIGMA0, K_SPREAD, K_BIAS, K_RATE, MAG_SD * MAG_SD, K_BRIDGE
         for i, xi in enumerate(x):  # plain floats: the node's hot path is a block of one
             r0, r1 = g.r0[i], g.r1[i]
             if r1 > r0:
@@ -106,7 +108,7 @@ class Uncertainty:
                 self.rate_lp, self.lin_lp, self.started = w, lin, True
             bs, h = bias_sigma[r0], tilt_sd[i] * DEG
             frows.append((self.spread, self.rate_lp, self.lin_lp, h, bs))
-            si = math.sqrt(s0 + (ks * self.spread) ** 2 + (kb * bs) ** 2 + h * h)  # = inclination_sigma
+            si = math.sqrt(s0 + (ks * self.spread) ** 2 + (kb * bs) ** 2 + (kr * self.rate_lp) ** 2 + h * h)
             y = self._yaw(gain[i], dt[i], dip[i], bs, bridges.get(i))
             yrows.append(y)
             if y[0] == FREE:  # = heading_sigma
@@ -147,10 +149,11 @@ class Uncertainty:
                 "heading sd (deg)": f"{self.sigma[-1, 1] / DEG:.1f}"}
 
 
-def inclination_sigma(f: Array, k: tuple[float, float, float] = (SIGMA0, K_SPREAD, K_BIAS)) -> Array:
-    """σ_i (rad) of feature rows ``f`` (columns :data:`FEATURES`) with the constants ``k`` (σ₀, k_s, k_b)."""
-    s0, ks, kb = k
-    return np.sqrt(s0 * s0 + (ks * f[:, 0]) ** 2 + (kb * f[:, 4]) ** 2 + f[:, 3] ** 2)
+def inclination_sigma(f: Array, k: tuple[float, float, float, float] = (SIGMA0, K_SPREAD, K_BIAS, K_RATE)) -> Array:
+    """σ_i (rad) of feature rows ``f`` (columns :data:`FEATURES`) with the constants ``k`` (σ₀, k_s, k_b, k_r); the
+    per-sample formula of :meth:`Uncertainty.run`."""
+    s0, ks, kb, kr = k
+    return np.sqrt(s0 * s0 + (ks * f[:, 0]) ** 2 + (kb * f[:, 4]) ** 2 + (kr * f[:, 1]) ** 2 + f[:, 3] ** 2)
 
 
 def heading_sigma(yf: Array, sigma_i: Array, mag_sd: float = MAG_SD, k_bridge: float = K_BRIDGE) -> Array:
