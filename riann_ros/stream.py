@@ -263,6 +263,7 @@ class EstimatorStream:
         # accepted sample of process() (None: rejected), and per sample of the last process_batch() (NaN: rejected)
         self.sigma: NDArray[np.float64] | None = None
         self.batch_sigma: NDArray[np.float64] = np.empty((0, 2))
+        self.batch_state: NDArray[np.float64] = np.empty(0)  # the estimator's heading state (NaN: it says none)
 
     def reset(self) -> None:
         """Clear the estimator and restart the stamp sequence (the node's ~/reset service)."""
@@ -323,6 +324,7 @@ class EstimatorStream:
         state = self.mag.state  # of the last sample (a restart inside the sequence must not clear it)
         out = np.full((len(stamps), 4), np.nan)
         self.batch_sigma = np.full((len(stamps), 2), np.nan)
+        self.batch_state = np.full(len(stamps), np.nan)
         accepted, dts, starts = self._gate_batch(stamps, acc, gyr)
         idx = np.flatnonzero(accepted)
         if len(idx) == 0:
@@ -378,6 +380,9 @@ class EstimatorStream:
             got: NDArray[np.bool_] = (np.zeros(len(seg), dtype=bool) if m is None
                                       else np.asarray(np.isfinite(m).all(axis=1), dtype=bool))
             self.batch_sigma[seg[:n_ok]] = self.estimator.sigma(got)[:n_ok]
+            state = self.estimator.heading_state()
+            if state is not None:
+                self.batch_state[seg[:n_ok]] = state[:n_ok]
             if m is not None or self.mag.seen:
                 ok: NDArray[np.bool_] = (np.zeros(n_ok, dtype=bool) if m is None
                                          else np.asarray(np.isfinite(m[:n_ok]).all(axis=1), dtype=bool))

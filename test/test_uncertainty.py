@@ -159,6 +159,42 @@ def test_uncertainty_sums_score_a_calibrated_sigma_as_calibrated_and_a_constant_
     assert set(nothing.result().values()) == {None}
 
 
+def test_heading_samples_are_split_by_the_state_the_estimator_reports_else_by_sigma():
+    """A third σ column is the estimator's heading state (1 corrected, 2 held, 0 unknown): where it says one the
+    split follows it, whatever the σ; NaN (nothing said) falls back on the σ (≤ 5°: corrected)."""
+    from riann_ros.evaluation.uncertainty import UncertaintySums
+
+    s_y = np.radians([3.0, 12.0, 3.0, 12.0, 12.0, 3.0])
+    state = np.array([2.0, 1.0, np.nan, np.nan, 0.0, 1.0])
+    e_y = np.radians([1.0, 1.0, 1.0, 1.0, 1.0, 10.0])  # the last one outside its 95 % region
+    sig = np.column_stack([np.full(6, np.radians(1.0)), s_y, state])
+    u = UncertaintySums()
+    u.add(np.full(6, np.radians(0.5)), e_y, sig)
+    r = u.result()
+    assert r["n_yaw_mag"] == 3 and r["n_yaw_held"] == 2  # (1, 2, 5) corrected, (0, 3) held, 4 unknown
+    assert r["yaw_cover95_mag_pct"] == pytest.approx(200.0 / 3.0) and r["yaw_cover95_held_pct"] == 100.0
+
+
+def test_riann_reports_its_heading_state_through_the_stream_the_others_none():
+    from riann_ros.stream import EstimatorStream, GateConfig
+
+    n = 600
+    acc, gyr, _ = _motion(n, seed=2)
+    mag = np.tile([0.0, 2e-5, -4e-5], (n, 1))
+    mag[:100] = mag[400:] = np.nan
+    stamps = (np.arange(n) * 1e9 / RATE).astype(np.int64) + 10**9
+    for name in ("riann", "vqf"):
+        est = create(name)
+        st = EstimatorStream(est, GateConfig())
+        st.process_batch(stamps, acc, gyr, mag)
+        if name == "vqf":
+            assert np.isnan(st.batch_state).all()
+            continue
+        assert np.array_equal(st.batch_state, est.heading_state())  # one run, no restart: the last call's
+        assert (st.batch_state[:100] == 0.0).all() and (st.batch_state[150:400] == 1.0).all()
+        assert (st.batch_state[400:] == 2.0).all()
+
+
 def test_results_rows_keep_the_uncertainty_scores_and_older_rows_read():
     from riann_ros.evaluation.compare import Comparison, Saved, compare
     from riann_ros.evaluation.compare_text import format_comparison

@@ -110,6 +110,12 @@ class AttitudeEstimator(ABC):
         not rejected as disturbed); False for 6D estimators and while the heading follows the gyro."""
         return False
 
+    def heading_state(self) -> Array | None:
+        """(n,) for the samples of the last call, what the estimator says of its heading: 1 where a field corrected
+        it, 2 where the gyro held it after one (the field rejected or absent), 0 where it is not known. None (the
+        default): the estimator does not say, and the evaluator splits the heading's samples by their σ."""
+        return None
+
     def sigma(self, fields: NDArray[np.bool_]) -> Array:
         """(n, 2): σ (rad) of the inclination per horizontal axis and of the heading, for the n samples of the last
         :meth:`update` / :meth:`update_batch` call; ``fields`` (n,): which of them carried a field the estimator

@@ -50,7 +50,7 @@ class _OfflineRun:
             est.reset()
             self.streams.append(EstimatorStream(est, gate, MagConfig(use_mag=use_mag)))
         self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
-        self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimator (N, 2)
+        self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimator (N, 3): σ, state
 
     def feed(self, rec: Recording) -> list[NDArray[np.float64]]:
         out = []
@@ -61,7 +61,7 @@ class _OfflineRun:
             stats.seconds += time.perf_counter() - t
             stats.cpu_seconds += time.process_time() - cpu
             out.append(q)
-            self.sigmas.append(stream.batch_sigma)
+            self.sigmas.append(np.column_stack([stream.batch_sigma, stream.batch_state]))
         return out
 
     def finish(self) -> list[RunStats]:
@@ -133,7 +133,8 @@ class Joined:
 
 
 def run_sigmas(run: Run, n: int) -> list[NDArray[np.float64] | None]:
-    """The σ (N, 2) of the last feed of each of the ``n`` estimators of ``run``: those of an offline run and of the
+    """The σ (N, 2; N, 3 with the estimator's heading state, offline) of the last feed of each of the ``n``
+    estimators of ``run``: those of an offline run and of the
     covariance recorded with an estimate topic or published by a live node, None for estimates that carry none
     (files, a topic without a covariance, --live-topics attitude topics)."""
     sig = getattr(run, "sigmas", None)

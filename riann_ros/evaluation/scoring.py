@@ -155,7 +155,7 @@ class Accumulator:
     def add(self, quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_], q: NDArray[np.float64],
             sigma: NDArray[np.float64] | None = None) -> None:
         """One chunk: reference (N, 4) with NaN rows (None: no reference), score mask, estimates (N, 4), and the
-        estimator's σ (N, 2) when it reports one."""
+        estimator's σ (N, 2) when it reports one, (N, 3) with its heading state (:mod:`.uncertainty`)."""
         self.n += len(q)
         if quat_ref is None:
             return

@@ -11,9 +11,11 @@ freedom:
   from a histogram of σ in :data:`BINS`, so a bag of any length is scored in bounded memory).
 
 The heading the same way with one degree of freedom (``χ²₁(0.95) = 3.841``), on samples whose ``σ_ψ`` is below the
-unobservable 180°, split into those corrected by a field (``σ_ψ`` at the field's σ) and those held by the gyro
-after one (larger). Samples without a σ (NaN) are not counted. The tables, ``--compare`` lines and the plot:
-:mod:`riann_ros.evaluation.uncertainty_report`.
+unobservable 180°, split into those corrected by a field and those held by the gyro after one (the field rejected or
+absent): by the state the estimator reports with its σ
+(:meth:`~riann_ros.estimators.base.AttitudeEstimator.heading_state`, run in process), else by the σ (at most the
+field's 5°: corrected; larger: held), as for a covariance read from a bag. Samples without a σ (NaN) are not
+counted. The tables, ``--compare`` lines and the plot: :mod:`riann_ros.evaluation.uncertainty_report`.
 """
 
 from __future__ import annotations
@@ -47,8 +49,9 @@ class UncertaintySums:
         self.yaw_nees = 0.0
 
     def add(self, e: NDArray[np.float64], e_yaw: NDArray[np.float64], sigma: NDArray[np.float64]) -> None:
-        """Scored samples: inclination and heading errors (rad) and their σ (n, 2) (NaN rows: none reported)."""
-        ok = np.isfinite(sigma).all(axis=1) & (sigma[:, 0] > 0.0)
+        """Scored samples: inclination and heading errors (rad) and their σ (n, 2) (NaN rows: none reported), or
+        (n, 3) with the estimator's heading state (1 corrected, 2 held, 0 unknown; NaN: not said)."""
+        ok = np.isfinite(sigma[:, :2]).all(axis=1) & (sigma[:, 0] > 0.0)
         if not ok.any():
             return
         e, ey, s = e[ok], e_yaw[ok], sigma[ok]
@@ -59,8 +62,13 @@ class UncertaintySums:
         b = np.searchsorted(BINS, s[:, 0])
         self.hist_n += np.bincount(b, minlength=len(self.hist_n))
         self.hist_e += np.bincount(b, weights=e, minlength=len(self.hist_e))
-        held = (s[:, 1] > MAG_SD) & (s[:, 1] < FREE_SD)
-        for key, sel in (("mag", s[:, 1] <= MAG_SD), ("held", held)):
+        known = s[:, 1] < FREE_SD
+        mag, held = known & (s[:, 1] <= MAG_SD), known & (s[:, 1] > MAG_SD)
+        if s.shape[1] > 2:  # the estimator's own state where it says one
+            said = np.isfinite(s[:, 2])
+            mag = np.where(said, known & (s[:, 2] == 1.0), mag)
+            held = np.where(said, known & (s[:, 2] == 2.0), held)
+        for key, sel in (("mag", mag), ("held", held)):
             if sel.any():
                 ry = (ey[sel] / s[sel, 1]) ** 2
                 self.yaw[key][0] += int(sel.sum())

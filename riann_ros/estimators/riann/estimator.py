@@ -146,6 +146,10 @@ class RiannEstimator(AttitudeEstimator):
             out.update(stage.diagnostics())
         return out
 
+    def heading_state(self) -> Array:
+        """Stage 8's heading state of the samples of the last call (FREE 0, USED 1, HELD 2: the base class's codes)."""
+        return self.uncertainty.yaw_features[:, 0].copy()
+
     def sigma(self, fields: np.ndarray) -> Array:
         """Stage 8's σ of the samples of the last call (``fields`` is not needed: the heading stage knows which
         samples its field corrected)."""
