@@ -27,6 +27,8 @@ isotropic 2-D Gaussian: σ per horizontal axis) and of the heading. The default 
 is a documented constant: :data:`~riann_ros.defaults.INCLINATION_SD_DEG`, and the heading
 :data:`~riann_ros.defaults.YAW_FREE_SD_DEG` without a field or
 :data:`~riann_ros.defaults.MAG_HEADING_SD_DEG` with one; RIANN reports its per-sample model.
+:meth:`AttitudeEstimator.heading_state` may say per sample whether a field corrected the heading or the gyro
+held it (the evaluator then splits the heading's uncertainty scores by it; default: not said).
 
 Parameters are described by :class:`~riann_ros.params.ParamSpec` so that the ROS node base can declare
 them (with description, range and whether they can change at run time) without knowing the estimator,
