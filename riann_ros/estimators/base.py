@@ -48,7 +48,11 @@ from riann_ros.params import ParamSpec, find
 
 Array = NDArray[np.float64]
 
-__all__ = ["Array", "AttitudeEstimator", "ParamSpec"]
+__all__ = ["HEADING_CORRECTED", "HEADING_HELD", "HEADING_UNKNOWN", "Array", "AttitudeEstimator", "ParamSpec"]
+
+
+#: the codes of :meth:`AttitudeEstimator.heading_state`
+HEADING_UNKNOWN, HEADING_CORRECTED, HEADING_HELD = 0.0, 1.0, 2.0
 
 
 class AttitudeEstimator(ABC):
@@ -113,9 +117,10 @@ class AttitudeEstimator(ABC):
         return False
 
     def heading_state(self) -> Array | None:
-        """(n,) for the samples of the last call, what the estimator says of its heading: 1 where a field corrected
-        it, 2 where the gyro held it after one (the field rejected or absent), 0 where it is not known. None (the
-        default): the estimator does not say, and the evaluator splits the heading's samples by their σ."""
+        """(n,) for the samples of the last call, what the estimator says of its heading: :data:`HEADING_CORRECTED`
+        where a field corrected it, :data:`HEADING_HELD` where the gyro held it after one (the field rejected or
+        absent), :data:`HEADING_UNKNOWN` where it is not known. None (the default): the estimator does not say, and
+        the evaluator splits the heading's samples by their σ."""
         return None
 
     def sigma(self, fields: NDArray[np.bool_]) -> Array:

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.defaults import MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
+from riann_ros.estimators.base import HEADING_CORRECTED, HEADING_HELD
 
 CHI2_2_95 = 5.991  # χ²₂(0.95)
 CHI2_1_95 = 3.841  # χ²₁(0.95)
@@ -50,7 +51,7 @@ class UncertaintySums:
 
     def add(self, e: NDArray[np.float64], e_yaw: NDArray[np.float64], sigma: NDArray[np.float64]) -> None:
         """Scored samples: inclination and heading errors (rad) and their σ (n, 2) (NaN rows: none reported), or
-        (n, 3) with the estimator's heading state (1 corrected, 2 held, 0 unknown; NaN: not said)."""
+        (n, 3) with the estimator's heading state (the codes of ``heading_state``; NaN: not said)."""
         ok = np.isfinite(sigma[:, :2]).all(axis=1) & (sigma[:, 0] > 0.0)
         if not ok.any():
             return
@@ -66,8 +67,8 @@ class UncertaintySums:
         mag, held = known & (s[:, 1] <= MAG_SD), known & (s[:, 1] > MAG_SD)
         if s.shape[1] > 2:  # the estimator's own state where it says one
             said = np.isfinite(s[:, 2])
-            mag = np.where(said, known & (s[:, 2] == 1.0), mag)
-            held = np.where(said, known & (s[:, 2] == 2.0), held)
+            mag = np.where(said, known & (s[:, 2] == HEADING_CORRECTED), mag)
+            held = np.where(said, known & (s[:, 2] == HEADING_HELD), held)
         for key, sel in (("mag", mag), ("held", held)):
             if sel.any():
                 ry = (ey[sel] / s[sel, 1]) ** 2

@@ -147,7 +147,7 @@ class RiannEstimator(AttitudeEstimator):
         return out
 
     def heading_state(self) -> Array:
-        """Stage 8's heading state of the samples of the last call (FREE 0, USED 1, HELD 2: the base class's codes)."""
+        """Stage 8's heading state of the samples of the last call (its FREE, USED, HELD are the base class's codes)."""
         return self.uncertainty.yaw_features[:, 0].copy()
 
     def sigma(self, fields: np.ndarray) -> Array:

@@ -64,12 +64,16 @@ class MagHeading:
         self.disturbed = False
         self.gyr_lp = 0.0
         self.hist: list[tuple[float, float, float, float]] = []  # (dt, rotation vector of the increment)
-        self.observed = False  # the last sample's heading was corrected by the field
-        self.gain = 0.0  # the last sample's gain toward the field (1: the field set the heading)
+        self.gain = 0.0  # the last sample's gain toward the field (0: not corrected, 1: the field set the heading)
         self.reacq = False  # re-acquiring the heading after a hole (start phase without reference learning)
         self.weight = 0.0  # while re-acquiring: Σ of the weights (1/deg²) of the bridge and the fields since the hole
         self.gate = False  # the next field is tested against the bridge
         self.latency.reset()
+
+    @property
+    def observed(self) -> bool:
+        """The last sample's heading was corrected by the field."""
+        return self.gain > 0.0
 
     def reacquire(self, bridge_sd: float | None = None) -> None:
         """A hole in the input: the rotation during it is not known well, so the heading re-converges to the
@@ -107,7 +111,7 @@ class MagHeading:
         """The heading correction (rad, about world z) for the output ``q`` of this sample before correction;
         ``delta`` is the sample's bias-corrected gyro increment (sensor frame), ``mag`` its field or None,
         ``tilt_sd`` the standard deviation (deg) of ``q``'s inclination after a hole (0: converged)."""
-        self.observed, self.gain = False, 0.0
+        self.gain = 0.0
         w = to_rotvec(delta)
         rate = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / dt if dt > 0.0 else 0.0
         self.gyr_lp += dt / (GYR_LP_TAU + dt) * (rate - self.gyr_lp)
@@ -130,7 +134,7 @@ class MagHeading:
             self.t, self.n = 0.0, 1
             self.norm_lp = self.ref_norm = self.cand_norm = mn
             self.dip_lp = self.ref_dip = self.cand_dip = dip
-            self.observed, self.gain = True, 1.0
+            self.gain = 1.0
             return err
         self.t += dt
         k = dt / self.tau_mag
@@ -144,7 +148,7 @@ class MagHeading:
             k = self._disturbance(mn, dip, dt, k, initial)
         if self.reacq and k > 0.0 and not self.disturbed:  # (not the half gain after a long rejection)
             k = max(k, self._reacquire_gain(err, mw, tilt_sd))
-        self.observed, self.gain = k > 0.0, k
+        self.gain = k
         return k * err
 
     def _reacquire_gain(self, err: float, mw: Vec, tilt_sd: float) -> float:

@@ -41,7 +41,7 @@ import math
 import numpy as np
 
 from riann_ros.defaults import YAW_FREE_SD_DEG
-from riann_ros.estimators.base import Array
+from riann_ros.estimators.base import HEADING_CORRECTED, HEADING_HELD, HEADING_UNKNOWN, Array
 from riann_ros.estimators.riann.stage import Cause, GridBlock, Row6, Vec
 
 G = 9.81  # m/s²
@@ -58,7 +58,7 @@ K_BRIDGE = 0.46  # the bridge's σ (a bound, stage 6) as the heading's σ (fitte
 FEATURES = ("spread", "rate", "lin", "handover", "bias_sigma")
 # state: FREE (no field yet, or since a gap), USED (corrected), HELD (since one); bridge, carried: x's parts (rad)
 YAW_FEATURES = ("state", "bridge", "carried", "tan_dip")
-FREE, USED, HELD = 0.0, 1.0, 2.0
+FREE, USED, HELD = HEADING_UNKNOWN, HEADING_CORRECTED, HEADING_HELD  # the codes heading_state() reports
 MAX_DIP = 80.0 * DEG  # the tilt's share of the heading error is capped at tan(80°)
 
 
