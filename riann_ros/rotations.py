@@ -2,8 +2,8 @@
 
 A node processes one sample per message, where numpy's per-call overhead costs more than the arithmetic; these
 helpers do the same math on tuples. Conventions as in :mod:`riann_ros.quaternion`: unit quaternions
-``(w, x, y, z)``, sensor → world (z up), ``v_world = q ⊗ v ⊗ q⁻¹``. Angles in radians; :data:`DEG` is one
-degree in radians (multiply degrees by it, divide radians by it).
+``(w, x, y, z)``, sensor → world (z up), ``v_world = q ⊗ v ⊗ q⁻¹``. Angles in radians (one degree:
+:data:`riann_ros.constants.DEG`).
 """
 
 from __future__ import annotations
@@ -13,7 +13,6 @@ import math
 Quat = tuple[float, float, float, float]
 Vec = tuple[float, float, float]
 
-DEG = math.pi / 180.0  # one degree in rad
 IDENTITY: Quat = (1.0, 0.0, 0.0, 0.0)
 
 

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 
+from riann_ros.constants import DEG
 from riann_ros.defaults import MAG_HEADING_SD_DEG
 from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
-from riann_ros.rotations import DEG, IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
+from riann_ros.rotations import IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
 
 # VQF's defaults (vqf 2.1.2 VQFParams): magnetic disturbance rejection
 NORM_TH = 0.1  # relative deviation of |m| from the reference
