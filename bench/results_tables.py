@@ -362,7 +362,8 @@ CANDIDATE_CONDITIONS = ("none", "jitter:10/20/30ms", "bias:3,3,0", "dropout:0.1-
 def demo_candidates() -> str:
     """Per candidate trial (as recorded, perturbed.json) and condition: each estimator's RMSE."""
     rows = load("perturbed").where(scenario="as-recorded").trials(DEMO_CANDIDATES)
-    body = [[f"`{seq}`", f"`{c}`", *(f"{rows.where(sequence=seq, perturbation=c).values(e)[0]:.2f}" for e in ESTIMATORS)]
+    body = [[f"`{seq}`", f"`{c}`", *(f"{v:.2f}" for e in ESTIMATORS
+                                      for v in rows.where(sequence=seq, perturbation=c).values(e))]
             for seq in rows.ordered("sequence") for c in CANDIDATE_CONDITIONS]
     return _table(["trial", "condition", *(NAMES[e] for e in ESTIMATORS)], body, left=2)
 
