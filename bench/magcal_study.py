@@ -141,7 +141,7 @@ def study_trial(d: dict, name: str, scen: str, model: str) -> dict:
         "trial": name, "scenario": scen, "duration_s": float(t[-1]), "converged_s": tc,
         "h_err_ut": {f"{s}s": hard_iron_error_at(on["hist"], h_true, s) for s in (10, 30, 60, 120)}
         | {"end": float(np.linalg.norm(np.array(c.hard_iron_t) / UT - h_true))},
-        "h_sd_end_ut": [v / UT for v in c.hard_iron_sd_t], "soft_err_end": s_err(s_est),
+        "h_end_ut": [v / UT for v in c.hard_iron_t], "h_sd_end_ut": [v / UT for v in c.hard_iron_sd_t], "soft_err_end": s_err(s_est),
         "windows": cal.windows, "rejected": cal.rejected, "unit_weight": cal.unit_weight,
         "cover_1sd": float(np.mean(np.abs(z) <= 1.0)), "cover_2sd": float(np.mean(np.abs(z) <= 2.0)),
         "nees": float(np.mean(z * z)),
@@ -152,6 +152,7 @@ def study_trial(d: dict, name: str, scen: str, model: str) -> dict:
                              "recorded_after_conv": rmse_deg(wrap(e_rec[after])),
                              "calibrated_from_60s": rmse_deg(wrap(e_cal[has & (t >= 60)])),
                              "recorded_from_60s": rmse_deg(wrap(e_rec[ok & (t >= 60)]))},
+        "offline_h_ut": [v / UT for v in off.calibration.hard_iron_t],
         "offline_h_err_ut": float(np.linalg.norm(np.array(off.calibration.hard_iron_t) / UT - h_true)),
         "offline_h_sd_ut": [v / UT for v in off.calibration.hard_iron_sd_t], "offline_soft_err": s_err(s_off),
         "offline_residual_rms_ut": off.residual_rms_ut, "offline_outliers": off.outliers,
