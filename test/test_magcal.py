@@ -142,19 +142,35 @@ def test_no_drift_at_rest_and_straight():
 
 @pytest.mark.slow
 def test_disturbance_windows_are_rejected():
-    rec = rich_motion(150.0, seed=5)
+    rec = rich_motion(120.0, seed=5)
     raw = distort(rec.quat_ref, H_TRUE * UT, S_SYM, noise_t=0.3e-6)
-    dist = (rec.t >= 100.0) & (rec.t < 130.0)
-    raw_d = raw + np.where(dist[:, None], np.array([25e-6, -15e-6, 10e-6]), 0.0)  # a magnet carried along
+    dist = (rec.t >= 80.0) & (rec.t < 88.0)
+    raw_d = raw + np.where(dist[:, None], np.array([25e-6, -15e-6, 10e-6]), 0.0)  # a magnet carried by for 8 s
     clean = OnlineMagCalibrator(soft_iron_model="symmetric")
     _, snaps_c = run(clean, rec, raw, every=200)
     cal = OnlineMagCalibrator(soft_iron_model="symmetric")
     _, snaps = run(cal, rec, raw_d, every=200)
-    assert cal.rejected >= 10
-    h_before = next(h for t, h in snaps if t >= 100.0)
-    h_in = [h for t, h in snaps if 100.0 <= t < 130.0]
-    assert max(np.linalg.norm(h - h_before) for h in h_in) < 0.5  # the estimate holds through the disturbance
-    assert np.linalg.norm(snaps[-1][1] - snaps_c[-1][1]) < 0.5
+    assert cal.rejected >= 5 and cal.switches == 0
+    h_before = next(h for t, h in snaps if t >= 80.0)
+    h_in = [h for t, h in snaps if 80.0 <= t < 90.0]
+    assert max(np.linalg.norm(h - h_before) for h in h_in) < 0.3  # the estimate holds through the disturbance
+    assert np.linalg.norm(snaps[-1][1] - snaps_c[-1][1]) < 0.3
+
+
+@pytest.mark.slow
+def test_a_changed_magnetic_situation_replaces_the_estimate():
+    """A magnet attached during the first 40 s of motion (BROAD trial 33 has one): the estimate learns it (it is a
+    hard iron while attached); once it is removed, the consistently rejected windows replace it."""
+    rec = rich_motion(120.0, seed=6)
+    raw = distort(rec.quat_ref, H_TRUE * UT, noise_t=0.3e-6)
+    magnet = np.array([-5.0, 8.0, 25.0])
+    raw = raw + np.where((rec.t < 40.0)[:, None], magnet * UT, 0.0)
+    cal = OnlineMagCalibrator(soft_iron_model="symmetric")
+    _, snaps = run(cal, rec, raw, every=200)
+    h_attached = next(h for t, h in snaps if t >= 39.0)
+    assert np.linalg.norm(h_attached - H_TRUE - magnet) < 1.0
+    assert cal.switches == 1 and cal.rejected >= 20
+    assert np.linalg.norm(snaps[-1][1] - H_TRUE) < 0.6
 
 
 @pytest.mark.slow

@@ -12,8 +12,8 @@ Only directions the windows know at least as well as the prior move the estimate
 
 One window's residual is ``r = r₀ + J θ`` with a noise of variance (isotropic, µT²)
 ``2 g² σ_m² + σ_env² + σ_φ² |B|²``: the two readings' noise through ``A`` (``g² = |A|²_F / 3``), the field's
-change along the path, and the gyro's error over the window (bias residual × length, scale error × angle, latency
-uncertainty × the rates at its ends) times the field's strength.
+change along the path (a part growing with the window's length), and the gyro's error over the window (bias
+residual × length, scale error × angle, latency uncertainty × the rates at its ends) times the field's strength.
 """
 
 from __future__ import annotations
@@ -26,11 +26,13 @@ from numpy.typing import NDArray
 
 from riann_ros.magcal.records import (
     DELAY_SD_S,
+    FIELD_CHANGE_RATE_UT_S,
     FIELD_CHANGE_SD_UT,
     GYRO_BIAS_RESIDUAL_SD_RAD_S,
     GYRO_SCALE_SD,
     MAG_NOISE_SD_UT,
     SOFT_IRON_MODELS,
+    SYSTEMATIC_SD_UT,
     UT,
     MagCalPrior,
     SoftIronModel,
@@ -130,7 +132,8 @@ class CalModel:
         b2 = np.sum((ws.m1_ut @ a.T - c) ** 2, axis=1)
         phi2 = ((GYRO_BIAS_RESIDUAL_SD_RAD_S * ws.duration_s) ** 2 + (GYRO_SCALE_SD * ws.angle_rad) ** 2
                 + DELAY_SD_S ** 2 * (ws.rate0_rad_s ** 2 + ws.rate1_rad_s ** 2))
-        return 2.0 * g2 * MAG_NOISE_SD_UT ** 2 + FIELD_CHANGE_SD_UT ** 2 + phi2 * b2
+        env2 = FIELD_CHANGE_SD_UT ** 2 + (FIELD_CHANGE_RATE_UT_S * ws.duration_s) ** 2
+        return 2.0 * g2 * MAG_NOISE_SD_UT ** 2 + env2 + phi2 * b2
 
     def prior(self, prior: MagCalPrior) -> tuple[Array, Array]:
         """``(Λ₀, θ₀)``: the prior's information and mean in θ."""
@@ -162,6 +165,15 @@ class CalModel:
         g[9:, self.p:] = ainv
         out = g @ cov @ g.T
         return 0.5 * (out + out.T)
+
+    def with_floor(self, cov: Array) -> Array:
+        """``cov`` with the hard iron's (``c``'s) variance raised to at least :data:`SYSTEMATIC_SD_UT`² in every
+        direction (a floor, not a sum: a saved covariance loaded as the next run's prior is not floored twice)."""
+        out = cov.copy()
+        c = out[self.p:, self.p:]
+        lam, v = np.linalg.eigh(0.5 * (c + c.T))
+        out[self.p:, self.p:] = c + (v * np.maximum(SYSTEMATIC_SD_UT ** 2 - lam, 0.0)) @ v.T
+        return out
 
     def field_jacobian_t(self, m_ut: Array, w: Array) -> Array:
         """``J_uᵀ w`` (n,) for the calibrated field ``u = A m − c`` and a sensor-frame direction ``w``: the

@@ -2,8 +2,9 @@
 
 The same windows and the same linear constraint as online (:mod:`.windows`, :mod:`.model`), solved at once with
 ``scipy.optimize.least_squares``: each window's residual whitened by its noise, the prior as pseudo-residuals, and
-a robust loss (``soft_l1``, scale 2 × the residuals' robust spread from a first, ordinary least-squares solution),
-so windows in a magnetic disturbance weigh little instead of being gated one by one. At the robust solution the
+a robust loss (Cauchy, scale 2 × the residuals' robust spread), started from the online calibration run over the
+same recording (whose gate keeps disturbed windows out, so the start is the undisturbed solution and a magnet
+carried along for a third of the recording stays an outlier). At the robust solution the
 weighted normal equations are solved once more with the online rule (only directions the windows observe at least
 as well as the prior move, :func:`~.model.posterior`); their information is divided by the variance of unit weight
 (when above 1) and by the windows' overlap (:func:`windows_of`), so the covariance is not overstated.
@@ -27,6 +28,7 @@ from scipy.optimize import least_squares
 from riann_ros import quaternion as quat
 from riann_ros.mag import plausible
 from riann_ros.magcal.model import Array, CalModel, heading_sd_bound, posterior
+from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.magcal.records import (
     CALIBRATED,
     CALIBRATED_SD_RAD,
@@ -44,7 +46,7 @@ from riann_ros.magcal.records import (
 )
 from riann_ros.magcal.windows import WindowSet
 
-ROBUST_SCALE = 2.0  # the soft_l1 loss bends at this many robust standard deviations of the whitened residuals
+ROBUST_SCALE = 2.0  # the Cauchy loss bends at this many robust standard deviations of the whitened residuals
 MAD_TO_SD = 1.4826  # a normal distribution's standard deviation per median absolute deviation
 MAX_WINDOWS = 20_000  # windows of one fit at most (the stacked system is 3 rows per window: a few MB)
 
@@ -151,18 +153,22 @@ def _whitened(model: CalModel, ws: WindowSet, theta: Array) -> tuple[Array, Arra
 
 
 def fit_windows(ws: WindowSet, overlap: float = 1.0, prior: MagCalPrior | None = None,
-                soft_iron_model: SoftIronModel = "full") -> tuple[CalModel, Array, Array, Array, int]:
+                soft_iron_model: SoftIronModel = "full", start: Array | None = None
+                ) -> tuple[CalModel, Array, Array, Array, int]:
     """``(model, θ, covariance, whitened residuals, outliers)`` of the robust batch fit (module docstring);
-    ``overlap`` (≥ 1) scales the covariance for windows that share their noise (:func:`windows_of`)."""
+    ``overlap`` (≥ 1) scales the covariance for windows that share their noise (:func:`windows_of`); ``start``: θ to
+    start from (the online estimate: its gate has kept disturbed windows out), else the ordinary least squares."""
     prior = prior or MagCalPrior()
     model = CalModel(soft_iron_model, np.asarray(prior.soft_iron).reshape(3, 3))
     lam0, theta0 = model.prior(prior)
     l0 = np.linalg.cholesky(lam0).T  # ‖l0 (θ − θ₀)‖² = (θ − θ₀)ᵀ Λ₀ (θ − θ₀)
     if not len(ws):
         return model, theta0, np.linalg.inv(lam0), np.zeros(0), 0
-    j, r0 = _whitened(model, ws, theta0)
-    theta = np.linalg.lstsq(np.vstack([j, l0]), np.r_[-r0, l0 @ theta0], rcond=None)[0]
-    j, r0 = _whitened(model, ws, theta)  # the windows' σ at the estimate
+    if start is None:
+        j, r0 = _whitened(model, ws, theta0)
+        start = np.linalg.lstsq(np.vstack([j, l0]), np.r_[-r0, l0 @ theta0], rcond=None)[0]
+    theta = start
+    j, r0 = _whitened(model, ws, theta)  # the windows' σ at the start
     z = r0 + j @ theta
     spread = max(MAD_TO_SD * float(np.median(np.abs(z - np.median(z)))), 1e-9)
     fs = ROBUST_SCALE * spread
@@ -173,14 +179,15 @@ def fit_windows(ws: WindowSet, overlap: float = 1.0, prior: MagCalPrior | None =
     def jac(_: Array) -> Array:
         return np.vstack([j, l0])
 
-    theta = least_squares(resid, theta, jac=jac, loss="soft_l1", f_scale=fs, x_scale="jac").x
+    theta = least_squares(resid, theta, jac=jac, loss="cauchy", f_scale=fs, x_scale="jac").x
     z = r0 + j @ theta
-    wts = 1.0 / np.sqrt(1.0 + (z / fs) ** 2)  # soft_l1's weight per residual
+    wts = 1.0 / (1.0 + (z / fs) ** 2)  # the Cauchy loss's weight per residual
     unit = max(1.0, float(np.sum(wts * z * z) / max(len(z) - model.n, 1)))
     # the robust weights' normal equations, with the online rule: only directions the windows observe move
     jw = j * wts[:, None]
     k = unit * overlap
     theta, cov, _ = posterior(lam0, theta0, (jw.T @ j) / k, -(jw.T @ r0) / k)
+    cov = model.with_floor(cov)
     outliers = int(np.count_nonzero((wts.reshape(-1, 3) < 0.5).any(axis=1)))
     return model, theta, cov, z, outliers
 
@@ -191,7 +198,15 @@ def fit_recording(gyr: ArrayLike, dt: ArrayLike, mag_t: ArrayLike, prior: MagCal
     """Fit hard and soft iron over a whole recording (arrays as :func:`windows_of`). ``acc`` (N, 3), when given,
     sets the tilt for the state's heading bound (its last sample); without it the bound ignores the dip."""
     ws, overlap = windows_of(gyr, dt, mag_t, delay_s)
-    model, theta, cov, z, outliers = fit_windows(ws, overlap, prior, soft_iron_model)
+    online = OnlineMagCalibrator(prior, soft_iron_model)
+    g = np.asarray(gyr, dtype=float).reshape(-1, 3)
+    d = np.asarray(dt, dtype=float).reshape(-1)
+    m_all = np.asarray(mag_t, dtype=float).reshape(-1, 3)
+    ok = plausible(m_all)
+    for inc, step, m_i, good in zip(quat.from_rotvec(g * d[:, None]).tolist(), d.tolist(), m_all.tolist(),
+                                    ok.tolist(), strict=True):
+        online.update(tuple(inc), step, tuple(m_i) if good else None, delay_s)
+    model, theta, cov, z, outliers = fit_windows(ws, overlap, prior, soft_iron_model, start=online.theta)
     a, h = model.split(theta)
     m = np.asarray(mag_t, dtype=float).reshape(-1, 3)
     m = m[plausible(m)] / UT

@@ -23,16 +23,15 @@ import math
 
 import numpy as np
 
-from riann_ros.magcal.model import Array, CalModel, heading_sd_bound, posterior
+from riann_ros.magcal.model import Array, CalModel, heading_sd_bound
 from riann_ros.magcal.records import (
     CALIBRATED,
     CALIBRATED_SD_RAD,
     CONVERGING,
-    GATE_CHI2,
     REFRESH_ANGLE_RAD,
     STATE_HEADINGS,
+    SWITCH_WINDOWS,
     UNCALIBRATED,
-    UNIT_WEIGHT_PRIOR_WINDOWS,
     UT,
     CalState,
     MagCalibration,
@@ -40,6 +39,7 @@ from riann_ros.magcal.records import (
     MagCalStatus,
     SoftIronModel,
 )
+from riann_ros.magcal.solver import InfoEstimate
 from riann_ros.magcal.windows import Window, Windower, WindowSet
 from riann_ros.rotations import Quat, Vec, rotate
 
@@ -55,16 +55,12 @@ class OnlineMagCalibrator:
         prior = prior or MagCalPrior()
         self.model = CalModel(soft_iron_model, np.asarray(prior.soft_iron).reshape(3, 3))
         self.lam0, self.theta0 = self.model.prior(prior)
-        self.lam = np.zeros_like(self.lam0)  # the windows' information (Λ_d, η_d)
-        self.eta = np.zeros(self.model.n)
-        self.theta = self.theta0
-        self.cov = np.linalg.inv(self.lam0)
-        self.observed = 0  # directions the windows have observed (model.posterior)
+        self.est = InfoEstimate(self.model, self.lam0, self.theta0)
+        self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
+        self.switches = 0  # times a candidate replaced the estimate
         self.windower = Windower()
         self.windows = prior.windows  # windows in the information (a saved calibration's included)
-        self.added = 0  # windows added in this run
         self.rejected = 0  # windows rejected as disturbed in this run
-        self.chi2 = 0.0  # Σ of the added windows' innovation distances² (the variance of unit weight)
         self.converged_after_s: float | None = None  # s after this run's first sample
         self.q: Quat | None = None  # the attitude last passed (the state's tilt)
         self.m_last: Vec | None = None  # the last raw reading (µT)
@@ -123,36 +119,60 @@ class OnlineMagCalibrator:
         ws = WindowSet.of([w])
         jw, rw = self.model.rows(ws)
         j, r0 = jw[0], rw[0]
-        a = self.model.soft_iron(self.theta)
-        c = self.theta[self.model.p:]
-        var = float(self.model.window_var(ws, a, c)[0])
-        r = r0 + j @ self.theta
-        k = max(1.0, self.unit_weight)
-        s = k * (var * np.eye(3) + j @ self.cov @ j.T)
-        d2 = float(r @ np.linalg.solve(s, r))
-        if not d2 <= GATE_CHI2:  # a disturbed field (or a non-finite one): the world-fixed model does not hold
+        est = self.est
+        var = float(self.model.window_var(ws, self.model.soft_iron(est.theta), est.theta[self.model.p:])[0])
+        d2, k = est.window(j, r0, var)
+        if est.passes(d2):
+            est.add(j, r0, var, d2, k)
+            self.windows += 1
+            self.cand = None
+        else:  # a disturbed field, or the magnetic situation changed: a candidate learns from the rejected windows
             self.rejected += 1
-            return
-        self.chi2 += d2 * k
-        self.lam = self.lam + (j.T @ j) / var
-        self.eta = self.eta - (j.T @ r0) / var
-        self.theta, self.cov, self.observed = posterior(self.lam0, self.theta0, self.lam, self.eta)
-        self.windows += 1
-        self.added += 1
+            self._candidate(j, r0, ws)
         self._cache()
         self._set_state()
 
+    def _candidate(self, j: Array, r0: Array, ws: WindowSet) -> None:
+        """A rejected window goes to the candidate (restarted from the prior when it does not fit the candidate
+        either); :data:`~.records.SWITCH_WINDOWS` consecutive rejected windows that fit one candidate replace the
+        estimate with it."""
+        cand = self.cand
+        if cand is not None:
+            var = float(self.model.window_var(ws, self.model.soft_iron(cand.theta), cand.theta[self.model.p:])[0])
+            d2, k = cand.window(j, r0, var)
+            if not cand.passes(d2):
+                cand = None
+        if cand is None:
+            cand = InfoEstimate(self.model, self.lam0, self.theta0)
+            var = float(self.model.window_var(ws, self.model.soft_iron(cand.theta), cand.theta[self.model.p:])[0])
+            d2, k = cand.window(j, r0, var)
+        cand.add(j, r0, var, d2, k)
+        self.cand = cand
+        if cand.added >= SWITCH_WINDOWS:
+            self.est, self.cand = cand, None
+            self.windows = cand.added
+            self.switches += 1
+
+    @property
+    def theta(self) -> Array:
+        """The estimate θ (:mod:`.model`)."""
+        return self.est.theta
+
+    @property
+    def added(self) -> int:
+        """Windows in the current estimate added in this run."""
+        return self.est.added
+
     @property
     def unit_weight(self) -> float:
-        """The variance of unit weight: the added windows' mean innovation distance² per degree of freedom, with
-        :data:`UNIT_WEIGHT_PRIOR_WINDOWS` windows' worth of 1 (≈ 1 when the noise model fits)."""
-        n0 = UNIT_WEIGHT_PRIOR_WINDOWS
-        return (n0 + self.chi2 / 3.0) / (n0 + self.added)
+        """The current estimate's variance of unit weight (:class:`~.solver.InfoEstimate`)."""
+        return self.est.unit_weight
 
     @property
     def covariance(self) -> Array:
-        """θ's covariance: ``Λ⁻¹`` scaled up by the variance of unit weight when it exceeds 1."""
-        return self.cov * max(1.0, self.unit_weight)
+        """θ's covariance: ``Λ⁻¹`` scaled up by the variance of unit weight when it exceeds 1, with the systematic
+        floor of the hard iron (:data:`~.records.SYSTEMATIC_SD_UT`)."""
+        return self.model.with_floor(self.est.cov * max(1.0, self.unit_weight))
 
     def _cache(self) -> None:
         a = self.model.soft_iron(self.theta)

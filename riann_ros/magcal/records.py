@@ -25,9 +25,16 @@ IDENTITY_9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 #: µT; white noise of one magnetometer reading: MEMS magnetometers' data sheets give 0.1–0.6 µT rms at 100–1000 Hz
 #: (e.g. LIS3MDL 0.32 µT, BMM150 0.3–0.6 µT, AK09916 0.15 µT/LSB); the upper end of the range.
 MAG_NOISE_SD_UT = 0.5
-#: µT; how much the world field may change between a window's two readings: indoors, steel in floors and walls
-#: makes the field vary by about a µT per metre travelled, and a window lasts about a second of motion.
-FIELD_CHANGE_SD_UT = 1.0
+#: µT; how much the world field differs between a window's two readings however short it is (the readings'
+#: positions differ by the sensor's lever arm; indoors steel makes the field vary by about a µT per metre).
+FIELD_CHANGE_SD_UT = 0.5
+#: µT/s; how fast the world field seen by a moving sensor changes: about a µT per metre indoors, at up to a metre per
+#: second of travel. A long window of slow rotation during fast translation weighs little.
+FIELD_CHANGE_RATE_UT_S = 1.0
+#: µT; the hard iron is never known better than this per axis, however many windows: the world field's
+#: non-uniformity over the space the sensor moves in (a µT per metre over half a metre) biases every window alike,
+#: so it does not average out. The reported covariance's floor (not the estimate's).
+SYSTEMATIC_SD_UT = 0.5
 #: rad/s; the gyro bias left after the bias front end (VQF's rest and motion estimate, RIANN's stage 3): a few
 #: tenths of °/s while it converges.
 GYRO_BIAS_RESIDUAL_SD_RAD_S = 0.3 * DEG
@@ -67,14 +74,20 @@ SOFT_IRON_PRIOR_SD = 0.1
 #: a window whose innovation's Mahalanobis distance² exceeds this is rejected as a magnetic disturbance: the 99.9 %
 #: quantile of χ² with 3 degrees of freedom (a consistent window is rejected once in 1000).
 GATE_CHI2 = 16.27
+#: consecutive rejected windows that agree with one another replace the estimate: the magnetic situation has changed
+#: (a payload or magnet added or removed, or the first windows were disturbed). A consistent estimate is rejected 20
+#: times in a row with probability 1e-60 at GATE_CHI2, and 20 windows of 45° determine the new one to about a µT.
+SWITCH_WINDOWS = 20
 #: windows' worth of weight of the prior value 1 in the running variance of unit weight (keeps the first few
 #: windows' scale from swinging the σ).
 UNIT_WEIGHT_PRIOR_WINDOWS = 10.0
-#: rad; the field heading's own σ (RIANN's stage 8: 2.5°). The calibration is *calibrated* once the heading error
-#: it can add at the current tilt is at most half of it: the heading's σ then grows by at most 12 %
-#: (√(1 + 0.5²)).
+#: rad; the field heading's own σ (RIANN's stage 8: 2.5°, fitted on BROAD's calibrated field, so it already holds a
+#: calibrated magnetometer's residual error). The calibration is *calibrated* once the heading error it can add at
+#: the current tilt is no larger: the heading's σ is then within √2 of a calibrated sensor's. (Its floor,
+#: SYSTEMATIC_SD_UT over the horizontal field, is 1.4° at 20 µT, 1.8° at BROAD's 16 µT: reachable where the
+#: horizontal field is above ~11.5 µT.)
 FIELD_HEADING_SD_RAD = 2.5 * DEG
-CALIBRATED_SD_RAD = 0.5 * FIELD_HEADING_SD_RAD
+CALIBRATED_SD_RAD = FIELD_HEADING_SD_RAD
 #: the per-sample heading σ refreshes its cached field covariance each time the sensor has turned this far.
 REFRESH_ANGLE_RAD = 15.0 * DEG
 #: headings sampled around the current tilt for the state's bound (every 15°).
