@@ -48,6 +48,13 @@ PRIOR_FLOOR = 1e-12  # added to the prior covariance's diagonal: keeps a saved, 
 OBSERVED_RATIO = 1.0
 
 
+_SWAP = np.eye(9)[[3 * (k % 3) + k // 3 for k in range(9)]]  # vec(Mᵀ) = _SWAP vec(M), row-major
+#: the projectors onto the symmetric and the antisymmetric 3×3 matrices (row-major vec). A rotation by a small angle
+#: α about an axis is the antisymmetric [α]×, whose Frobenius norm is √2 α: a prior of σ per axis is σ² · ANTI.
+SYM = 0.5 * (np.eye(9) + _SWAP)
+ANTI = 0.5 * (np.eye(9) - _SWAP)
+
+
 def rotation_matrix(q: tuple[float, float, float, float]) -> Array:
     """R(q) of a unit quaternion (w, x, y, z)."""
     w, x, y, z = q
@@ -143,7 +150,9 @@ class CalModel:
             scale = np.r_[np.ones(9), np.full(3, 1.0 / UT)]
             cov = np.asarray(prior.covariance).reshape(12, 12) * np.outer(scale, scale)
         else:
-            cov = np.diag(np.r_[np.full(9, prior.soft_iron_sd ** 2), np.full(3, (prior.hard_iron_sd_t / UT) ** 2)])
+            cov = np.zeros((12, 12))
+            cov[:9, :9] = prior.soft_iron_sd ** 2 * SYM + prior.misalignment_sd_rad ** 2 * ANTI
+            cov[9:, 9:] = np.eye(3) * (prior.hard_iron_sd_t / UT) ** 2
         g = np.zeros((self.n, 12))  # d θ / d (vec S, h)
         g[: self.p, :9] = self.basis.T
         for i in range(3):
@@ -216,15 +225,17 @@ def heading_sd_bound(model: CalModel, theta: Array, cov: Array, q: tuple[float, 
     return math.sqrt(worst) / fh
 
 
-def posterior(lam0: Array, theta0: Array, lam_d: Array, eta_d: Array) -> tuple[Array, Array, int]:
+def posterior(lam0: Array, theta0: Array, lam_d: Array, eta_d: Array, overstated: float = 1.0
+              ) -> tuple[Array, Array, int]:
     """``(θ, covariance, observed directions)`` of the prior ``(Λ₀, θ₀)`` and the windows' information
     ``(Λ_d, η_d)``, keeping of the data only the directions it knows at least as well as the prior
-    (:data:`OBSERVED_RATIO`): in the prior-whitened frame, the eigen-directions of ``Λ_d`` with eigenvalue ≥ 1."""
+    (:data:`OBSERVED_RATIO`): in the prior-whitened frame, the eigen-directions of ``Λ_d`` with eigenvalue ≥ 1
+    (≥ ``overstated`` when ``Λ_d`` overstates the information by that factor: overlapping windows)."""
     l0 = np.linalg.cholesky(lam0)  # Λ₀ = L Lᵀ
     li = np.linalg.inv(l0)
     m = li @ lam_d @ li.T
     lam, v = np.linalg.eigh(0.5 * (m + m.T))
-    keep = lam >= OBSERVED_RATIO
+    keep = lam >= OBSERVED_RATIO * overstated
     vs = v[:, keep]
     lam_eff = lam0 + l0 @ (vs * lam[keep]) @ vs.T @ l0.T
     eta_eff = lam0 @ theta0 + l0 @ vs @ (vs.T @ (li @ eta_d))

@@ -6,8 +6,8 @@ a robust loss (Cauchy, scale 2 × the residuals' robust spread), started from th
 same recording (whose gate keeps disturbed windows out, so the start is the undisturbed solution and a magnet
 carried along for a third of the recording stays an outlier). At the robust solution the
 weighted normal equations are solved once more with the online rule (only directions the windows observe at least
-as well as the prior move, :func:`~.model.posterior`); their information is divided by the variance of unit weight
-(when above 1) and by the windows' overlap (:func:`windows_of`), so the covariance is not overstated.
+as well as the prior move, :func:`~.model.posterior`); for the covariance their information is divided by the
+variance of unit weight (when above 1) and by the windows' overlap (:func:`windows_of`), so it is not overstated.
 
 Why not the ``magyc`` package (MAGYC, Rodríguez-Martínez et al. 2024): its 1.0.0 wheel requires ``numpy < 2``
 (this project pins numpy 2.4) and pulls gtsam, jax, jaxlib, navlib, lcm and pyproj; its batch least-squares
@@ -183,11 +183,14 @@ def fit_windows(ws: WindowSet, overlap: float = 1.0, prior: MagCalPrior | None =
     z = r0 + j @ theta
     wts = 1.0 / (1.0 + (z / fs) ** 2)  # the Cauchy loss's weight per residual
     unit = max(1.0, float(np.sum(wts * z * z) / max(len(z) - model.n, 1)))
-    # the robust weights' normal equations, with the online rule: only directions the windows observe move
+    # the robust weights' normal equations with the online rule (only directions the windows observe move): the
+    # estimate from all windows, its covariance from their information divided by the variance of unit weight and
+    # their overlap (shared noise is not independent information)
     jw = j * wts[:, None]
     k = unit * overlap
-    theta, cov, _ = posterior(lam0, theta0, (jw.T @ j) / k, -(jw.T @ r0) / k)
-    cov = model.with_floor(cov)
+    lam_d, eta_d = jw.T @ j, -(jw.T @ r0)
+    theta = posterior(lam0, theta0, lam_d, eta_d, overstated=k)[0]
+    cov = model.with_floor(posterior(lam0, theta0, lam_d / k, eta_d / k)[1])
     outliers = int(np.count_nonzero((wts.reshape(-1, 3) < 0.5).any(axis=1)))
     return model, theta, cov, z, outliers
 

@@ -68,9 +68,14 @@ MAX_STEP_S = 0.2
 #: T; the prior standard deviation of an unknown hard iron per axis: a robot's motors, battery, frame and board
 #: add "tens of µT" (Earth's field ≈ 50 µT).
 HARD_IRON_PRIOR_SD_T = 50.0 * UT
-#: the prior standard deviation of each soft-iron entry (Frobenius-isotropic): soft-iron scale errors and
-#: cross-coupling of 5–15 % and mounting misalignment of a few degrees.
+#: the prior standard deviation of the soft iron's symmetric part per entry (Frobenius-isotropic): soft-iron scale
+#: errors and cross-coupling of 5–15 %.
 SOFT_IRON_PRIOR_SD = 0.1
+#: rad; the prior standard deviation of the soft iron's antisymmetric part (a small rotation: the magnetometer's
+#: misalignment to the gyro, about each axis): a magnetometer on the IMU's board or in its package is aligned to
+#: about a degree. Only the full soft-iron model estimates it; a rotation about the only axis a ground robot turns
+#: about is unobservable (a heading offset), so this prior is what bounds it there.
+MISALIGNMENT_PRIOR_SD_RAD = 1.0 * DEG
 #: a window whose innovation's Mahalanobis distance² exceeds this is rejected as a magnetic disturbance: the 99.9 %
 #: quantile of χ² with 3 degrees of freedom (a consistent window is rejected once in 1000).
 GATE_CHI2 = 16.27
@@ -112,13 +117,15 @@ def _finite(values: tuple[float, ...], what: str, n: int) -> tuple[float, ...]:
 @dataclass(frozen=True)
 class MagCalPrior:
     """Where a calibration starts: the configured (or saved) ``h`` and ``S`` and how well they are known, either
-    as standard deviations (``hard_iron_sd_t`` per axis, ``soft_iron_sd`` per entry) or, from a saved calibration,
+    as standard deviations (``hard_iron_sd_t`` per axis, ``soft_iron_sd`` per entry of the symmetric part,
+    ``misalignment_sd_rad`` per axis of the antisymmetric part) or, from a saved calibration,
     as the full covariance (12×12 over ``(S, h)``, see the module docstring; it then replaces the two σ)."""
 
     hard_iron_t: tuple[float, float, float] = (0.0, 0.0, 0.0)
     soft_iron: tuple[float, ...] = IDENTITY_9
     hard_iron_sd_t: float = HARD_IRON_PRIOR_SD_T
     soft_iron_sd: float = SOFT_IRON_PRIOR_SD
+    misalignment_sd_rad: float = MISALIGNMENT_PRIOR_SD_RAD
     covariance: tuple[float, ...] | None = None
     windows: int = 0  # windows already in the covariance (a saved calibration's)
     converged_after_s: float | None = None  # a saved calibration's
@@ -126,7 +133,7 @@ class MagCalPrior:
     def __post_init__(self) -> None:
         object.__setattr__(self, "hard_iron_t", _finite(self.hard_iron_t, "hard_iron_t", 3))
         object.__setattr__(self, "soft_iron", _finite(self.soft_iron, "soft_iron", 9))
-        if not (self.hard_iron_sd_t > 0.0 and self.soft_iron_sd > 0.0):
+        if not (self.hard_iron_sd_t > 0.0 and self.soft_iron_sd > 0.0 and self.misalignment_sd_rad > 0.0):
             raise ValueError("prior standard deviations must be positive")
         if self.covariance is not None:
             object.__setattr__(self, "covariance", _finite(self.covariance, "covariance", 144))
