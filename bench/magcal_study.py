@@ -69,7 +69,15 @@ def prepare(path: Path) -> dict:
     idx = np.maximum.accumulate(np.where(valid, np.arange(len(q)), 0))
     q = q[idx]
     q[~np.isfinite(q).all(axis=1)] = (1.0, 0.0, 0.0, 0.0)
-    return {"rec": rec, "gyr": gyr, "dt": dt, "q": q, "score": rec.score_mask & valid, "t": rec.t}
+    d = {"rec": rec, "gyr": gyr, "dt": dt, "q": q, "score": rec.score_mask & valid, "t": rec.t}
+    return d
+
+
+def reference(d: dict, model: str, delay_s: float) -> np.ndarray:
+    """The trial's own best calibration of its recorded field (offline, all of it): the recorded field through it."""
+    fit = fit_recording(d["gyr"], d["dt"], d["rec"].mag, soft_iron_model=model, delay_s=delay_s, acc=d["rec"].acc)
+    c = fit.calibration
+    return (d["rec"].mag - np.asarray(c.hard_iron_t)) @ np.asarray(c.soft_iron).reshape(3, 3).T
 
 
 def run_online(d: dict, raw_t: np.ndarray, model: str) -> dict:
@@ -112,6 +120,12 @@ def hard_iron_error_at(hist: np.ndarray, h_true: np.ndarray, t: float) -> float:
     return float(np.linalg.norm(h - h_true))
 
 
+def coverage(delta: np.ndarray, sd: np.ndarray) -> dict:
+    z = delta / np.maximum(sd, 1e-9)
+    return {"cover_1sd": float(np.mean(np.abs(z) <= 1.0)), "cover_2sd": float(np.mean(np.abs(z) <= 2.0)),
+            "nees": float(np.mean(z * z)), "n": len(z)}
+
+
 def study_trial(d: dict, name: str, scen: str, model: str) -> dict:
     h_true, dist = SCENARIOS[scen]
     rec = d["rec"]
@@ -122,11 +136,13 @@ def study_trial(d: dict, name: str, scen: str, model: str) -> dict:
     e_rec = field_heading(q, rec.mag)
     e_raw = field_heading(q, raw)
     e_cal = field_heading(q, np.nan_to_num(on["u"]))
-    delta = wrap(e_cal - e_rec)  # the heading error the calibration causes
+    delta = wrap(e_cal - e_rec)  # the heading error the calibration causes (against the recorded field's)
+    if "u_ref" not in d:
+        d["u_ref"] = reference(d, model, on["delay_ms"] * 1e-3)
+    delta_ref = wrap(e_cal - field_heading(q, d["u_ref"]))  # against the trial's own offline calibration
     has = ok & np.isfinite(on["sd"])
     tc = cal.converged_after_s
     after = has & (t >= tc) if tc is not None else np.zeros_like(has)
-    z = delta[has] / np.maximum(on["sd"][has], 1e-9)
     c = cal.calibration()
     s_est = np.array(c.soft_iron).reshape(3, 3)
     s_true = np.linalg.inv(dist)
@@ -141,10 +157,10 @@ def study_trial(d: dict, name: str, scen: str, model: str) -> dict:
         "trial": name, "scenario": scen, "duration_s": float(t[-1]), "converged_s": tc,
         "h_err_ut": {f"{s}s": hard_iron_error_at(on["hist"], h_true, s) for s in (10, 30, 60, 120)}
         | {"end": float(np.linalg.norm(np.array(c.hard_iron_t) / UT - h_true))},
-        "h_end_ut": [v / UT for v in c.hard_iron_t], "h_sd_end_ut": [v / UT for v in c.hard_iron_sd_t], "soft_err_end": s_err(s_est),
+        "h_end_ut": [v / UT for v in c.hard_iron_t], "h_sd_end_ut": [v / UT for v in c.hard_iron_sd_t],
+        "soft_err_end": s_err(s_est),
         "windows": cal.windows, "rejected": cal.rejected, "unit_weight": cal.unit_weight,
-        "cover_1sd": float(np.mean(np.abs(z) <= 1.0)), "cover_2sd": float(np.mean(np.abs(z) <= 2.0)),
-        "nees": float(np.mean(z * z)),
+        "vs_recorded": coverage(delta[has], on["sd"][has]), "vs_offline": coverage(delta_ref[has], on["sd"][has]),
         "cal_err_rmse_deg": rmse_deg(delta[has]), "cal_sd_rms_deg": rmse_deg(on["sd"][has]),
         "heading_rmse_deg": {"recorded": rmse_deg(wrap(e_rec[ok])), "raw": rmse_deg(wrap(e_raw[ok])),
                              "calibrated": rmse_deg(wrap(e_cal[has])),
@@ -191,18 +207,48 @@ def ground_robot_study(model: str) -> dict:
 
 
 def table(rows: list[dict]) -> str:
-    head = ("| trial | scenario | conv. s | h err 30 s / 60 s / end µT | σ_h end µT | cover 1σ / 2σ | NEES "
-            "| heading RMSE ° rec / raw / cal / cal after conv / cal from 60 s (rec from 60 s) | offline h µT / S % |")
+    head = ("| trial | scenario | conv. s | h err 30 s / 60 s / end µT | σ_h end µT | 2σ cover / NEES vs recorded "
+            "| vs offline | heading RMSE ° rec / raw / cal / cal after conv / cal from 60 s (rec from 60 s) "
+            "| offline h µT / S % |")
     out = [head, "|" + "---|" * 9]
     for r in rows:
-        h, hd = r["h_err_ut"], r["heading_rmse_deg"]
+        h, hd, a, b = r["h_err_ut"], r["heading_rmse_deg"], r["vs_recorded"], r["vs_offline"]
         conv = f"{r['converged_s']:.0f}" if r["converged_s"] is not None else "—"
         out.append(f"| {r['trial'][:2]} | {r['scenario']} | {conv} | {h['30s']:.2f} / {h['60s']:.2f} / "
-                   f"{h['end']:.2f} | {max(r['h_sd_end_ut']):.2f} | {100 * r['cover_1sd']:.0f} / "
-                   f"{100 * r['cover_2sd']:.0f} % | {r['nees']:.2f} | {hd['recorded']:.2f} / {hd['raw']:.1f} / "
+                   f"{h['end']:.2f} | {max(r['h_sd_end_ut']):.2f} | {100 * a['cover_2sd']:.0f} % / {a['nees']:.2f} "
+                   f"| {100 * b['cover_2sd']:.0f} % / {b['nees']:.2f} | {hd['recorded']:.2f} / {hd['raw']:.1f} / "
                    f"{hd['calibrated']:.2f} / {hd['calibrated_after_conv']:.2f} / {hd['calibrated_from_60s']:.2f} "
                    f"({hd['recorded_from_60s']:.2f}) | {r['offline_h_err_ut']:.2f} / "
                    f"{100 * r['offline_soft_err']:.2f} |")
+    return "\n".join(out)
+
+
+def pooled(rows: list[dict]) -> str:
+    """Per scenario over the trials: coverage pooled by samples, means of the rest."""
+    out = ["| scenario | trials converged | conv. s mean | h err end µT mean / worst | 2σ cover / NEES vs recorded "
+           "(undisturbed trials) | vs offline (all) | heading RMSE ° cal from 60 s / rec from 60 s (mean) "
+           "| offline h err µT mean / worst |", "|" + "---|" * 8]
+    for scen in dict.fromkeys(r["scenario"] for r in rows):
+        rs = [r for r in rows if r["scenario"] == scen]
+        und = [r for r in rs if r["trial"][:2] < "24"]
+
+        def pool(sel: list[dict], key: str) -> tuple[float, float]:
+            n = sum(r[key]["n"] for r in sel)
+            if not n:
+                return float("nan"), float("nan")
+            return (sum(r[key]["cover_2sd"] * r[key]["n"] for r in sel) / n,
+                    sum(r[key]["nees"] * r[key]["n"] for r in sel) / n)
+
+        conv = [r["converged_s"] for r in rs if r["converged_s"] is not None]
+        he = [r["h_err_ut"]["end"] for r in rs]
+        oe = [r["offline_h_err_ut"] for r in rs]
+        c1, n1 = pool(und, "vs_recorded")
+        c2, n2 = pool(rs, "vs_offline")
+        hc = np.nanmean([r["heading_rmse_deg"]["calibrated_from_60s"] for r in rs])
+        hr = np.nanmean([r["heading_rmse_deg"]["recorded_from_60s"] for r in rs])
+        out.append(f"| {scen} | {len(conv)}/{len(rs)} | {np.mean(conv) if conv else float('nan'):.0f} | "
+                   f"{np.mean(he):.2f} / {np.max(he):.2f} | {100 * c1:.0f} % / {n1:.2f} | {100 * c2:.0f} % / "
+                   f"{n2:.2f} | {hc:.2f} / {hr:.2f} | {np.mean(oe):.2f} / {np.max(oe):.2f} |")
     return "\n".join(out)
 
 
@@ -234,6 +280,8 @@ def main(argv: list[str] | None = None) -> int:
     (out / "magcal_study.json").write_text(json.dumps(result, indent=1))
     if rows:
         print(table(rows))
+        print()
+        print(pooled(rows))
     return 0
 
 
