@@ -7,27 +7,24 @@ Usage::
 A 200 Hz stream of rich rotation (the synthetic generator) with a distorted field: per sample the calibration's
 ``update()`` (gyro increment into the window, the reading calibrated; the window's linear algebra when one closes)
 and ``heading_sd_rad()``, in plain floats as the heading stage would call them; the reference is RIANN's
-``update()`` with the field on the same samples (ensemble 4, ONNX Runtime one thread). Each figure is the best of
+``update()`` with the field on the same samples (ensemble 4). Each figure is the best of
 ``--rounds`` runs in one process; the ratio is what the calibration would add to RIANN's per-sample cost.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import time
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from riann_ros import quaternion as quat  # noqa: E402
-from riann_ros.datasets.synthetic import generate  # noqa: E402
-from riann_ros.estimators import create  # noqa: E402
-from riann_ros.magcal.online import OnlineMagCalibrator  # noqa: E402
-from riann_ros.magcal.records import UT  # noqa: E402
-from riann_ros.magcal.synthetic import distort  # noqa: E402
-from riann_ros.rotations import rotate  # noqa: E402
+from riann_ros import quaternion as quat
+from riann_ros.datasets.synthetic import generate
+from riann_ros.estimators import create
+from riann_ros.magcal.online import OnlineMagCalibrator
+from riann_ros.magcal.records import UT
+from riann_ros.magcal.synthetic import distort
+from riann_ros.rotations import rotate
 
 
 def calibration_us(rec, raw, model: str) -> tuple[float, int]:

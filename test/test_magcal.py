@@ -92,7 +92,9 @@ def test_known_hard_and_soft_iron_recovered_online_and_offline(model, s_true):
     assert np.linalg.norm(h_err) < 0.5
     assert scale_free_error(np.array(off.calibration.soft_iron).reshape(3, 3), s_true) < 0.01
     assert np.all(np.abs(h_err) < 3.0 * np.array(off.calibration.hard_iron_sd_t) / UT + 0.05)  # σ is honest
-    assert off.field_norm_sd_ut < 1.0  # the calibrated readings lie on a sphere
+    assert off.field_norm_sd_ut < 1.0  # the calibrated readings lie on a sphere ...
+    k = 3.0 / np.trace(s_true)  # ... of the field's radius at the calibration's scale (trace S = 3)
+    assert off.field_norm_ut == pytest.approx(np.linalg.norm(FIELD_ENU_T) / UT * k, rel=0.01)
 
 
 def robot():
@@ -194,6 +196,9 @@ def test_heading_sigma_covers_the_calibration_error_and_the_state_moves_on():
     z_arr = np.abs(np.array(z))
     assert states == {UNCALIBRATED, CONVERGING, CALIBRATED}
     assert cal.converged_after_s is not None and 0.0 < cal.converged_after_s < 100.0
+    st = cal.status()  # what the node's diagnostics show
+    assert st.state == CALIBRATED and st.heading_sd_bound_rad <= math.radians(2.5) and st.windows == cal.windows
+    assert all(0.0 < sd < 1e-6 for sd in st.hard_iron_sd_t) and st.converged_after_s == cal.converged_after_s
     assert np.mean(z_arr <= 2.0) > 0.9  # the error is inside 2σ at least 90 % of the time
     assert np.mean(z_arr <= 0.1) < 0.9  # and σ is not uselessly wide
 
