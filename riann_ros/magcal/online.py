@@ -67,6 +67,7 @@ class OnlineMagCalibrator:
         self.q_refresh: Quat | None = None  # the windower's attitude at the last field-covariance refresh
         self.su = (0.0,) * 6  # the cached field covariance (µT²): xx, xy, xz, yy, yz, zz
         self.bound = math.pi  # the last state bound (rad)
+        self.field_sd_ut = math.inf  # the calibrated field's σ in its worst direction (µT; refreshed with su)
         self._cache()
         self.state: CalState = UNCALIBRATED
         self._set_state()
@@ -113,6 +114,13 @@ class OnlineMagCalibrator:
         var = (s[0] * wx * wx + s[3] * wy * wy + s[5] * wz * wz
                + 2.0 * (s[1] * wx * wy + s[2] * wx * wz + s[4] * wy * wz))
         return math.sqrt(max(var, 0.0)) * UT / fh
+
+    def field_sd_t(self) -> float:
+        """T; the calibrated field's σ in its worst direction for the current orientation: how far its norm and
+        dip can be off through the calibration alone (a disturbance test against a learned reference should widen
+        its band by a few of these while the calibration converges)."""
+        self._maybe_refresh()
+        return self.field_sd_ut * UT
 
     # -------------------------------------------------------------------------------------------------- per window
     def _add_window(self, w: Window) -> None:
@@ -188,6 +196,7 @@ class OnlineMagCalibrator:
         m = np.asarray(self.m_last if self.m_last is not None else (0.0, 0.0, 0.0), dtype=float)
         su = self.model.field_covariance(m, self.covariance)
         self.su = (su[0, 0], su[0, 1], su[0, 2], su[1, 1], su[1, 2], su[2, 2])
+        self.field_sd_ut = math.sqrt(max(float(np.linalg.eigvalsh(su)[-1]), 0.0))
 
     def _set_state(self) -> None:
         if self.m_last is None:
