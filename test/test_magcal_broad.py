@@ -30,7 +30,7 @@ def test_injected_offset_is_found_online_and_offline(broad_trial, number):
     ok = np.isfinite(q).all(axis=1)
     q = q[np.maximum.accumulate(np.where(ok, np.arange(len(q)), 0))]
     inc = quat.from_rotvec(gyr * rec.dt[:, None]).tolist()
-    cal = OnlineMagCalibrator(soft_iron_model="symmetric")
+    cal = OnlineMagCalibrator()  # the default, full soft-iron model
     z = []
     for i, (d, dt, m, qi) in enumerate(zip(inc, rec.dt.tolist(), raw.tolist(), q.tolist(), strict=True)):
         u = cal.update(tuple(d), dt, tuple(m), DELAY_S, tuple(qi))  # type: ignore[arg-type]
@@ -44,6 +44,6 @@ def test_injected_offset_is_found_online_and_offline(broad_trial, number):
     assert np.linalg.norm(np.array(c.hard_iron_t) / UT - OFFSET_UT) < 1.5
     # the calibration-induced heading error (against the recorded field's) is inside 2σ most of the time
     assert np.mean(np.abs(np.array(z)) <= 2.0) > 0.85
-    off = fit_recording(gyr, rec.dt, raw, soft_iron_model="symmetric", delay_s=DELAY_S, acc=rec.acc)
+    off = fit_recording(gyr, rec.dt, raw, delay_s=DELAY_S, acc=rec.acc)
     assert np.linalg.norm(np.array(off.calibration.hard_iron_t) / UT - OFFSET_UT) < 1.5  # the acceptance
     assert off.residual_rms_ut < 3.0
