@@ -195,7 +195,7 @@ class OnlineMagCalibrator:
         self.q_refresh = qw
         m = np.asarray(self.m_last if self.m_last is not None else (0.0, 0.0, 0.0), dtype=float)
         su = self.model.field_covariance(m, self.covariance)
-        self.su = (su[0, 0], su[0, 1], su[0, 2], su[1, 1], su[1, 2], su[2, 2])
+        self.su = tuple(float(su[i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
         self.field_sd_ut = math.sqrt(max(float(np.linalg.eigvalsh(su)[-1]), 0.0))
 
     def _set_state(self) -> None:
