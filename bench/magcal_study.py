@@ -224,9 +224,11 @@ def table(rows: list[dict]) -> str:
 
 
 def pooled(rows: list[dict]) -> str:
-    """Per scenario over the trials: coverage pooled by samples, means of the rest."""
+    """Per scenario over the trials: coverage pooled by samples, means of the rest. Trial 33 is left out of the
+    coverage against its own offline calibration: that is the calibration without the magnet attached for 55 s of
+    its motion, while the online one rightly holds the magnet as hard iron while it is attached."""
     out = ["| scenario | trials converged | conv. s mean | h err end µT mean / worst | 2σ cover / NEES vs recorded "
-           "(undisturbed trials) | vs offline (all) | heading RMSE ° cal from 60 s / rec from 60 s (mean) "
+           "(undisturbed trials) | vs offline (all but 33) | heading RMSE ° cal from 60 s / rec from 60 s (mean) "
            "| offline h err µT mean / worst |", "|" + "---|" * 8]
     for scen in dict.fromkeys(r["scenario"] for r in rows):
         rs = [r for r in rows if r["scenario"] == scen]
@@ -243,7 +245,7 @@ def pooled(rows: list[dict]) -> str:
         he = [r["h_err_ut"]["end"] for r in rs]
         oe = [r["offline_h_err_ut"] for r in rs]
         c1, n1 = pool(und, "vs_recorded")
-        c2, n2 = pool(rs, "vs_offline")
+        c2, n2 = pool([r for r in rs if not r["trial"].startswith("33")], "vs_offline")
         hc = np.nanmean([r["heading_rmse_deg"]["calibrated_from_60s"] for r in rs])
         hr = np.nanmean([r["heading_rmse_deg"]["recorded_from_60s"] for r in rs])
         out.append(f"| {scen} | {len(conv)}/{len(rs)} | {np.mean(conv) if conv else float('nan'):.0f} | "

@@ -3,8 +3,9 @@
 The same windows and the same linear constraint as online (:mod:`.windows`, :mod:`.model`), solved at once with
 ``scipy.optimize.least_squares``: each window's residual whitened by its noise, the prior as pseudo-residuals, and
 a robust loss (Cauchy, scale 2 × the residuals' robust spread), started from the online calibration run over the
-same recording (whose gate keeps disturbed windows out, so the start is the undisturbed solution and a magnet
-carried along for a third of the recording stays an outlier). At the robust solution the
+same recording: the windows that fail the online gate against its final estimate are left out (disturbed, or from
+another magnetic situation: BROAD trial 33 has a magnet attached for 55 of its 125 s of motion, more windows than
+the rest; the fit, like the online calibration, is the situation at the recording's end). At the robust solution the
 weighted normal equations are solved once more with the online rule (only directions the windows observe at least
 as well as the prior move, :func:`~.model.posterior`); for the covariance their information is divided by the
 variance of unit weight (when above 1) and by the windows' overlap (:func:`windows_of`), so it is not overstated.
@@ -22,7 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from riann_ros import quaternion as quat
@@ -33,6 +34,7 @@ from riann_ros.magcal.records import (
     CALIBRATED,
     CALIBRATED_SD_RAD,
     CONVERGING,
+    GATE_CHI2,
     MAX_STEP_S,
     STATE_HEADINGS,
     UNCALIBRATED,
@@ -62,7 +64,7 @@ class OfflineFit:
     field_norm_ut: float
     field_norm_sd_ut: float
     windows: int
-    outliers: int
+    outliers: int  # windows left out (another magnetic situation) or down-weighted below half
     unit_weight: float
 
 
@@ -152,22 +154,39 @@ def _whitened(model: CalModel, ws: WindowSet, theta: Array) -> tuple[Array, Arra
     return (j * s[:, None, None]).reshape(-1, model.n), (r0 * s[:, None]).reshape(-1)
 
 
+def _consistent(model: CalModel, ws: WindowSet, theta: Array, cov: Array) -> NDArray[np.bool_]:
+    """The windows whose innovation against ``(θ, cov)`` passes the online gate."""
+    j, r0 = model.rows(ws)
+    r = r0 + j @ theta
+    var = model.window_var(ws, model.soft_iron(theta), theta[model.p:])
+    s = var[:, None, None] * np.eye(3) + j @ cov @ np.swapaxes(j, 1, 2)
+    d2 = np.einsum("wi,wi->w", r, np.linalg.solve(s, r[..., None])[..., 0])
+    return d2 <= GATE_CHI2
+
+
 def fit_windows(ws: WindowSet, overlap: float = 1.0, prior: MagCalPrior | None = None,
-                soft_iron_model: SoftIronModel = "full", start: Array | None = None
+                soft_iron_model: SoftIronModel = "full", start: tuple[Array, Array] | None = None
                 ) -> tuple[CalModel, Array, Array, Array, int]:
     """``(model, θ, covariance, whitened residuals, outliers)`` of the robust batch fit (module docstring);
-    ``overlap`` (≥ 1) scales the covariance for windows that share their noise (:func:`windows_of`); ``start``: θ to
-    start from (the online estimate: its gate has kept disturbed windows out), else the ordinary least squares."""
+    ``overlap`` (≥ 1) scales the covariance for windows that share their noise (:func:`windows_of`); ``start``:
+    ``(θ, covariance)`` to start from (the online estimate at the recording's end): windows that fail its gate are
+    left out (another magnetic situation: a magnet attached for a while), else the ordinary least squares."""
     prior = prior or MagCalPrior()
     model = CalModel(soft_iron_model, np.asarray(prior.soft_iron).reshape(3, 3))
     lam0, theta0 = model.prior(prior)
     l0 = np.linalg.cholesky(lam0).T  # ‖l0 (θ − θ₀)‖² = (θ − θ₀)ᵀ Λ₀ (θ − θ₀)
+    left_out = 0
+    if start is not None and len(ws):
+        keep = _consistent(model, ws, *start)
+        left_out = int(np.count_nonzero(~keep))
+        ws = WindowSet(*(getattr(ws, f)[keep] for f in ws.__dataclass_fields__))
     if not len(ws):
-        return model, theta0, np.linalg.inv(lam0), np.zeros(0), 0
-    if start is None:
+        return model, theta0, np.linalg.inv(lam0), np.zeros(0), left_out
+    if start is not None:
+        theta = start[0]
+    else:
         j, r0 = _whitened(model, ws, theta0)
-        start = np.linalg.lstsq(np.vstack([j, l0]), np.r_[-r0, l0 @ theta0], rcond=None)[0]
-    theta = start
+        theta = np.linalg.lstsq(np.vstack([j, l0]), np.r_[-r0, l0 @ theta0], rcond=None)[0]
     j, r0 = _whitened(model, ws, theta)  # the windows' σ at the start
     z = r0 + j @ theta
     spread = max(MAD_TO_SD * float(np.median(np.abs(z - np.median(z)))), 1e-9)
@@ -191,7 +210,7 @@ def fit_windows(ws: WindowSet, overlap: float = 1.0, prior: MagCalPrior | None =
     lam_d, eta_d = jw.T @ j, -(jw.T @ r0)
     theta = posterior(lam0, theta0, lam_d, eta_d, overstated=k)[0]
     cov = model.with_floor(posterior(lam0, theta0, lam_d / k, eta_d / k)[1])
-    outliers = int(np.count_nonzero((wts.reshape(-1, 3) < 0.5).any(axis=1)))
+    outliers = left_out + int(np.count_nonzero((wts.reshape(-1, 3) < 0.5).any(axis=1)))
     return model, theta, cov, z, outliers
 
 
@@ -209,7 +228,8 @@ def fit_recording(gyr: ArrayLike, dt: ArrayLike, mag_t: ArrayLike, prior: MagCal
     for inc, step, m_i, good in zip(quat.from_rotvec(g * d[:, None]).tolist(), d.tolist(), m_all.tolist(),
                                     ok.tolist(), strict=True):
         online.update(tuple(inc), step, tuple(m_i) if good else None, delay_s)
-    model, theta, cov, z, outliers = fit_windows(ws, overlap, prior, soft_iron_model, start=online.theta)
+    model, theta, cov, z, outliers = fit_windows(ws, overlap, prior, soft_iron_model,
+                                                 start=(online.theta, online.covariance))
     a, h = model.split(theta)
     m = np.asarray(mag_t, dtype=float).reshape(-1, 3)
     m = m[plausible(m)] / UT

@@ -65,7 +65,7 @@ class OnlineMagCalibrator:
         self.q: Quat | None = None  # the attitude last passed (the state's tilt)
         self.m_last: Vec | None = None  # the last raw reading (µT)
         self.q_refresh: Quat | None = None  # the windower's attitude at the last field-covariance refresh
-        self.su = (0.0,) * 6  # the cached field covariance (µT²): xx, xy, xz, yy, yz, zz
+        self.su: tuple[float, ...] = (0.0,) * 6  # the cached field covariance (µT²): xx, xy, xz, yy, yz, zz
         self.bound = math.pi  # the last state bound (rad)
         self.field_sd_ut = math.inf  # the calibrated field's σ in its worst direction (µT; refreshed with su)
         self._cache()
