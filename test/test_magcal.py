@@ -205,6 +205,21 @@ def test_heading_sigma_covers_the_calibration_error_and_the_state_moves_on():
     assert np.mean(z_arr <= 0.1) < 0.9  # and σ is not uselessly wide
 
 
+def test_bad_readings_are_no_readings():
+    rec = rich_motion(40.0, seed=8)
+    raw = distort(rec.quat_ref, H_TRUE * UT, noise_t=0.3e-6)
+    bad = raw.copy()
+    bad[::7] = np.nan
+    bad[3::11] = (1.0, 0.0, 0.0)  # saturated / wrong unit
+    bad[5::13] = 0.0  # dead
+    cal = OnlineMagCalibrator()
+    inc = quat.from_rotvec(rec.gyr * rec.dt[:, None]).tolist()
+    for i in range(len(rec)):
+        cal.update(tuple(inc[i]), float(rec.dt[i]), tuple(bad[i]), 0.0, tuple(rec.quat_ref[i]))  # type: ignore[arg-type]
+    assert cal.windows > 20 and cal.rejected == 0 and np.all(np.isfinite(cal.theta))
+    assert np.linalg.norm(np.array(cal.calibration().hard_iron_t) / UT - H_TRUE) < 1.5
+
+
 def test_latency_compensation():
     rec = rich_motion(90.0, seed=2)
     lag = 0.03  # s: the magnetometer saw the field 30 ms before its stamp

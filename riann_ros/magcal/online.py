@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from riann_ros.mag import USABLE_MAX_T, USABLE_MIN_T
 from riann_ros.magcal.model import Array, CalModel, heading_sd_bound
 from riann_ros.magcal.records import (
     CALIBRATED,
@@ -44,6 +45,7 @@ from riann_ros.magcal.windows import Window, Windower, WindowSet
 from riann_ros.rotations import Quat, Vec, rotate
 
 _COS_REFRESH = math.cos(0.5 * REFRESH_ANGLE_RAD)
+_MIN2_UT, _MAX2_UT = (USABLE_MIN_T / UT) ** 2, (USABLE_MAX_T / UT) ** 2  # µT²: riann_ros.mag's plausible norms
 
 
 class OnlineMagCalibrator:
@@ -76,13 +78,17 @@ class OnlineMagCalibrator:
     def update(self, delta: Quat, dt: float, mag_t: Vec | None, delay_s: float = 0.0, q: Quat | None = None
                ) -> Vec | None:
         """One sample: ``delta`` the bias-corrected gyro increment (sensor frame), ``dt`` its step (s), ``mag_t``
-        the raw field (T, finite) or None, ``delay_s`` the magnetometer's latency (s), ``q`` the attitude (sensor →
+        the raw field (T; a reading that is not finite or outside riann_ros.mag's plausible 1 µT–1 mT counts as
+        none) or None, ``delay_s`` the magnetometer's latency (s), ``q`` the attitude (sensor →
         world; only its tilt matters) when known. Returns the calibrated field (T) or None."""
         if q is not None:
             self.q = q
         m = None
         if mag_t is not None:
             m = (mag_t[0] / UT, mag_t[1] / UT, mag_t[2] / UT)
+            n2 = m[0] * m[0] + m[1] * m[1] + m[2] * m[2]
+            if not _MIN2_UT <= n2 <= _MAX2_UT:  # not finite (NaN fails too), dead or saturated: no reading
+                m = None
         w = self.windower.add(delta, dt, m, delay_s)
         if w is not None:
             self._add_window(w)
