@@ -30,7 +30,7 @@ from riann_ros.stream import EstimatorStream, GateConfig
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS  # a plausible wall-clock stamp (a zero stamp means "unstamped")
-TOL = 1e-4  # node (per message) vs EstimatorStream.process_batch, as in test_node.py
+TOL = 1e-4  # node (per message) vs EstimatorStream.process_batch, as in test_nodes_node_base.py
 
 ros = pytest.mark.ros
 

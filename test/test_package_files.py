@@ -2,7 +2,7 @@
 launch files (run against stand-in launch modules: launch_ros is not installable in the .venv).
 
 Regenerate the parameter table of docs/node.md after changing a ParamSpec:
-``RIANN_WRITE_DOCS=1 python -m pytest test/test_node_files.py -k docs``.
+``RIANN_WRITE_DOCS=1 python -m pytest test/test_package_files.py -k docs``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from riann_ros.params import ParamSpec
 DOC = ROOT / "docs" / "node.md"
 LAYOUT = ROOT / "config" / "foxglove_side_by_side.json"
 NODE_CLASSES = {"riann": RiannNode, "madgwick": MadgwickNode, "mahony": MahonyNode, "vqf": VqfNode}
-TABLE_BEGIN = "<!-- node-params:begin (generated from NODE_PARAMS by test/test_node_files.py) -->"
+TABLE_BEGIN = "<!-- node-params:begin (generated from NODE_PARAMS by test/test_package_files.py) -->"
 TABLE_END = "<!-- node-params:end -->"
 
 
@@ -76,7 +76,7 @@ def test_docs_parameter_table_is_generated_from_node_params():
     if os.environ.get("RIANN_WRITE_DOCS") == "1":
         DOC.write_text(head + TABLE_BEGIN + want + TABLE_END + tail)
         table = want
-    assert table == want, "docs/node.md parameter table is stale: RIANN_WRITE_DOCS=1 pytest test/test_node_files.py"
+    assert table == want, "docs/node.md parameter table is stale: RIANN_WRITE_DOCS=1 pytest test/test_package_files.py"
     for s in NODE_PARAMS:
         assert f"`{s.name}`" in doc
 

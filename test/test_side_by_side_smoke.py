@@ -74,7 +74,7 @@ def test_launch_file_starts_every_node_executable_with_its_config():
         assert f'"{name}_node = riann_ros.nodes.{name}_node:main"' in setup
         assert (ROOT / "config" / f"{name}.yaml").is_file()
     assert 'glob("launch/*.py")' in setup  # installed into share/riann_ros/launch
-    # riann.launch.py (its arguments and the node it starts: test_node_files.py, with stand-in launch modules)
+    # riann.launch.py (its arguments and the node it starts: test_package_files.py, with stand-in launch modules)
     tree = ast.parse((ROOT / "launch" / "riann.launch.py").read_text())
     consts = {t.id: ast.literal_eval(n.value) for n in tree.body if isinstance(n, ast.Assign)
               for t in n.targets if isinstance(t, ast.Name) and t.id in ("NODE", "PACKAGE", "INPUT_TOPIC")}

@@ -1,4 +1,4 @@
-"""The ROS-free pieces behind the node's parameter handling (fast; the DDS tests are in test_node_params.py):
+"""The ROS-free pieces behind the node's parameter handling (fast; the DDS tests are in test_nodes_parameters.py):
 ParamSpec.coerce, imu_tools' names, the --ros-args pre-pass, and the one mapping table of docs/node.md."""
 
 from __future__ import annotations
