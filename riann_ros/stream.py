@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from riann_ros.constants import NS_PER_S
 from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.mag import MagConfig, MagInput
 from riann_ros.params import ParamSpec, defaults, find
@@ -180,7 +181,7 @@ class InputGate:
         if self._last_ns is None:
             return None, START
         diff = stamp_ns - self._last_ns
-        max_dt_ns = self.config.max_dt * 1e9
+        max_dt_ns = self.config.max_dt * NS_PER_S
         if diff == 0:
             return STAMP_REPEAT, None
         if diff < 0:
@@ -219,7 +220,7 @@ class InputGate:
             sg = np.einsum("ij,ij->i", gyr, gyr)
             good = np.isfinite(sa) & np.isfinite(sg) & (np.sqrt(sa) <= cfg.max_acc) & (np.sqrt(sg) <= cfg.max_gyr)
         diffs = np.diff(stamps_ns, prepend=np.int64(self._last_ns))
-        good &= (stamps_ns != 0) & (diffs > 0) & (diffs <= cfg.max_dt * 1e9)
+        good &= (stamps_ns != 0) & (diffs > 0) & (diffs <= cfg.max_dt * NS_PER_S)
         k = len(good) if good.all() else int(np.argmin(good))
         if k == 0:
             return none

@@ -8,7 +8,7 @@ sum of sinusoids of ``τ``. All derivatives are analytic, so:
 
 * ``gyr = ω_body(t) + bias + noise`` with the exact body angular velocity
   ``ω = [φ̇ − ψ̇ sinθ, θ̇ cosφ + ψ̇ sinφ cosθ, −θ̇ sinφ + ψ̇ cosφ cosθ]``;
-* ``acc = Rᵀ (a_world + [0, 0, 9.81]) + noise`` (specific force in the sensor frame);
+* ``acc = Rᵀ (a_world + [0, 0, g]) + noise`` (specific force in the sensor frame);
 * ``quat_ref = q(t)`` exactly, at every sample; ``score_mask`` = movement phases (``e(t) > 0``).
 
 Tolerance (tested): integrating the noise-free, bias-free gyroscope with the trapezoidal rule
@@ -24,9 +24,9 @@ import numpy as np
 
 from riann_ros import defaults
 from riann_ros import quaternion as quat
+from riann_ros.constants import GRAVITY, NS_PER_S
 from riann_ros.recording import Recording
 
-GRAVITY = 9.81
 MOTIONS = ("combined", "rotation", "translation")
 SOURCE = "riann_ros synthetic generator (riann_ros.datasets.synthetic), exact ground truth"
 
@@ -151,7 +151,7 @@ def generate(
         raise ValueError("noise standard deviations must be >= 0")
     rng = np.random.default_rng(seed)
     n = int(np.floor(duration * rate)) + 1
-    stamps = np.round(start_s * 1e9 + np.arange(n) * (1e9 / rate)).astype(np.int64)
+    stamps = np.round(start_s * NS_PER_S + np.arange(n) * (NS_PER_S / rate)).astype(np.int64)
     t = (stamps - stamps[0]) * 1e-9
 
     ramp = 1.0

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from riann_ros.constants import DEG, GRAVITY, NS_PER_S
 from riann_ros.recording import Recording
 
 # Sample rate. MEMS IMUs and the attitude filters here run at tens of Hz to a few kHz (BROAD 286 Hz,
@@ -34,7 +35,6 @@ TYPICAL_RATE_HZ = 200.0
 # Consumer MEMS accelerometers add up to ≈ ±3 % sensitivity error and ±0.1 g offset per axis before
 # calibration (≈ ±1.5 m/s² on the norm at worst); 7–13 m/s² leaves room for that and for small motion in
 # the "rest" samples, while a wrong unit is off by a factor 9.8 (g ↔ m/s²).
-GRAVITY = 9.80665
 ACC_REST_MIN = 7.0
 ACC_REST_MAX = 13.0
 # "At rest" = |gyr| below this, in rad/s (≈ 11 °/s): above the zero-rate offset of uncalibrated MEMS gyros
@@ -66,7 +66,7 @@ MAG_MAX_T = 200e-6
 # Canonical units (aliases such as "µs", "dps", "m/s^2" map onto these) and their scale to ns, m/s², rad/s.
 TIME_SCALES: dict[str, float] = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}
 ACC_SCALES: dict[str, float] = {"m/s2": 1.0, "g": GRAVITY}
-GYR_SCALES: dict[str, float] = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
+GYR_SCALES: dict[str, float] = {"rad/s": 1.0, "deg/s": DEG}
 MAG_SCALES: dict[str, float] = {"T": 1.0, "mT": 1e-3, "G": 1e-4, "uT": 1e-6, "nT": 1e-9}
 _ALIASES = {"µs": "us", "m/s^2": "m/s2", "m/s²": "m/s2", "dps": "deg/s", "µT": "uT", "gauss": "G", "tesla": "T"}
 
@@ -135,7 +135,7 @@ def _fmt_duration(seconds: float) -> str:
     for unit, scale in (("s", 1.0), ("ms", 1e-3), ("µs", 1e-6)):
         if abs(seconds) >= scale:
             return f"{seconds / scale:.4g} {unit}"
-    return f"{seconds * 1e9:.4g} ns"
+    return f"{seconds * NS_PER_S:.4g} ns"
 
 
 def check_rate(rec: Recording, time_unit: str = "s") -> Finding | None:

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from riann_ros import defaults
 from riann_ros.bagio.layout import IMU_TOPIC
+from riann_ros.constants import NS_PER_S
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.magpair import NodePairing
 from riann_ros.evaluation.rest import GIVEN, Rest, RestDetector
@@ -130,8 +131,8 @@ class Source:
         for f in self.files:
             if f.label not in self._file_data:
                 self._file_data[f.label] = f.read()
-        aligners = {f.label: Aligner(iter([self._file_data[f.label]]), round(t.t_offset_s * 1e9),
-                                     round(t.max_gap_s * 1e9)) for f in self.files}
+        aligners = {f.label: Aligner(iter([self._file_data[f.label]]), round(t.t_offset_s * NS_PER_S),
+                                     round(t.max_gap_s * NS_PER_S)) for f in self.files}
         for c in self._chunks():
             recorded = dict(c.recorded) if isinstance(c, Chunk) else {}
             recorded.update({label: a.at(c.stamps_ns) for label, a in aligners.items()})
@@ -164,8 +165,8 @@ class Source:
         from riann_ros.bagio.topics import iter_topic_chunks
 
         for rec, recorded in iter_topic_chunks(self.path, self.chunk, imu_topic=t.imu, reference_topic=t.reference,
-                                               estimate_topics=t.estimates, t_offset_ns=round(t.t_offset_s * 1e9),
-                                               max_gap_ns=round(t.max_gap_s * 1e9), pair_mag=NodePairing()):
+                                               estimate_topics=t.estimates, t_offset_ns=round(t.t_offset_s * NS_PER_S),
+                                               max_gap_ns=round(t.max_gap_s * NS_PER_S), pair_mag=NodePairing()):
             yield Chunk.of(rec, recorded) if t.estimates else rec
 
 
