@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+import time
 from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 
@@ -263,9 +264,10 @@ def _main(argv: list[str] | None) -> int:
         return 2
     run = session.EvalRun(tuple(str(s) for s in args.inputs), settings, args.jobs, tuple(args.tune),
                           args.tune_scenario, "riann-bag-eval " + shlex.join(argv_list))
+    started = time.perf_counter()  # the run's time includes the start of the --live nodes
     try:
         with _runner(args) as runner:
-            rep = session.evaluate(run, runner, _hooks(args, len(run.sources)))
+            rep = session.evaluate(run, runner, _hooks(args, len(run.sources)), started)
     except ev.EvalError as exc:
         _err(str(exc))
         return 1

@@ -55,12 +55,14 @@ class Hooks:
     progress: Callable[[int], Progress | None] = field(default=_no_progress)  # the callback of a pass over N inputs
 
 
-def evaluate(run: EvalRun, runner: Runner | None = None, hooks: Hooks | None = None) -> Report:
+def evaluate(run: EvalRun, runner: Runner | None = None, hooks: Hooks | None = None,
+             started: float | None = None) -> Report:
     """Tune the grids of ``run.tune`` (each best spec is added to the estimators unless one of that label is there),
     then evaluate every input (``runner``: None in-process, or e.g. the live DDS runner); the report with the time
-    it took. EvalError when the run cannot go on; an input that fails is a failure in the report."""
+    it took since ``started`` (a ``time.perf_counter()`` value; None: now, e.g. earlier when the runner's start-up
+    counts). EvalError when the run cannot go on; an input that fails is a failure in the report."""
     hooks = hooks or Hooks()
-    t0 = time.perf_counter()
+    t0 = time.perf_counter() if started is None else started
     sources = list(run.sources)
     settings = replace(run.settings, estimators=list(run.settings.estimators))
     tuning = []
