@@ -120,11 +120,15 @@ def _candidates(value: float, unit: str, scales: Mapping[str, float], ok) -> lis
     return out
 
 
-def _scale_finding(check: str, value: float, unit: str, scales: Mapping[str, float], ok, text: str) -> Finding:
-    """The Finding of an implausible ``value`` (read as ``unit``): the first other unit of ``scales`` in which
-    ``ok`` holds is suggested, or none."""
+def _scale_finding(check: str, value: float, unit: str, scales: Mapping[str, float], plausible: tuple[float, float],
+                   text: str) -> Finding | None:
+    """None for a ``value`` (read as ``unit``) within the ``plausible`` range; else its Finding: the first other unit
+    of ``scales`` in which it would be plausible is suggested, or none."""
+    lo, hi = plausible
+    if lo <= value <= hi:
+        return None
     option = f"{check}_unit"
-    cands = _candidates(value, unit, scales, ok)
+    cands = _candidates(value, unit, scales, lambda v: lo <= v <= hi)
     if not cands:
         return Finding(check, option, value, unit, None, f"{text}: implausible in any unit ({', '.join(scales)})")
     best = cands[0][0]
@@ -191,13 +195,11 @@ def check_gravity(rec: Recording, acc_unit: str = "m/s2", gyr_scale: float = 1.0
         rest[:] = True
         over = f"all {len(rec)} samples (none at rest)"
     value = float(np.median(norm[rest]))
-    if ACC_REST_MIN <= value <= ACC_REST_MAX:
-        return None
     text = (
         f"median |acc| {value:.4g} m/s² over {over}, expected gravity ≈ {GRAVITY:.2f} "
         f"({ACC_REST_MIN:g}–{ACC_REST_MAX:g})"
     )
-    return _scale_finding("acc", value, unit, ACC_SCALES, lambda v: ACC_REST_MIN <= v <= ACC_REST_MAX, text)
+    return _scale_finding("acc", value, unit, ACC_SCALES, (ACC_REST_MIN, ACC_REST_MAX), text)
 
 
 def check_gyro(rec: Recording, gyr_unit: str = "rad/s") -> Finding | None:
@@ -206,13 +208,11 @@ def check_gyro(rec: Recording, gyr_unit: str = "rad/s") -> Finding | None:
         return None
     unit = canonical_unit(gyr_unit, GYR_SCALES)
     value = float(np.percentile(np.linalg.norm(rec.gyr, axis=1), GYR_PERCENTILE))
-    if value <= GYR_MAX_RAD_S:
-        return None
     text = (
         f"{GYR_PERCENTILE:g}th percentile of |gyr| {value:.4g} rad/s is above {GYR_MAX_RAD_S:g} rad/s "
         f"(2000 °/s, the full scale of common MEMS gyros)"
     )
-    return _scale_finding("gyr", value, unit, GYR_SCALES, lambda v: v <= GYR_MAX_RAD_S, text)
+    return _scale_finding("gyr", value, unit, GYR_SCALES, (-math.inf, GYR_MAX_RAD_S), text)
 
 
 def check_mag(rec: Recording, mag_unit: str = "T") -> Finding | None:
@@ -226,13 +226,11 @@ def check_mag(rec: Recording, mag_unit: str = "T") -> Finding | None:
         return None
     unit = canonical_unit(mag_unit, MAG_SCALES)
     value = float(np.median(norm))
-    if MAG_MIN_T <= value <= MAG_MAX_T:
-        return None
     text = (
         f"median |mag| {value * 1e6:.4g} µT, expected Earth's field 25–65 µT "
         f"({MAG_MIN_T * 1e6:g}–{MAG_MAX_T * 1e6:g} with calibration offsets)"
     )
-    return _scale_finding("mag", value, unit, MAG_SCALES, lambda v: MAG_MIN_T <= v <= MAG_MAX_T, text)
+    return _scale_finding("mag", value, unit, MAG_SCALES, (MAG_MIN_T, MAG_MAX_T), text)
 
 
 def check_units(
