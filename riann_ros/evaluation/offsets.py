@@ -114,7 +114,7 @@ class OffsetSearch:
     def add(self, stamps: NDArray[np.int64], quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_],
             qs: Sequence[NDArray[np.float64]]) -> None:
         """One chunk: stamps, reference (N, 4) with NaN rows (None: none), score mask and each estimator's estimates
-        (N, 4); scores the samples whose shifted times the reference now covers."""
+        (N, 4); scores the samples whose shifted times the reference covers with this chunk in."""
         if quat_ref is None or not len(stamps):
             return
         ref_ok = np.isfinite(quat_ref).all(axis=1)

@@ -101,7 +101,7 @@ DECLINATION_PLAUSIBLE = 0.6  # rad (34°): |declination| beyond this is rare out
 
 def _declination(v: Any, est: str) -> Translation:
     """imu_tools' declination is in radians, ours (declination_deg) in degrees: a value that is implausible in
-    radians was probably meant in degrees (this package called its parameter declination once)."""
+    radians was probably meant in degrees (the unit of ours), and the translation says so."""
     t = _radians_to("declination_deg", "magnetic declination, east positive")(v, est)
     if abs(_number("declination", v)) > DECLINATION_PLAUSIBLE:
         t.note += (f" -- WARNING: {_number('declination', v):g} rad is implausible; declination is in radians "
