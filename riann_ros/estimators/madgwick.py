@@ -41,8 +41,9 @@ Conventions shared with :mod:`riann_ros.estimators.mahony`:
   the output is always a finite unit quaternion. (Unlike ``ahrs``, a gyro sample of exactly zero still
   gets the accelerometer (and magnetometer) correction; ``ahrs`` skips such samples entirely.)
 * **speed** — the recursion cannot be vectorised over time, so the loop runs on Python floats in local
-  variables (no numpy per sample). :meth:`update` runs the very same loop with one sample, so
-  streaming and batch give identical numbers.
+  variables (no numpy per sample). One loop serves both forms (without ``mag`` every sample takes the IMU step,
+  here on the ENU state). :meth:`update` runs the very same loop with one sample, so streaming and batch give
+  identical numbers.
 """
 
 from __future__ import annotations
@@ -162,7 +163,7 @@ class MadgwickEstimator(AttitudeEstimator):
 
     def reset(self) -> None:
         self._q: Quat | None = None  # sensor → ENU, the last output
-        # (ENU state, the same attitude in NWU) as the MARG loop left them: the NWU value continues exactly
+        # (ENU state, the same attitude in NWU) as the last 9D call left them: the NWU value continues exactly
         self._marg: tuple[Quat, Quat] | None = None
         self._observed = False
         self._fe = FrontEndSlot(self.params)
@@ -191,7 +192,7 @@ class MadgwickEstimator(AttitudeEstimator):
         return as_array(out)
 
     def _nwu_state(self) -> Quat | None:
-        """The state as sensor → NWU: the MARG loop's own value if nothing changed the attitude since."""
+        """The state as sensor → NWU: the last 9D call's own value while the attitude is the one it left."""
         if self._q is None:
             return None
         if self._marg is not None and self._marg[0] == self._q:
