@@ -23,12 +23,12 @@ initialising sample when it has one (:func:`~riann_ros.estimators.common.initial
 horizontal part of the tilt-compensated field along +y). :meth:`MahonyEstimator.heading_observed` is
 True iff the last sample's correction used a field.
 
-Initialisation, per-sample dt, degenerate input and the fast loop (one for both forms: without ``mag`` every
-sample takes the IMU step) follow :mod:`riann_ros.estimators.madgwick`: initialised from the first usable accelerometer sample with
-:func:`riann_ros.quaternion.from_accelerometer`; a zero accelerometer sample gives a gyro-only step
-(bias integral frozen, the current bias still subtracted; ``ahrs`` integrates the raw gyro there, and
-skips samples whose gyro is exactly zero); the output is always a finite unit quaternion;
-:meth:`update` runs the same loop as :meth:`update_batch` with one sample.
+Initialisation, per-sample dt, degenerate input and the fast loop (one for both forms: without ``mag`` every sample
+takes the IMU step) follow :mod:`riann_ros.estimators.madgwick`: initialised from the first usable accelerometer
+sample with :func:`riann_ros.quaternion.from_accelerometer`; a zero accelerometer sample gives a gyro-only step
+(bias integral frozen, the current bias still subtracted; ``ahrs`` integrates the raw gyro there, and skips samples
+whose gyro is exactly zero); the output is always a finite unit quaternion; :meth:`update` runs the same loop as
+:meth:`update_batch` with one sample.
 """
 
 from __future__ import annotations
