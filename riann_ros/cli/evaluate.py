@@ -12,8 +12,9 @@ Inputs are rosbag2 bags in the layout of :mod:`riann_ros.bagio` (``.mcap`` files
 rosbag2 bag with ``--imu-topic`` / ``--ground-truth-topic``, or BROAD trial files (``.hdf5`` / ``.mat``).
 Full reference: docs/evaluation.md. Exit status: 0 all inputs evaluated, 1 some input failed
 (named on stderr, the others are still evaluated and reported), 130 interrupted, 2 bad command line.
-This module only parses the command line and prints; the work is in :mod:`riann_ros.evaluation`
-(and :mod:`riann_ros.cli.live` for ``--live``).
+This module turns the command line (:mod:`riann_ros.cli.evaluate_parser`) into settings and prints; the work is
+one library call, :func:`riann_ros.evaluation.session.evaluate` (with :mod:`riann_ros.cli.live`'s runner for
+``--live``).
 """
 
 from __future__ import annotations
