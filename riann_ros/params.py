@@ -2,7 +2,7 @@
 
 A :class:`ParamSpec` holds a parameter's default, description, range and whether it may change at run
 time. Every default and range is written once, in the module that owns the parameter (the estimators'
-``PARAMS``, :data:`riann_ros.stream.GATE_PARAMS`, the node base's own): the ROS node declares them from
+``PARAMS``, :data:`riann_ros.gate.GATE_PARAMS`, the node base's own): the ROS node declares them from
 the specs, the evaluator parses and tunes them through the specs.
 """
 

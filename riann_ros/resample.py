@@ -14,6 +14,7 @@ import numpy as np
 from scipy.signal import resample as fft_resample
 
 from riann_ros import quaternion as quat
+from riann_ros.constants import NS_PER_S
 from riann_ros.recording import Recording
 
 
@@ -29,7 +30,7 @@ def resample_recording(rec: Recording, rate_hz: float) -> Recording:
     pos = np.arange(n1) * (n0 / n1)  # input index of each output sample
     # stamps: the input's times at those indices (linear between its stamps, one step beyond the last)
     st = rec.stamps_ns.astype(np.float64)
-    step = (st[-1] - st[0]) / (n0 - 1) if n0 > 1 else 1e9 / rate_hz
+    step = (st[-1] - st[0]) / (n0 - 1) if n0 > 1 else NS_PER_S / rate_hz
     t1 = np.interp(pos, np.arange(n0), st - st[0], right=np.nan)
     beyond = ~np.isfinite(t1)
     t1[beyond] = st[-1] - st[0] + (pos[beyond] - (n0 - 1)) * step

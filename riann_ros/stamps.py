@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-NS_PER_S = 1_000_000_000
+from riann_ros.constants import NS_PER_S
 
 
 def to_ns(stamp: Any) -> int:

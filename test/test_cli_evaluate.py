@@ -11,7 +11,8 @@ import pytest
 from test_evaluation import synthetic
 
 from riann_ros import evaluation as ev
-from riann_ros.cli.evaluate import main, topic_for
+from riann_ros.cli.evaluate import main
+from riann_ros.evaluation.estimate_bags import topic_for
 
 bagio = pytest.importorskip("riann_ros.bagio")
 

@@ -428,7 +428,8 @@ def test_units_rate_both_candidates_and_none() -> None:
 
 
 def test_units_gravity_and_gyro() -> None:
-    from riann_ros.datasets.units import GRAVITY, check_units
+    from riann_ros.constants import GRAVITY
+    from riann_ros.datasets.units import check_units
 
     (f,) = check_units(_imu(acc_scale=1 / GRAVITY))  # g read as m/s²
     assert (f.check, f.flag, f.suggest) == ("acc", "--acc-unit", "g") and f.value == pytest.approx(1.0, abs=0.01)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from riann_ros import quaternion as quat
-from riann_ros.datasets.synthetic import GRAVITY, MOTIONS, generate, integrate_gyr
+from riann_ros.constants import GRAVITY
+from riann_ros.datasets.synthetic import MOTIONS, generate, integrate_gyr
 
 
 @pytest.mark.parametrize("motion", MOTIONS)

@@ -206,7 +206,7 @@ def test_magnetic_offset_and_disturbance_window():
 def test_perturb_help_and_errors_name_every_kind():
     """The --perturb help and the parse error are built from the definitions: every kind the parser accepts (and the
     :points and :lowpass suffixes) has example forms there, each of which parses, and the CLI help shows every one."""
-    from riann_ros.cli.evaluate import build_parser
+    from riann_ros.cli.evaluate_parser import build_parser
     from riann_ros.evaluation.perturb import conditions
 
     kinds = set(conditions._PARSERS)

@@ -15,9 +15,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from riann_ros import stream as stm
+from riann_ros import gate as gt
 from riann_ros.estimators import create
-from riann_ros.stream import EstimatorStream, GateConfig, InputGate
+from riann_ros.gate import GateConfig, InputGate
+from riann_ros.stream import EstimatorStream
 
 ESTIMATORS = ("riann", "madgwick", "mahony", "vqf")
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -103,12 +104,12 @@ def test_gate_invariants(seq, cfg, with_receive):
         recv = 10**15 + i * 1_000_000 if with_receive else None
         r = gate.check(int(s), a, g, recv)
         if not r.accepted:
-            assert r.reason in stm.REJECT_REASONS
+            assert r.reason in gt.REJECT_REASONS
             continue
         assert np.isfinite(a).all() and np.isfinite(g).all()
         assert np.linalg.norm(a) <= cfg.max_acc and np.linalg.norm(g) <= cfg.max_gyr
         if r.reset is not None:
-            assert r.reset in stm.RESET_CAUSES
+            assert r.reset in gt.RESET_CAUSES
             assert r.dt == 1.0 / cfg.nominal_rate
         else:
             assert 0.0 < r.dt <= cfg.max_dt  # never a zero, negative or over-long dt

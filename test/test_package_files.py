@@ -82,13 +82,13 @@ def test_docs_parameter_table_is_generated_from_node_params():
 
 
 def test_docs_name_the_topics_diagnostics_and_bad_input_reasons():
-    from riann_ros import stream as st
+    from riann_ros import gate as gt
 
     doc = DOC.read_text()
     for cls in NODE_CLASSES.values():
         for topic in (cls.ATTITUDE_TOPIC, cls.IMU_TOPIC, rpy_topic(cls.ATTITUDE_TOPIC)):
             assert f"`{topic}`" in doc, topic
-    for reason in st.REJECT_REASONS:
+    for reason in gt.REJECT_REASONS:
         assert f"`rejected {reason}`" in doc, reason
     for key in ("stamp rate measured (Hz)", "nominal_rate (Hz)", "world frame"):
         assert key in doc

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from riann_ros import stream as st
+from riann_ros import gate as gt
 from riann_ros.estimators import create
-from riann_ros.stream import EstimatorStream, GateConfig, InputGate
+from riann_ros.gate import GateConfig, InputGate
+from riann_ros.stream import EstimatorStream
 
 A = (0.0, 0.0, 9.81)
 G = (0.0, 0.0, 0.0)
@@ -17,17 +18,17 @@ S = 1_000_000_000
 def test_first_sample_uses_nominal_rate_then_stamp_differences():
     gate = InputGate(GateConfig(nominal_rate=200.0))
     r0 = gate.check(S, A, G)
-    assert r0.accepted and r0.reset == st.START and r0.dt == pytest.approx(0.005)
+    assert r0.accepted and r0.reset == gt.START and r0.dt == pytest.approx(0.005)
     r1 = gate.check(S + 3_000_000, A, G)
     assert r1.accepted and r1.reset is None and r1.dt == pytest.approx(0.003)
 
 
 @pytest.mark.parametrize(("acc", "gyr", "reason"), [
-    ((np.nan, 0.0, 9.8), G, st.NON_FINITE),
-    (A, (0.0, np.inf, 0.0), st.NON_FINITE),
-    ((3000.0, 0.0, 0.0), G, st.OUT_OF_RANGE),
-    (A, (0.0, 0.0, 250.0), st.OUT_OF_RANGE),
-    ((1e200, 0.0, 0.0), G, st.OUT_OF_RANGE),  # finite but overflows when squared
+    ((np.nan, 0.0, 9.8), G, gt.NON_FINITE),
+    (A, (0.0, np.inf, 0.0), gt.NON_FINITE),
+    ((3000.0, 0.0, 0.0), G, gt.OUT_OF_RANGE),
+    (A, (0.0, 0.0, 250.0), gt.OUT_OF_RANGE),
+    ((1e200, 0.0, 0.0), G, gt.OUT_OF_RANGE),  # finite but overflows when squared
 ])
 def test_bad_samples_are_rejected_without_touching_the_stamp_sequence(acc, gyr, reason):
     gate = InputGate()
@@ -41,22 +42,22 @@ def test_bad_samples_are_rejected_without_touching_the_stamp_sequence(acc, gyr, 
 def test_repeats_backwards_gaps_and_clock_jumps():
     gate = InputGate(GateConfig(max_dt=0.5))
     gate.check(S, A, G)
-    assert gate.check(S, A, G).reason == st.STAMP_REPEAT
-    assert gate.check(S - 1_000_000, A, G).reason == st.STAMP_BACKWARDS
+    assert gate.check(S, A, G).reason == gt.STAMP_REPEAT
+    assert gate.check(S - 1_000_000, A, G).reason == gt.STAMP_BACKWARDS
     r = gate.check(S + 2 * S, A, G)  # 2 s later: gap
-    assert r.accepted and r.reset == st.GAP and r.dt == pytest.approx(0.01)
+    assert r.accepted and r.reset == gt.GAP and r.dt == pytest.approx(0.01)
     r = gate.check(S, A, G)  # 2 s back: clock jump (bag loop)
-    assert r.accepted and r.reset == st.CLOCK_JUMP
-    assert gate.resets[st.GAP] == gate.resets[st.CLOCK_JUMP] == 1
+    assert r.accepted and r.reset == gt.CLOCK_JUMP
+    assert gate.resets[gt.GAP] == gate.resets[gt.CLOCK_JUMP] == 1
 
 
 def test_zero_stamps_use_receive_time_and_warn_once():
     gate = InputGate()
     r = gate.check(0, A, G, receive_ns=5 * S)
-    assert r.accepted and r.stamp_ns == 5 * S and r.warnings == [st.ZERO_STAMP]
+    assert r.accepted and r.stamp_ns == 5 * S and r.warnings == [gt.ZERO_STAMP]
     r = gate.check(0, A, G, receive_ns=5 * S + 10_000_000)
     assert r.accepted and r.warnings == []
-    assert gate.check(0, A, G).reason == st.NO_STAMP  # offline: no receive time, nothing to use
+    assert gate.check(0, A, G).reason == gt.NO_STAMP  # offline: no receive time, nothing to use
 
 
 def test_acc_in_g_warns_once_after_the_check_window():
@@ -64,7 +65,7 @@ def test_acc_in_g_warns_once_after_the_check_window():
     warned = []
     for i in range(200):
         warned += gate.check(S + i * 10_000_000, (0.0, 0.0, 1.0), G).warnings
-    assert warned == [st.ACC_IN_G]
+    assert warned == [gt.ACC_IN_G]
     ok = InputGate()
     assert not any(ok.check(S + i * 10_000_000, A, G).warnings for i in range(200))
 
@@ -110,7 +111,7 @@ def test_reset_restarts_the_stamp_sequence():
     s.process(S, A, G)
     s.reset()
     q, r = s.process(S - 1_000_000, A, G)  # would be "backwards" without the reset
-    assert q is not None and r.reset == st.START
+    assert q is not None and r.reset == gt.START
 
 
 def test_batch_gate_fast_path_matches_per_sample_checks():

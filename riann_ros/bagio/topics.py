@@ -38,6 +38,7 @@ from riann_ros import quaternion as quat
 from riann_ros.bagio.cdr import _f64_cols, _stamps_of, _uniform_rows
 from riann_ros.bagio.layout import IMU_TOPIC, IMU_TYPE, BagError, typestore
 from riann_ros.bagio.read import MagPairer, _opened, iter_imu_chunks
+from riann_ros.constants import NS_PER_S
 from riann_ros.recording import Recording
 from riann_ros.stamps import to_ns
 
@@ -231,7 +232,7 @@ class Aligner:
     as far as needed and forgetting those no later sample can use."""
 
     def __init__(self, batches: Iterator[tuple[NDArray[np.int64], NDArray[np.float64]]], offset_ns: int = 0,
-                 max_gap_ns: int = round(defaults.MAX_GAP_S * 1e9), width: int = 4) -> None:
+                 max_gap_ns: int = round(defaults.MAX_GAP_S * NS_PER_S), width: int = 4) -> None:
         self.batches = batches  # rows of ``width`` columns: a quaternion, then σ columns (``sigma=True`` reads)
         self.offset = int(offset_ns)
         self.gap = int(max_gap_ns)
@@ -285,7 +286,7 @@ class Aligner:
 
 def iter_topic_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_topic: str = IMU_TOPIC,
                       reference_topic: str | None = None, estimate_topics: Sequence[str] = (), t_offset_ns: int = 0,
-                      max_gap_ns: int = round(defaults.MAX_GAP_S * 1e9), pair_mag: MagPairer | None = None,
+                      max_gap_ns: int = round(defaults.MAX_GAP_S * NS_PER_S), pair_mag: MagPairer | None = None,
                       ) -> Iterator[tuple[Recording, dict[str, NDArray[np.float64]]]]:
     """The IMU samples of ``imu_topic`` in chunks, each with the orientations of ``estimate_topics`` at its samples
     (stamps + ``t_offset_ns``; (N, 6): w, x, y, z and the σ of :func:`sigmas_of_variances`) and, with

@@ -31,8 +31,8 @@ from riann_ros.bagio.layout import (
     typestore,
 )
 from riann_ros.bagio.read import _info_from, _opened, bag_compression, bag_storage
+from riann_ros.constants import NS_PER_S
 from riann_ros.recording import Recording
-from riann_ros.stamps import NS_PER_S
 
 _MSGDEFS: dict[str, tuple[str, str]] = {}
 

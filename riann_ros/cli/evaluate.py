@@ -12,159 +12,28 @@ Inputs are rosbag2 bags in the layout of :mod:`riann_ros.bagio` (``.mcap`` files
 rosbag2 bag with ``--imu-topic`` / ``--ground-truth-topic``, or BROAD trial files (``.hdf5`` / ``.mat``).
 Full reference: docs/evaluation.md. Exit status: 0 all inputs evaluated, 1 some input failed
 (named on stderr, the others are still evaluated and reported), 130 interrupted, 2 bad command line.
-This module only parses the command line and prints; the work is in :mod:`riann_ros.evaluation`
-(and :mod:`riann_ros.cli.live` for ``--live``).
+This module turns the command line (:mod:`riann_ros.cli.evaluate_parser`) into settings and prints; the work is
+one library call, :func:`riann_ros.evaluation.session.evaluate` (with :mod:`riann_ros.cli.live`'s runner for
+``--live``).
 """
 
 from __future__ import annotations
 
 import argparse
-import re
 import shlex
 import sys
 import time
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 
-from riann_ros import defaults
 from riann_ros import evaluation as ev
 from riann_ros.cli import eval_inputs
+from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, build_parser
 from riann_ros.cli.pipe import quiet_when_reader_leaves
-from riann_ros.evaluation import outdir, perturb, report, seq_tables
+from riann_ros.evaluation import outdir, perturb, report, seq_tables, session
+from riann_ros.evaluation.estimate_bags import write_estimate_bags
+from riann_ros.evaluation.runners import Runner
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
-from riann_ros.mag import USE_MAG_CHOICES
-
-DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="riann-bag-eval",
-        description="Attitude RMSE (e_α, heading ignored) of RIANN, Madgwick, Mahony and VQF on dataset bags, "
-        "in the paper's restrictive / partially-restrictive / realistic scenarios and as recorded; also of "
-        "estimates your own filter recorded in a bag (--estimate-topic), on any rosbag2 bag (--imu-topic, "
-        "--ground-truth-topic); --compare of two saved runs. Full reference: docs/evaluation.md.",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="estimator specs: NAME[:PARAM=VALUE[:PARAM=VALUE...]], comma-separated, e.g.\n"
-        "  riann,madgwick:beta=0.033,madgwick:beta=0.1,mahony:kp=1:ki=0.3,vqf:tau_acc=3\n"
-        "tuning specs: NAME (default grid) or NAME:PARAM=V1/V2/...[:PARAM=...], e.g. mahony:kp=0.5/1/2:ki=0/0.3\n"
-        "exit status: 0 ok, 1 some input failed, 2 usage error, 130 interrupted",
-    )
-    p.add_argument("inputs", nargs="*", metavar="BAG",
-                   help="bags (.mcap, .db3, bag directories) or BROAD .hdf5/.mat files (CSV files and EuRoC folders: "
-                   "convert them with riann-bag-convert first; the error message says how)")
-    c = p.add_argument_group("comparing saved runs (evo_res style)")
-    c.add_argument("--compare", nargs=2, metavar=("A", "B"), type=Path, default=None,
-                   help="no evaluation: the difference B − A of two saved runs (results.json files or their --out "
-                   "folders; the same run twice to compare rows of one run), paired by sequence and by every axis "
-                   "(estimator, scenario, perturbation, rate) on which A and B share a value; per group "
-                   "(mean/median/max) and per sequence; with --out, compare.csv and the plot compare_rmse")
-    c.add_argument("--select-a", action="append", default=[], metavar="FIELD=VALUE",
-                   help="--compare: only A's rows with this value (estimator, scenario, perturbation, rate, sequence, "
-                   "dataset, sensors; estimator: a table label or a spec as for -e). Repeatable")
-    c.add_argument("--select-b", action="append", default=[], metavar="FIELD=VALUE",
-                   help="--compare: only B's rows with this value (as --select-a)")
-    c.add_argument("--select", action="append", default=[], metavar="FIELD=VALUE",
-                   help="--compare: only rows with this value, on both sides")
-    c.add_argument("--metric", default="rmse",
-                   help="--compare: the per-sequence statistic compared: rmse (default), mean, median, std, min, max "
-                   "of e_α; heading_rmse, heading_mean, …, total_rmse, … where scored")
-    p.add_argument("--estimators", "-e", default=None,
-                   help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed); 'none': only "
-                   "the --estimate-topic estimates")
-    p.add_argument("--scenarios", "-s", default=None,
-                   help="restrictive, partially-restrictive, realistic, as-recorded; paper (the first three) or all "
-                   "(comma-separated; default all, or as-recorded with --estimators none)")
-    b = p.add_argument_group("bags from elsewhere and estimates recorded in them (evo style)")
-    b.add_argument("--estimate-topic", action="append", default=[], metavar="TOPIC",
-                   help="score the orientation a filter recorded on TOPIC in the bag (sensor_msgs/Imu, geometry_msgs/"
-                   "QuaternionStamped, PoseStamped, PoseWithCovarianceStamped, nav_msgs/Odometry) against the ground "
-                   "truth, beside the built-in estimators; matched to the IMU samples by stamp (slerp between "
-                   "messages). It is the recording as it is, so it is scored in the as-recorded scenario only, at the "
-                   "native rate, unperturbed. Repeatable")
-    b.add_argument("--estimate-file", action="append", default=[], metavar="FILE[:LABEL]",
-                   help="score an estimate in a trajectory file against the input's reference, like --estimate-topic: "
-                   "a TUM file (t tx ty tz qx qy qz qw, t in seconds, no header) or a CSV with a header: a time "
-                   "column (timestamp, time or t; its unit in the name, e.g. time[s], else ns) and qw, qx, qy, qz "
-                   "(the IMU frame's orientation in a z-up world, as the reference). Labelled LABEL (default: the "
-                   "file name). With several inputs a file belongs to the input whose name starts its name "
-                   "(run1.mcap: run1_vins.tum). Repeatable")
-    b.add_argument("--estimate-cols", default=None, metavar="TIME,QW,QX,QY,QZ",
-                   help="the --estimate-file columns, for a CSV in another layout")
-    b.add_argument("--estimate-time-unit", default=None, choices=("s", "ms", "us", "ns"),
-                   help="the time unit of the --estimate-file stamps (default: from the column name; ns for a CSV, "
-                   "s for a TUM file)")
-    b.add_argument("--t-offset", type=float, default=0.0, metavar="SECONDS",
-                   help="added to the stamps of the --estimate-topic and --estimate-file estimates before matching "
-                   "(default 0)")
-    b.add_argument("--max-gap", type=float, default=defaults.MAX_GAP_S, metavar="SECONDS",
-                   help="slerp a topic between two messages at most this far apart, hold the nearer one within half "
-                   "of it, else the sample has none (not scored, counted as unestimated); --estimate-topic and "
-                   f"--ground-truth-topic (default {defaults.MAX_GAP_S})")
-    b.add_argument("--ground-truth-topic", default=None, metavar="TOPIC",
-                   help="the reference orientation for bags not written by riann-bag-convert (geometry_msgs/"
-                   "PoseStamped, nav_msgs/Odometry, geometry_msgs/QuaternionStamped, sensor_msgs/Imu, …; the IMU "
-                   "frame's orientation in a z-up world), interpolated onto the IMU stamps")
-    b.add_argument("--imu-topic", default=None, metavar="TOPIC",
-                   help="the sensor_msgs/Imu topic of the samples (default /imu/data_raw); without a "
-                   "/ground_truth/scored topic every sample is scored")
-    p.add_argument("--perturb", "-p", action="append", default=[], metavar="CONDITION",
-                   help="evaluate under this condition too: 'none', or perturbations joined with '+': "
-                   f"{perturb.accepted_forms()}; repeatable, each one a condition (default: none; "
-                   "docs/evaluation.md#perturbations)")
-    p.add_argument("--salvage", action="store_true",
-                   help="score the readable part of a bag cut off by a crash or a full disk (an MCAP file without its "
-                   "footer, a sqlite3 file shorter than its header says), saying how much was recovered; without it "
-                   "such a bag fails with that count (riann-bag-convert --repair writes a repaired copy)")
-    p.add_argument("--rest", default=None, metavar="START:END",
-                   help="the initial rest, in seconds from the first sample, whose mean gyro is removed as the turn-on "
-                   "bias (default: detected from the signals before the first scored sample; see docs/evaluation.md)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random gyro bias (per sequence: seed + name)")
-    p.add_argument("--rates", default=None,
-                   help="comma-separated sampling rates (Hz) to resample to (FFT), e.g. 50,100,200,500; 'native' "
-                   "keeps the recording's own rate. Native-rate runs stream bags chunk by chunk (memory independent "
-                   "of the bag length); resampled runs load each input whole")
-    p.add_argument("--jobs", "-j", type=int, default=1, help="parallel worker processes (one per sequence)")
-    p.add_argument("--out", "-o", type=Path, default=None,
-                   help="write results.csv, results.json, report.md and plots (PNG+SVG) here (a folder already holding "
-                   "results needs --force)")
-    p.add_argument("--heading", action="store_true",
-                   help="also score heading and total error of 6D runs (heading drift; 9D runs always have them)")
-    p.add_argument("--use-mag", choices=USE_MAG_CHOICES, default="auto",
-                   help="the magnetometer (/imu/mag), as the nodes' use_mag: auto (default) = every estimator runs 9D "
-                   "where the recording has a field, with heading and total error in the results; false = 6D only")
-    p.add_argument("--offset-steps", type=int, default=ev.OFFSET_STEPS, metavar="STEPS",
-                   help="per estimator and sequence, find the time offset (added to the estimate stamps, like "
-                   "--t-offset) that minimises the e_α RMSE within ± STEPS steps of the stream, and the RMSE there; "
-                   f"in the as-recorded scenario, else the first (default {ev.OFFSET_STEPS}; 0: no search)")
-    p.add_argument("--plot-perturb", action="append", default=[], metavar="CONDITION",
-                   help="plot this --perturb condition (repeatable; default: every condition, each in panels or "
-                   "figures of its own)")
-    p.add_argument("--plot-sequence", default=None,
-                   help="sequence for the error-over-time and roll/pitch plots (default: the first input); 'all': "
-                   "a roll/pitch figure (roll_pitch_<sequence>) for every sequence")
-    p.add_argument("--no-plots", action="store_true", help="skip the plots")
-    p.add_argument("--tune", action="append", default=[], metavar="SPEC",
-                   help="grid-search this estimator's parameters for the lowest mean RMSE on the inputs and add "
-                   "the best one to the comparison (repeatable)")
-    p.add_argument("--tune-scenario", default=ev.REALISTIC, help="scenario the tuning minimises (default realistic)")
-    p.add_argument("--write-estimates", type=Path, default=None, metavar="DIR",
-                   help="write a copy of every input bag into DIR with each estimator's output as "
-                   "geometry_msgs/QuaternionStamped topics /eval/<scenario>/<estimator> (first scenario)")
-    p.add_argument("--force", action="store_true",
-                   help="replace an earlier run's result files in --out (results.csv/json, report.md, compare.csv and "
-                   "the plots; nothing else in the folder) and existing --write-estimates bags; without it an --out "
-                   "folder holding results is refused before any work")
-    p.add_argument("--live", action="store_true",
-                   help="replay the inputs over DDS to the estimator nodes (started by the tool, or already running "
-                   "with --live-topics) instead of running them in-process; reports messages lost")
-    p.add_argument("--speed", type=float, default=1.0, help="--live replay speed factor (0: as fast as the nodes go)")
-    p.add_argument("--live-input", default=None,
-                   help="--live: IMU topic to publish on (default /riann_eval/imu/data_raw)")
-    p.add_argument("--live-topics", default=None,
-                   help="--live with nodes already running: their attitude topics, comma-separated, in --estimators "
-                   "order (they must subscribe to --live-input)")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
-    return p
 
 
 def parse_rates(text: str | None) -> list[float | None]:
@@ -180,12 +49,6 @@ def parse_rates(text: str | None) -> list[float | None]:
                 raise ValueError(f"rate must be positive, got {item}")
             out.append(r)
     return out or [None]
-
-
-def topic_for(scenario: str, label: str) -> str:
-    """A valid ROS topic name for an estimator's estimates."""
-    clean = re.sub(r"[^A-Za-z0-9_]+", "_", label).strip("_")
-    return f"/eval/{scenario.replace('-', '_')}/{clean}"
 
 
 def _err(msg: str) -> None:
@@ -244,56 +107,39 @@ def _plotted(args: argparse.Namespace) -> tuple[str, ...] | None:
     return labels
 
 
-def _tune(args: argparse.Namespace, sources: list[str], settings: ev.EvalSettings) -> list[dict]:
-    tuning = []
-    for text in args.tune:
-        if not args.quiet:
-            _err(f"tuning {text} on {len(sources)} input(s), {args.tune_scenario}")
-        best, spec = ev.tune(text, sources, args.tune_scenario, settings.seed, args.jobs,
-                             report.Progress(len(sources), enabled=not args.quiet), like=settings)
-        tuning.append(best)
-        b = best["best"]
-        _err(f"tuned {best['estimator']} on {args.tune_scenario}: {b['label']} mean {b['mean']:.2f}° "
-             f"max {b['max']:.2f}°")
-        if spec.label not in {e.label for e in settings.estimators}:
-            settings.estimators.append(spec)
-    return tuning
-
-
-def _evaluate(args: argparse.Namespace, sources: list[str], settings: ev.EvalSettings) -> list[ev.SequenceResult]:
-    progress = report.Progress(len(sources), enabled=not args.quiet)
+def _runner(args: argparse.Namespace) -> AbstractContextManager[Runner | None]:
+    """The live DDS runner of --live (ev.EvalError without ROS), else none (in-process)."""
     if not args.live:
-        return ev.evaluate_sources(sources, settings, args.jobs, progress)
+        return nullcontext()
     try:
         from riann_ros.cli.live import LiveRunner
     except ImportError as exc:
         raise ev.EvalError(f"--live needs rclpy and the ROS message packages: {exc}") from exc
     topics = args.live_topics.split(",") if args.live_topics else None
-    with LiveRunner(speed=args.speed, input_topic=args.live_input, topics=topics) as runner:
-        return ev.evaluate_sources(sources, settings, 1, progress, runner)
+    return LiveRunner(speed=args.speed, input_topic=args.live_input, topics=topics)
+
+
+def _hooks(args: argparse.Namespace, n_sources: int) -> session.Hooks:
+    """The run's messages on stderr: each tuning search (unless --quiet) and its best; the progress bar."""
+
+    def tuning(text: str) -> None:
+        if not args.quiet:
+            _err(f"tuning {text} on {n_sources} input(s), {args.tune_scenario}")
+
+    def tuned(best: dict) -> None:
+        b = best["best"]
+        _err(f"tuned {best['estimator']} on {args.tune_scenario}: {b['label']} mean {b['mean']:.2f}° "
+             f"max {b['max']:.2f}°")
+
+    return session.Hooks(tuning=tuning, tuned=tuned, progress=lambda n: report.Progress(n, enabled=not args.quiet))
 
 
 def _write_estimates(results: list[ev.SequenceResult], out_dir: Path, force: bool) -> list[str]:
-    from riann_ros import bagio
-
-    problems = []
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for res in results:
-        if res.error or not res.estimates:
-            continue
-        src = Path(res.source)
-        if src.suffix.lower() in ev.BROAD_SUFFIXES:
-            problems.append(f"{src}: --write-estimates needs a bag input, not a dataset file")
-            continue
-        est = res.estimates
-        topics = {topic_for(est["scenario"], lbl): (est["stamps"], q) for lbl, q in est["quats"].items()}
-        dst = out_dir / src.name
-        try:
-            bagio.write_estimates(src, dst, topics, force=force)
-            print(f"wrote {dst} ({', '.join(topics)})", file=sys.stderr)
-        except Exception as exc:
-            problems.append(f"{src}: cannot write estimates to {dst}: {exc}")
-    return problems
+    """--write-estimates: the bags written (stdout is for tables: stderr), and the problems."""
+    done = write_estimate_bags(results, out_dir, force)
+    for dst, topics in done.written:
+        print(f"wrote {dst} ({', '.join(topics)})", file=sys.stderr)
+    return done.problems
 
 
 def _print_summary(rep: report.Report, live: bool) -> None:
@@ -417,16 +263,16 @@ def _main(argv: list[str] | None) -> int:
     except (ValueError, ImportError) as exc:
         _err(str(exc))
         return 2
-    sources = [str(s) for s in args.inputs]
-    t_start = time.perf_counter()
+    run = session.EvalRun(tuple(str(s) for s in args.inputs), settings, args.jobs, tuple(args.tune),
+                          args.tune_scenario, "riann-bag-eval " + shlex.join(argv_list))
+    started = time.perf_counter()  # the run's time includes the start of the --live nodes
     try:
-        tuning = _tune(args, sources, settings)
-        results = _evaluate(args, sources, settings)
+        with _runner(args) as runner:
+            rep = session.evaluate(run, runner, _hooks(args, len(run.sources)), started)
     except ev.EvalError as exc:
         _err(str(exc))
         return 1
-    rep = report.Report("riann-bag-eval " + shlex.join(argv_list), sources, settings, results,
-                        time.perf_counter() - t_start, args.jobs, tuning)
+    results = rep.results
     _print_messages(rep)
     _print_summary(rep, args.live)
     problems = _write_estimates(results, args.write_estimates, args.force) if args.write_estimates else []

@@ -28,8 +28,8 @@ from riann_ros.bagio.topics import sigmas_of_variances
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.results import RunStats
 from riann_ros.evaluation.specs import EstimatorSpec
+from riann_ros.gate import GateConfig
 from riann_ros.recording import Recording
-from riann_ros.stream import GateConfig
 
 LIVE_NS = "/riann_eval"
 LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt), besides the ~/reset call

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from riann_ros.constants import NS_PER_S
 from riann_ros.recording import Recording
 
 #: the attribution CC BY 4.0 asks for (authors, title, source, licence and its address), carried into every bag
@@ -73,7 +74,7 @@ def read_broad(path: str | os.PathLike[str]) -> Recording:
         mag = np.asarray(d["imu_mag"], dtype=np.float64) * MICROTESLA
         if mag.shape != (n, 3):
             raise ValueError(f"{path}: imu_mag has shape {mag.shape}, expected ({n}, 3)")
-    stamps = np.round(np.arange(n) * (1e9 / rate)).astype(np.int64)
+    stamps = np.round(np.arange(n) * (NS_PER_S / rate)).astype(np.int64)
     q = np.where(np.isfinite(q).all(axis=1, keepdims=True), q, np.nan)
     return Recording(
         stamps_ns=stamps,

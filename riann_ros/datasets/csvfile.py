@@ -34,11 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from riann_ros import defaults
+from riann_ros.constants import DEG, GRAVITY
 from riann_ros.recording import Recording
 
 TIME_UNITS = {"s": 10**9, "ms": 10**6, "us": 10**3, "µs": 10**3, "ns": 1}
-ACC_UNITS = {"m/s2": 1.0, "m/s^2": 1.0, "m/s²": 1.0, "g": 9.80665}
-GYR_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0, "dps": np.pi / 180.0}
+ACC_UNITS = {"m/s2": 1.0, "m/s^2": 1.0, "m/s²": 1.0, "g": GRAVITY}
+GYR_UNITS = {"rad/s": 1.0, "deg/s": DEG, "dps": DEG}
 MAG_UNITS = {"uT": 1e-6, "µT": 1e-6, "nT": 1e-9, "mT": 1e-3, "G": 1e-4, "gauss": 1e-4, "T": 1.0}
 QUAT_ORDERS = ("wxyz", "xyzw")
 DEFAULT_TIME = "t"

@@ -8,7 +8,7 @@ sum of sinusoids of ``τ``. All derivatives are analytic, so:
 
 * ``gyr = ω_body(t) + bias + noise`` with the exact body angular velocity
   ``ω = [φ̇ − ψ̇ sinθ, θ̇ cosφ + ψ̇ sinφ cosθ, −θ̇ sinφ + ψ̇ cosφ cosθ]``;
-* ``acc = Rᵀ (a_world + [0, 0, 9.81]) + noise`` (specific force in the sensor frame);
+* ``acc = Rᵀ (a_world + [0, 0, g]) + noise`` (specific force in the sensor frame);
 * ``quat_ref = q(t)`` exactly, at every sample; ``score_mask`` = movement phases (``e(t) > 0``).
 
 Tolerance (tested): integrating the noise-free, bias-free gyroscope with the trapezoidal rule
@@ -24,9 +24,9 @@ import numpy as np
 
 from riann_ros import defaults
 from riann_ros import quaternion as quat
+from riann_ros.constants import GRAVITY, NS_PER_S
 from riann_ros.recording import Recording
 
-GRAVITY = 9.81
 MOTIONS = ("combined", "rotation", "translation")
 SOURCE = "riann_ros synthetic generator (riann_ros.datasets.synthetic), exact ground truth"
 
@@ -118,6 +118,49 @@ def euler_to_quat(euler: np.ndarray) -> np.ndarray:
     return quat.multiply(quat.multiply(qz, qy), qx)
 
 
+def _check(motion: str, rate: float, duration: float, gyr_noise: float, acc_noise: float) -> None:
+    """ValueError for settings no recording can be made from."""
+    if motion not in MOTIONS:
+        raise ValueError(f"unknown motion {motion!r}; expected one of {', '.join(MOTIONS)}")
+    if not (rate > 0 and np.isfinite(rate)):
+        raise ValueError(f"rate must be positive, got {rate}")
+    if not (duration > 0 and np.isfinite(duration)):
+        raise ValueError(f"duration must be positive, got {duration}")
+    if gyr_noise < 0 or acc_noise < 0:
+        raise ValueError("noise standard deviations must be >= 0")
+
+
+def _rotation(rng: np.random.Generator, tau: np.ndarray, e: np.ndarray, motion: str, max_tilt_deg: float,
+              speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """The attitude ``q(t)`` (w ≥ 0) and the exact body rate ``ω(t)`` of seeded Euler angles of the clock ``τ``."""
+    tilt = np.deg2rad(max_tilt_deg) * (0.25 if motion == "translation" else 1.0)
+    rot = _random_sines(rng, 3, 4, np.array([tilt, tilt, 2.5 * tilt]), 0.05 * speed, 0.4 * speed)
+    base = rng.uniform(-np.pi, np.pi, 3) * np.array([0.2, 0.2, 1.0])
+    euler = base + rot(tau)
+    deuler = rot(tau, 1) * e[:, None]
+    q = euler_to_quat(euler)
+    return q * np.where(q[:, :1] < 0, -1.0, 1.0), body_rate(euler, deuler)
+
+
+def _translation(rng: np.random.Generator, tau: np.ndarray, e: np.ndarray, de: np.ndarray, motion: str,
+                 speed: float) -> np.ndarray:
+    """The world-frame linear acceleration (N, 3) of a seeded position of the clock ``τ`` (zero for rotation)."""
+    if motion == "rotation":
+        return np.zeros((len(tau), 3))
+    amp = np.array([0.3, 0.3, 0.15]) * (1.5 if motion == "translation" else 1.0)
+    pos = _random_sines(rng, 3, 3, amp, 0.15 * speed, 0.8 * speed)
+    # p(t) = P(τ(t)) → a = P''(τ) e² + P'(τ) ė
+    return pos(tau, 2) * (e**2)[:, None] + pos(tau, 1) * de[:, None]
+
+
+def _gyro_bias(rng: np.random.Generator, bias: float | tuple[float, float, float]) -> np.ndarray:
+    """The constant gyro bias: a 3-vector as given, or a magnitude along a seeded random direction."""
+    if np.ndim(bias) == 0:
+        d = rng.normal(size=3)
+        return float(bias) * d / np.linalg.norm(d)  # type: ignore[arg-type]
+    return np.asarray(bias, dtype=float).reshape(3)
+
+
 def generate(
     *,
     rate: float = defaults.SYNTHETIC.rate,
@@ -141,72 +184,25 @@ def generate(
     ``gyr_noise`` rad/s and ``acc_noise`` m/s²: white-noise standard deviations per sample.
     ``max_tilt_deg``: roll/pitch amplitude scale; ``speed``: frequency scale of the motion.
     """
-    if motion not in MOTIONS:
-        raise ValueError(f"unknown motion {motion!r}; expected one of {', '.join(MOTIONS)}")
-    if not (rate > 0 and np.isfinite(rate)):
-        raise ValueError(f"rate must be positive, got {rate}")
-    if not (duration > 0 and np.isfinite(duration)):
-        raise ValueError(f"duration must be positive, got {duration}")
-    if gyr_noise < 0 or acc_noise < 0:
-        raise ValueError("noise standard deviations must be >= 0")
-    rng = np.random.default_rng(seed)
+    _check(motion, rate, duration, gyr_noise, acc_noise)
+    rng = np.random.default_rng(seed)  # drawn from in this order: phases, rotation, translation, bias, noise
     n = int(np.floor(duration * rate)) + 1
-    stamps = np.round(start_s * 1e9 + np.arange(n) * (1e9 / rate)).astype(np.int64)
+    stamps = np.round(start_s * NS_PER_S + np.arange(n) * (NS_PER_S / rate)).astype(np.int64)
     t = (stamps - stamps[0]) * 1e-9
-
     ramp = 1.0
-    phases = _phases(rng, float(t[-1]), ramp)
-    tau, e, de = _clock(t, phases, ramp)
-
-    tilt = np.deg2rad(max_tilt_deg) * (0.25 if motion == "translation" else 1.0)
-    rot = _random_sines(rng, 3, 4, np.array([tilt, tilt, 2.5 * tilt]), 0.05 * speed, 0.4 * speed)
-    base = rng.uniform(-np.pi, np.pi, 3) * np.array([0.2, 0.2, 1.0])
-    euler = base + rot(tau)
-    deuler = rot(tau, 1) * e[:, None]
-    q = euler_to_quat(euler)
-    q = q * np.where(q[:, :1] < 0, -1.0, 1.0)
-    w = body_rate(euler, deuler)
-
-    if motion == "rotation":
-        a_world = np.zeros((n, 3))
-    else:
-        amp = np.array([0.3, 0.3, 0.15]) * (1.5 if motion == "translation" else 1.0)
-        pos = _random_sines(rng, 3, 3, amp, 0.15 * speed, 0.8 * speed)
-        # p(t) = P(τ(t)) → a = P''(τ) e² + P'(τ) ė
-        a_world = pos(tau, 2) * (e**2)[:, None] + pos(tau, 1) * de[:, None]
-
-    if np.ndim(bias) == 0:
-        d = rng.normal(size=3)
-        b = float(bias) * d / np.linalg.norm(d)  # type: ignore[arg-type]
-    else:
-        b = np.asarray(bias, dtype=float).reshape(3)
-    f_world = a_world + np.array([0.0, 0.0, GRAVITY])
+    tau, e, de = _clock(t, _phases(rng, float(t[-1]), ramp), ramp)
+    q, w = _rotation(rng, tau, e, motion, max_tilt_deg, speed)
+    f_world = _translation(rng, tau, e, de, motion, speed) + np.array([0.0, 0.0, GRAVITY])
+    b = _gyro_bias(rng, bias)
     acc = quat.rotate(quat.conjugate(q), f_world) + acc_noise * rng.normal(size=(n, 3))
     gyr = w + b + gyr_noise * rng.normal(size=(n, 3))
-    mask = e > 0
-    seq = name or f"synthetic_{motion}_seed{seed}_{rate:g}hz"
-    return Recording(
-        stamps_ns=stamps,
-        acc=acc,
-        gyr=gyr,
-        quat_ref=q,
-        score_mask=mask,
-        name=seq,
-        dataset="synthetic",
-        source=SOURCE,
-        frame_id=frame_id,
-        meta={
-            "seed": str(seed),
-            "rate_hz": repr(float(rate)),
-            "duration_s": repr(float(duration)),
-            "motion": motion,
-            "gyr_bias_rad_s": " ".join(repr(float(x)) for x in b),
-            "gyr_noise_rad_s": repr(float(gyr_noise)),
-            "acc_noise_m_s2": repr(float(acc_noise)),
-            "max_tilt_deg": repr(float(max_tilt_deg)),
-            "speed": repr(float(speed)),
-        },
-    )
+    meta = {"seed": str(seed), "rate_hz": repr(float(rate)), "duration_s": repr(float(duration)), "motion": motion,
+            "gyr_bias_rad_s": " ".join(repr(float(x)) for x in b), "gyr_noise_rad_s": repr(float(gyr_noise)),
+            "acc_noise_m_s2": repr(float(acc_noise)), "max_tilt_deg": repr(float(max_tilt_deg)),
+            "speed": repr(float(speed))}
+    return Recording(stamps_ns=stamps, acc=acc, gyr=gyr, quat_ref=q, score_mask=e > 0,
+                     name=name or f"synthetic_{motion}_seed{seed}_{rate:g}hz", dataset="synthetic", source=SOURCE,
+                     frame_id=frame_id, meta=meta)
 
 
 def integrate_gyr(gyr: np.ndarray, stamps_ns: np.ndarray, q0: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from riann_ros.constants import DEG, GRAVITY, NS_PER_S
 from riann_ros.recording import Recording
 
 # Sample rate. MEMS IMUs and the attitude filters here run at tens of Hz to a few kHz (BROAD 286 Hz,
@@ -34,7 +35,6 @@ TYPICAL_RATE_HZ = 200.0
 # Consumer MEMS accelerometers add up to ≈ ±3 % sensitivity error and ±0.1 g offset per axis before
 # calibration (≈ ±1.5 m/s² on the norm at worst); 7–13 m/s² leaves room for that and for small motion in
 # the "rest" samples, while a wrong unit is off by a factor 9.8 (g ↔ m/s²).
-GRAVITY = 9.80665
 ACC_REST_MIN = 7.0
 ACC_REST_MAX = 13.0
 # "At rest" = |gyr| below this, in rad/s (≈ 11 °/s): above the zero-rate offset of uncalibrated MEMS gyros
@@ -66,7 +66,7 @@ MAG_MAX_T = 200e-6
 # Canonical units (aliases such as "µs", "dps", "m/s^2" map onto these) and their scale to ns, m/s², rad/s.
 TIME_SCALES: dict[str, float] = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}
 ACC_SCALES: dict[str, float] = {"m/s2": 1.0, "g": GRAVITY}
-GYR_SCALES: dict[str, float] = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
+GYR_SCALES: dict[str, float] = {"rad/s": 1.0, "deg/s": DEG}
 MAG_SCALES: dict[str, float] = {"T": 1.0, "mT": 1e-3, "G": 1e-4, "uT": 1e-6, "nT": 1e-9}
 _ALIASES = {"µs": "us", "m/s^2": "m/s2", "m/s²": "m/s2", "dps": "deg/s", "µT": "uT", "gauss": "G", "tesla": "T"}
 
@@ -120,11 +120,15 @@ def _candidates(value: float, unit: str, scales: Mapping[str, float], ok) -> lis
     return out
 
 
-def _scale_finding(check: str, value: float, unit: str, scales: Mapping[str, float], ok, text: str) -> Finding:
-    """The Finding of an implausible ``value`` (read as ``unit``): the first other unit of ``scales`` in which
-    ``ok`` holds is suggested, or none."""
+def _scale_finding(check: str, value: float, unit: str, scales: Mapping[str, float], plausible: tuple[float, float],
+                   text: str) -> Finding | None:
+    """None for a ``value`` (read as ``unit``) within the ``plausible`` range; else its Finding: the first other unit
+    of ``scales`` in which it would be plausible is suggested, or none."""
+    lo, hi = plausible
+    if lo <= value <= hi:
+        return None
     option = f"{check}_unit"
-    cands = _candidates(value, unit, scales, ok)
+    cands = _candidates(value, unit, scales, lambda v: lo <= v <= hi)
     if not cands:
         return Finding(check, option, value, unit, None, f"{text}: implausible in any unit ({', '.join(scales)})")
     best = cands[0][0]
@@ -135,7 +139,7 @@ def _fmt_duration(seconds: float) -> str:
     for unit, scale in (("s", 1.0), ("ms", 1e-3), ("µs", 1e-6)):
         if abs(seconds) >= scale:
             return f"{seconds / scale:.4g} {unit}"
-    return f"{seconds * 1e9:.4g} ns"
+    return f"{seconds * NS_PER_S:.4g} ns"
 
 
 def check_rate(rec: Recording, time_unit: str = "s") -> Finding | None:
@@ -191,13 +195,11 @@ def check_gravity(rec: Recording, acc_unit: str = "m/s2", gyr_scale: float = 1.0
         rest[:] = True
         over = f"all {len(rec)} samples (none at rest)"
     value = float(np.median(norm[rest]))
-    if ACC_REST_MIN <= value <= ACC_REST_MAX:
-        return None
     text = (
         f"median |acc| {value:.4g} m/s² over {over}, expected gravity ≈ {GRAVITY:.2f} "
         f"({ACC_REST_MIN:g}–{ACC_REST_MAX:g})"
     )
-    return _scale_finding("acc", value, unit, ACC_SCALES, lambda v: ACC_REST_MIN <= v <= ACC_REST_MAX, text)
+    return _scale_finding("acc", value, unit, ACC_SCALES, (ACC_REST_MIN, ACC_REST_MAX), text)
 
 
 def check_gyro(rec: Recording, gyr_unit: str = "rad/s") -> Finding | None:
@@ -206,13 +208,11 @@ def check_gyro(rec: Recording, gyr_unit: str = "rad/s") -> Finding | None:
         return None
     unit = canonical_unit(gyr_unit, GYR_SCALES)
     value = float(np.percentile(np.linalg.norm(rec.gyr, axis=1), GYR_PERCENTILE))
-    if value <= GYR_MAX_RAD_S:
-        return None
     text = (
         f"{GYR_PERCENTILE:g}th percentile of |gyr| {value:.4g} rad/s is above {GYR_MAX_RAD_S:g} rad/s "
         f"(2000 °/s, the full scale of common MEMS gyros)"
     )
-    return _scale_finding("gyr", value, unit, GYR_SCALES, lambda v: v <= GYR_MAX_RAD_S, text)
+    return _scale_finding("gyr", value, unit, GYR_SCALES, (-math.inf, GYR_MAX_RAD_S), text)
 
 
 def check_mag(rec: Recording, mag_unit: str = "T") -> Finding | None:
@@ -226,13 +226,11 @@ def check_mag(rec: Recording, mag_unit: str = "T") -> Finding | None:
         return None
     unit = canonical_unit(mag_unit, MAG_SCALES)
     value = float(np.median(norm))
-    if MAG_MIN_T <= value <= MAG_MAX_T:
-        return None
     text = (
         f"median |mag| {value * 1e6:.4g} µT, expected Earth's field 25–65 µT "
         f"({MAG_MIN_T * 1e6:g}–{MAG_MAX_T * 1e6:g} with calibration offsets)"
     )
-    return _scale_finding("mag", value, unit, MAG_SCALES, lambda v: MAG_MIN_T <= v <= MAG_MAX_T, text)
+    return _scale_finding("mag", value, unit, MAG_SCALES, (MAG_MIN_T, MAG_MAX_T), text)
 
 
 def check_units(

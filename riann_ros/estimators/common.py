@@ -2,19 +2,21 @@
 
 Input sanitising (the documented degenerate-input rules), the accelerometer initialisation of
 Madgwick and Mahony (and, with a magnetometer, the heading from the field), and list ↔ array conversion
-for their plain-float loops.
+for their plain-float loops (:class:`Rows`).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
-from riann_ros.rotations import Quat
+from riann_ros.estimators.bias import FrontEndSlot
+from riann_ros.rotations import Quat, rotate
 
 BIAS_KEY = "gyro bias estimate (deg/s)"
 
@@ -40,21 +42,6 @@ def sanitize_arrays(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike) -> tuple[Arra
     gyr[~np.isfinite(gyr).all(axis=1)] = 0.0
     dt[~(np.isfinite(dt) & (dt > 0.0))] = 0.0
     return acc, gyr, dt
-
-
-def initialise(q: Quat | None, acc: list, out: list
-               ) -> tuple[Quat | None, int]:
-    """Until the first usable accelerometer sample sets the attitude, output the identity.
-
-    Returns the attitude (None when no sample was usable) and the index of the first sample to
-    filter; the outputs of the samples consumed are appended to ``out``.
-    """
-    i = 0
-    while q is None and i < len(acc):
-        q = initial_attitude(*acc[i])
-        out.append(q if q is not None else (1.0, 0.0, 0.0, 0.0))
-        i += 1
-    return q, i
 
 
 def initial_attitude(ax: float, ay: float, az: float) -> Quat | None:
@@ -94,12 +81,7 @@ def initial_attitude_marg(ax: float, ay: float, az: float, mx: float, my: float,
     if q is None or not has_field(mx, my, mz):
         return q
     w, x, y, z = q
-    # m_w = R(q) m = m + w t + q_vec × t with t = 2 q_vec × m (only its horizontal part is needed)
-    tx = 2.0 * (y * mz - z * my)
-    ty = 2.0 * (z * mx - x * mz)
-    tz = 2.0 * (x * my - y * mx)
-    hx = mx + w * tx + (y * tz - z * ty)
-    hy = my + w * ty + (z * tx - x * tz)
+    hx, hy, _ = rotate(q, (mx, my, mz))
     if not (0.0 < hx * hx + hy * hy < math.inf):
         return q
     psi = math.atan2(hx, hy)  # angle of the horizontal field from +y toward +x
@@ -111,18 +93,42 @@ def initial_attitude_marg(ax: float, ay: float, az: float, mx: float, my: float,
     return rw / n, rx / n, ry / n, rz / n
 
 
-def initialise_marg(q: Quat | None, acc: list, mag: list, out: list) -> tuple[Quat | None, int, bool]:
-    """:func:`initialise` with the heading from the field of the initialising sample, if it has one.
+class Rows(NamedTuple):
+    """One batch as the plain-float loops take it: nested lists of Python floats, degenerate values neutralised
+    (:func:`sanitize_arrays`, :func:`sanitize_mag`); a ``mag`` row that is None or zeros has no field."""
 
-    Returns the attitude (None when no sample was usable), the index of the first sample to filter, and
-    whether this call set the attitude from a sample with a field (its heading then comes from the field).
+    acc: list
+    gyr: list
+    mag: list
+    dt: list
+
+    def tail(self, i: int) -> Rows:
+        """The samples from index ``i`` on."""
+        return Rows(self.acc[i:], self.gyr[i:], self.mag[i:], self.dt[i:])
+
+
+def loop_rows(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None, front_end: FrontEndSlot) -> Rows:
+    """The batch for a loop: sanitised, the gyro debiased by ``front_end``; without ``mag`` every row is None."""
+    a, g, h = sanitize_arrays(acc, gyr, dt)
+    m = [None] * len(a) if mag is None else sanitize_mag(mag, len(a))
+    return Rows(a.tolist(), front_end.debias(a, g, h).tolist(), m, h.tolist())
+
+
+def initialise(rows: Rows, out: list) -> tuple[Quat | None, Rows, bool]:
+    """Until the first usable accelerometer sample sets the attitude (its heading from the sample's field, if it has
+    one), output the identity; the outputs of the samples consumed are appended to ``out``.
+
+    Returns the attitude (None when no sample was usable), the samples left to filter, and whether the attitude
+    was set from a sample with a field (its heading then comes from the field).
     """
+    acc, mag = rows.acc, rows.mag
+    q: Quat | None = None
     i = 0
     while q is None and i < len(acc):
-        q = initial_attitude_marg(*acc[i], *mag[i])
+        q = initial_attitude(*acc[i]) if mag[i] is None else initial_attitude_marg(*acc[i], *mag[i])
         out.append(q if q is not None else (1.0, 0.0, 0.0, 0.0))
         i += 1
-    return q, i, i > 0 and q is not None and has_field(*mag[i - 1])
+    return q, rows.tail(i), q is not None and mag[i - 1] is not None and has_field(*mag[i - 1])
 
 
 def as_array(rows: list) -> Array:

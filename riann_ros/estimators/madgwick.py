@@ -41,8 +41,9 @@ Conventions shared with :mod:`riann_ros.estimators.mahony`:
   the output is always a finite unit quaternion. (Unlike ``ahrs``, a gyro sample of exactly zero still
   gets the accelerometer (and magnetometer) correction; ``ahrs`` skips such samples entirely.)
 * **speed** — the recursion cannot be vectorised over time, so the loop runs on Python floats in local
-  variables (no numpy per sample). :meth:`update` runs the very same loop with one sample, so
-  streaming and batch give identical numbers.
+  variables (no numpy per sample). One loop serves both forms (without ``mag`` every sample takes the IMU step,
+  here on the ENU state). :meth:`update` runs the very same loop with one sample, so streaming and batch give
+  identical numbers.
 """
 
 from __future__ import annotations
@@ -53,16 +54,7 @@ from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import (
-    BIAS_KEY,
-    Quat,
-    as_array,
-    bias_text,
-    initialise,
-    initialise_marg,
-    sanitize_arrays,
-    sanitize_mag,
-)
+from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows
 
 #: ahrs 0.4.0 ``Madgwick`` default ``gain_imu`` (IMU/6D mode); Madgwick's report gives β = √(3/4)·ω̃ with
 #: ω̃ the gyro measurement error, and 0.033 corresponds to ω̃ ≈ 2.2°/s.
@@ -81,143 +73,64 @@ def enu_to_nwu(q: Quat) -> Quat:
     return _C * (w + z), _C * (x + y), _C * (y - x), _C * (z - w)
 
 
-def _madgwick_run(q: Quat | None, acc: list, gyr: list, dt: list, beta: float) -> tuple[Quat | None, list]:
-    """Run the filter from state ``q`` (None = not initialised) over the samples; (new q, outputs)."""
-    out: list = []
-    append = out.append
-    sqrt = math.sqrt
-    inf = math.inf
-    q, i = initialise(q, acc, out)
-    if q is None:
-        return None, out
-    qw, qx, qy, qz = q
-    for (ax, ay, az), (gx, gy, gz), h in zip(acc[i:], gyr[i:], dt[i:], strict=True):
-        # rate of change from the gyroscope: ½ q ⊗ [0, ω]
-        dw = 0.5 * (-qx * gx - qy * gy - qz * gz)
-        dx = 0.5 * (qw * gx + qy * gz - qz * gy)
-        dy = 0.5 * (qw * gy - qx * gz + qz * gx)
-        dz = 0.5 * (qw * gz + qx * gy - qy * gx)
-        an = sqrt(ax * ax + ay * ay + az * az)
-        if an > 0.0:
-            ax /= an
-            ay /= an
-            az /= an
-            # objective f = R(q)ᵀ e_z − â and gradient Jᵀ f
-            f1 = 2.0 * (qx * qz - qw * qy) - ax
-            f2 = 2.0 * (qw * qx + qy * qz) - ay
-            f3 = 2.0 * (0.5 - qx * qx - qy * qy) - az
-            s0 = -2.0 * qy * f1 + 2.0 * qx * f2
-            s1 = 2.0 * qz * f1 + 2.0 * qw * f2 - 4.0 * qx * f3
-            s2 = -2.0 * qw * f1 + 2.0 * qz * f2 - 4.0 * qy * f3
-            s3 = 2.0 * qx * f1 + 2.0 * qy * f2
-            sn = sqrt(s0 * s0 + s1 * s1 + s2 * s2 + s3 * s3)
-            if 0.0 < sn < inf:
-                k = beta / sn
-                dw -= k * s0
-                dx -= k * s1
-                dy -= k * s2
-                dz -= k * s3
-        nw = qw + dw * h
-        nx = qx + dx * h
-        ny = qy + dy * h
-        nz = qz + dz * h
-        nn = sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
-        if 0.0 < nn < inf:
-            qw = nw / nn
-            qx = nx / nn
-            qy = ny / nn
-            qz = nz / nn
-        append((qw, qx, qy, qz))
-    return (qw, qx, qy, qz), out
-
-
-def _madgwick_marg_run(
-    qn: Quat | None, used: bool, acc: list, gyr: list, mag: list, dt: list, beta: float, beta_marg: float
-) -> tuple[Quat | None, bool, list]:
-    """The MARG filter from state ``qn`` (sensor → NWU, None = not initialised) over the samples.
-
-    ``used`` is the heading-observed flag before these samples; returns (new NWU state, whether the last
-    sample's correction used a field, ENU outputs).
-    """
+def _madgwick_loop(q: Quat, used: bool, rows: Rows, beta: float, beta_marg: float,
+                   nwu: bool) -> tuple[Quat, bool, list]:
+    """The filter from the attitude ``q`` (sensor → NWU when ``nwu``, else sensor → ENU) over the samples: the MARG
+    step with ``beta_marg`` where a ``mag`` row has a field, the IMU step with ``beta`` elsewhere. ``used`` is the
+    heading-observed flag before the samples; returns (new q in its frame, whether the last sample's correction
+    used a field, ENU outputs)."""
     out: list = []
     append = out.append
     sqrt = math.sqrt
     inf = math.inf
     c = _C
-    i = 0
-    if qn is None:
-        q, i, used = initialise_marg(None, acc, mag, out)
-        if q is None:
-            return None, False, out
-        qn = enu_to_nwu(q)
-    qw, qx, qy, qz = qn
-    for (ax, ay, az), (gx, gy, gz), (mx, my, mz), h in zip(acc[i:], gyr[i:], mag[i:], dt[i:], strict=True):
+    qw, qx, qy, qz = q
+    for (ax, ay, az), (gx, gy, gz), m, h in zip(*rows, strict=True):
         # rate of change from the gyroscope: ½ q ⊗ [0, ω]
-        dw = 0.5 * (-qx * gx - qy * gy - qz * gz)
-        dx = 0.5 * (qw * gx + qy * gz - qz * gy)
-        dy = 0.5 * (qw * gy - qx * gz + qz * gx)
-        dz = 0.5 * (qw * gz + qx * gy - qy * gx)
+        dw, dx = 0.5 * (-qx * gx - qy * gy - qz * gz), 0.5 * (qw * gx + qy * gz - qz * gy)
+        dy, dz = 0.5 * (qw * gy - qx * gz + qz * gx), 0.5 * (qw * gz + qx * gy - qy * gx)
         used = False
         an = sqrt(ax * ax + ay * ay + az * az)
         if an > 0.0:
-            ax /= an
-            ay /= an
-            az /= an
-            # accelerometer rows of f and of the gradient Jᵀ f
-            f1 = 2.0 * (qx * qz - qw * qy) - ax
-            f2 = 2.0 * (qw * qx + qy * qz) - ay
+            ax, ay, az = ax / an, ay / an, az / an
+            # accelerometer rows of the objective f = R(q)ᵀ e_z − â and of the gradient Jᵀ f
+            f1, f2 = 2.0 * (qx * qz - qw * qy) - ax, 2.0 * (qw * qx + qy * qz) - ay
             f3 = 2.0 * (0.5 - qx * qx - qy * qy) - az
-            s0 = -2.0 * qy * f1 + 2.0 * qx * f2
-            s1 = 2.0 * qz * f1 + 2.0 * qw * f2 - 4.0 * qx * f3
-            s2 = -2.0 * qw * f1 + 2.0 * qz * f2 - 4.0 * qy * f3
-            s3 = 2.0 * qx * f1 + 2.0 * qy * f2
+            s0, s1 = -2.0 * qy * f1 + 2.0 * qx * f2, 2.0 * qz * f1 + 2.0 * qw * f2 - 4.0 * qx * f3
+            s2, s3 = -2.0 * qw * f1 + 2.0 * qz * f2 - 4.0 * qy * f3, 2.0 * qx * f1 + 2.0 * qy * f2
             k = beta
-            mn = sqrt(mx * mx + my * my + mz * mz)
-            if 0.0 < mn < inf:
-                used = True
-                k = beta_marg
-                mx /= mn
-                my /= mn
-                mz /= mn
-                # h = q ⊗ m̂ ⊗ q* (earth frame), reference field (b_x, 0, b_z)
-                tx = 2.0 * (qy * mz - qz * my)
-                ty = 2.0 * (qz * mx - qx * mz)
-                tz = 2.0 * (qx * my - qy * mx)
-                hx = mx + qw * tx + (qy * tz - qz * ty)
-                hy = my + qw * ty + (qz * tx - qx * tz)
-                bz = mz + qw * tz + (qx * ty - qy * tx)
-                bx = sqrt(hx * hx + hy * hy)
-                # magnetometer rows of f and of Jᵀ f
+            if m is not None and 0.0 < (mn := m[0] * m[0] + m[1] * m[1] + m[2] * m[2]) < inf:
+                used, k = True, beta_marg
+                mn = sqrt(mn)
+                mx, my, mz = m[0] / mn, m[1] / mn, m[2] / mn
+                # h = q ⊗ m̂ ⊗ q* (earth frame, as riann_ros.rotations.rotate), reference field (b_x, 0, b_z)
+                tx, ty, tz = 2.0 * (qy * mz - qz * my), 2.0 * (qz * mx - qx * mz), 2.0 * (qx * my - qy * mx)
+                hx, hy = mx + qw * tx + (qy * tz - qz * ty), my + qw * ty + (qz * tx - qx * tz)
+                bx, bz = sqrt(hx * hx + hy * hy), mz + qw * tz + (qx * ty - qy * tx)
+                # magnetometer rows of f and of Jᵀ f (Madgwick 2010 eqs. 29-34)
                 f4 = 2.0 * bx * (0.5 - qy * qy - qz * qz) + 2.0 * bz * (qx * qz - qw * qy) - mx
                 f5 = 2.0 * bx * (qx * qy - qw * qz) + 2.0 * bz * (qw * qx + qy * qz) - my
                 f6 = 2.0 * bx * (qw * qy + qx * qz) + 2.0 * bz * (0.5 - qx * qx - qy * qy) - mz
                 s0 += -2.0 * bz * qy * f4 + (-2.0 * bx * qz + 2.0 * bz * qx) * f5 + 2.0 * bx * qy * f6
                 s1 += 2.0 * bz * qz * f4 + (2.0 * bx * qy + 2.0 * bz * qw) * f5 + (2.0 * bx * qz - 4.0 * bz * qx) * f6
-                s2 += (
-                    (-4.0 * bx * qy - 2.0 * bz * qw) * f4
-                    + (2.0 * bx * qx + 2.0 * bz * qz) * f5
-                    + (2.0 * bx * qw - 4.0 * bz * qy) * f6
-                )
+                s2 += ((-4.0 * bx * qy - 2.0 * bz * qw) * f4 + (2.0 * bx * qx + 2.0 * bz * qz) * f5
+                       + (2.0 * bx * qw - 4.0 * bz * qy) * f6)
                 s3 += (-4.0 * bx * qz + 2.0 * bz * qx) * f4 + (-2.0 * bx * qw + 2.0 * bz * qy) * f5 + 2.0 * bx * qx * f6
+            # gradient step β ∇f / ‖∇f‖
             sn = sqrt(s0 * s0 + s1 * s1 + s2 * s2 + s3 * s3)
             if 0.0 < sn < inf:
                 k /= sn
-                dw -= k * s0
-                dx -= k * s1
-                dy -= k * s2
-                dz -= k * s3
-        nw = qw + dw * h
-        nx = qx + dx * h
-        ny = qy + dy * h
-        nz = qz + dz * h
+                dw, dx = dw - k * s0, dx - k * s1
+                dy, dz = dy - k * s2, dz - k * s3
+        # q ← normalise(q + q̇ dt), the previous q where that is not finite
+        nw, nx = qw + dw * h, qx + dx * h
+        ny, nz = qy + dy * h, qz + dz * h
         nn = sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
         if 0.0 < nn < inf:
-            qw = nw / nn
-            qx = nx / nn
-            qy = ny / nn
-            qz = nz / nn
-        # q_ENU = C ⊗ q_NWU
-        append((c * (qw - qz), c * (qx - qy), c * (qy + qx), c * (qz + qw)))
+            qw, qx = nw / nn, nx / nn
+            qy, qz = ny / nn, nz / nn
+        # the ENU output: q_ENU = C ⊗ q_NWU
+        append((c * (qw - qz), c * (qx - qy), c * (qy + qx), c * (qz + qw)) if nwu else (qw, qx, qy, qz))
     return (qw, qx, qy, qz), used, out
 
 
@@ -250,7 +163,7 @@ class MadgwickEstimator(AttitudeEstimator):
 
     def reset(self) -> None:
         self._q: Quat | None = None  # sensor → ENU, the last output
-        # (ENU state, the same attitude in NWU) as the MARG loop left them: the NWU value continues exactly
+        # (ENU state, the same attitude in NWU) as the last 9D call left them: the NWU value continues exactly
         self._marg: tuple[Quat, Quat] | None = None
         self._observed = False
         self._fe = FrontEndSlot(self.params)
@@ -262,26 +175,24 @@ class MadgwickEstimator(AttitudeEstimator):
         return self._observed
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
-        a, g, h = sanitize_arrays(acc, gyr, dt)
-        m = None if mag is None else sanitize_mag(mag, len(a))
-        g = self._fe.debias(a, g, h)
-        beta = float(self.params["beta"])
-        if m is None:
-            self._q, out = _madgwick_run(self._q, a.tolist(), g.tolist(), h.tolist(), beta)
-            if out:
-                self._observed = False
-            return as_array(out)
-        qn = self._nwu_state()
-        qn, self._observed, out = _madgwick_marg_run(
-            qn, self._observed, a.tolist(), g.tolist(), m, h.tolist(), beta, float(self.params["beta_marg"])
-        )
-        if qn is not None and out:
-            self._q = out[-1]
-            self._marg = (out[-1], qn)
+        rows = loop_rows(acc, gyr, dt, mag, self._fe)
+        nine = mag is not None
+        out: list = []
+        state, used = (self._nwu_state() if nine else self._q), self._observed
+        if state is None:
+            q0, rows, used = initialise(rows, out)
+            state = enu_to_nwu(q0) if nine and q0 is not None else q0
+        if state is not None:
+            beta, beta_marg = float(self.params["beta"]), float(self.params["beta_marg"])
+            state, used, filtered = _madgwick_loop(state, used, rows, beta, beta_marg, nine)
+            out += filtered
+            self._q = out[-1] if out else self._q
+            self._marg = (self._q, state) if nine and self._q is not None else None
+        self._observed = used
         return as_array(out)
 
     def _nwu_state(self) -> Quat | None:
-        """The state as sensor → NWU: the MARG loop's own value if nothing changed the attitude since."""
+        """The state as sensor → NWU: the last 9D call's own value while the attitude is the one it left."""
         if self._q is None:
             return None
         if self._marg is not None and self._marg[0] == self._q:

@@ -23,12 +23,12 @@ initialising sample when it has one (:func:`~riann_ros.estimators.common.initial
 horizontal part of the tilt-compensated field along +y). :meth:`MahonyEstimator.heading_observed` is
 True iff the last sample's correction used a field.
 
-Initialisation, per-sample dt, degenerate input and the fast loop follow
-:mod:`riann_ros.estimators.madgwick`: initialised from the first usable accelerometer sample with
-:func:`riann_ros.quaternion.from_accelerometer`; a zero accelerometer sample gives a gyro-only step
-(bias integral frozen, the current bias still subtracted; ``ahrs`` integrates the raw gyro there, and
-skips samples whose gyro is exactly zero); the output is always a finite unit quaternion;
-:meth:`update` runs the same loop as :meth:`update_batch` with one sample.
+Initialisation, per-sample dt, degenerate input and the fast loop (one for both forms: without ``mag`` every sample
+takes the IMU step) follow :mod:`riann_ros.estimators.madgwick`: initialised from the first usable accelerometer
+sample with :func:`riann_ros.quaternion.from_accelerometer`; a zero accelerometer sample gives a gyro-only step
+(bias integral frozen, the current bias still subtracted; ``ahrs`` integrates the raw gyro there, and skips samples
+whose gyro is exactly zero); the output is always a finite unit quaternion; :meth:`update` runs the same loop as
+:meth:`update_batch` with one sample.
 """
 
 from __future__ import annotations
@@ -40,16 +40,7 @@ from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import (
-    BIAS_KEY,
-    Quat,
-    as_array,
-    bias_text,
-    initialise,
-    initialise_marg,
-    sanitize_arrays,
-    sanitize_mag,
-)
+from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows
 from riann_ros.rotations import Vec
 
 #: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
@@ -57,139 +48,53 @@ DEFAULT_KP = 1.0
 DEFAULT_KI = 0.3
 
 
-
-def _mahony_run(
-    q: Quat | None, b: Vec, acc: list, gyr: list, dt: list, kp: float, ki: float
-) -> tuple[Quat | None, Vec, list]:
-    """Run the filter from state (q, bias) over the samples; (new q, new bias, outputs)."""
+def _mahony_loop(q: Quat, b: Vec, used: bool, rows: Rows, kp: float, ki: float) -> tuple[Quat, Vec, bool, list]:
+    """The filter from the state (q, bias) over the samples, the MARG step where a ``mag`` row has a field and the
+    IMU step elsewhere. ``used`` is the heading-observed flag before the samples. Returns (new q, new bias,
+    whether the last sample's correction used a field, outputs)."""
     out: list = []
     append = out.append
     sqrt = math.sqrt
     inf = math.inf
-    q, i = initialise(q, acc, out)
-    if q is None:
-        return None, b, out
     qw, qx, qy, qz = q
     bx, by, bz = b
-    for (ax, ay, az), (gx, gy, gz), h in zip(acc[i:], gyr[i:], dt[i:], strict=True):
-        an = sqrt(ax * ax + ay * ay + az * az)
-        if an > 0.0:
-            ax /= an
-            ay /= an
-            az /= an
-            # expected direction of "up" in the sensor frame: third row of R(q)
-            vx = 2.0 * (qx * qz - qw * qy)
-            vy = 2.0 * (qw * qx + qy * qz)
-            vz = 1.0 - 2.0 * (qx * qx + qy * qy)
-            ex = ay * vz - az * vy
-            ey = az * vx - ax * vz
-            ez = ax * vy - ay * vx
-            kih = ki * h
-            bx -= kih * ex
-            by -= kih * ey
-            bz -= kih * ez
-            gx = gx - bx + kp * ex
-            gy = gy - by + kp * ey
-            gz = gz - bz + kp * ez
-        else:
-            gx -= bx
-            gy -= by
-            gz -= bz
-        hh = 0.5 * h
-        nw = qw + (-qx * gx - qy * gy - qz * gz) * hh
-        nx = qx + (qw * gx + qy * gz - qz * gy) * hh
-        ny = qy + (qw * gy - qx * gz + qz * gx) * hh
-        nz = qz + (qw * gz + qx * gy - qy * gx) * hh
-        nn = sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
-        if 0.0 < nn < inf:
-            qw = nw / nn
-            qx = nx / nn
-            qy = ny / nn
-            qz = nz / nn
-        append((qw, qx, qy, qz))
-    if not (math.isfinite(bx) and math.isfinite(by) and math.isfinite(bz)):
-        bx = by = bz = 0.0
-    return (qw, qx, qy, qz), (bx, by, bz), out
-
-
-def _mahony_marg_run(
-    q: Quat | None, b: Vec, used: bool, acc: list, gyr: list, mag: list, dt: list, kp: float, ki: float
-) -> tuple[Quat | None, Vec, bool, list]:
-    """The MARG filter from state (q, bias) over the samples; ``used`` is the heading-observed flag before
-    them. Returns (new q, new bias, whether the last sample's correction used a field, outputs)."""
-    out: list = []
-    append = out.append
-    sqrt = math.sqrt
-    inf = math.inf
-    i = 0
-    if q is None:
-        q, i, used = initialise_marg(None, acc, mag, out)
-        if q is None:
-            return None, b, False, out
-    qw, qx, qy, qz = q
-    bx, by, bz = b
-    for (ax, ay, az), (gx, gy, gz), (mx, my, mz), h in zip(acc[i:], gyr[i:], mag[i:], dt[i:], strict=True):
+    for (ax, ay, az), (gx, gy, gz), m, h in zip(*rows, strict=True):
         used = False
         an = sqrt(ax * ax + ay * ay + az * az)
         if an > 0.0:
-            ax /= an
-            ay /= an
-            az /= an
-            # expected direction of "up" in the sensor frame: third row of R(q)
-            vx = 2.0 * (qx * qz - qw * qy)
-            vy = 2.0 * (qw * qx + qy * qz)
-            vz = 1.0 - 2.0 * (qx * qx + qy * qy)
-            ex = ay * vz - az * vy
-            ey = az * vx - ax * vz
-            ez = ax * vy - ay * vx
-            mn = sqrt(mx * mx + my * my + mz * mz)
-            if 0.0 < mn < inf:
-                mx /= mn
-                my /= mn
-                mz /= mn
-                # h = R(q) m̂ (world frame), reference (0, ry, rz)
-                tx = 2.0 * (qy * mz - qz * my)
-                ty = 2.0 * (qz * mx - qx * mz)
-                tz = 2.0 * (qx * my - qy * mx)
-                hx = mx + qw * tx + (qy * tz - qz * ty)
-                hy = my + qw * ty + (qz * tx - qx * tz)
-                rz = mz + qw * tz + (qx * ty - qy * tx)
-                ry = sqrt(hx * hx + hy * hy)
-                # expected field direction in the sensor frame v_m = R(q)ᵀ (0, ry, rz), normalised
+            ax, ay, az = ax / an, ay / an, az / an
+            # expected direction of "up" in the sensor frame v = R(q)ᵀ e_z, error e = â × v
+            vx, vy, vz = 2.0 * (qx * qz - qw * qy), 2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy)
+            ex, ey, ez = ay * vz - az * vy, az * vx - ax * vz, ax * vy - ay * vx
+            if m is not None and 0.0 < (mn := m[0] * m[0] + m[1] * m[1] + m[2] * m[2]) < inf:
+                mn = sqrt(mn)
+                mx, my, mz = m[0] / mn, m[1] / mn, m[2] / mn
+                # reference field (0, ry, rz) from h = R(q) m̂ (as riann_ros.rotations.rotate), seen in the sensor
+                # frame: v_m = R(q)ᵀ (0, ry, rz), error e += m̂ × v_m / ‖v_m‖
+                tx, ty, tz = 2.0 * (qy * mz - qz * my), 2.0 * (qz * mx - qx * mz), 2.0 * (qx * my - qy * mx)
+                hx, hy = mx + qw * tx + (qy * tz - qz * ty), my + qw * ty + (qz * tx - qx * tz)
+                ry, rz = sqrt(hx * hx + hy * hy), mz + qw * tz + (qx * ty - qy * tx)
                 wx = 2.0 * ry * (qx * qy + qw * qz) + 2.0 * rz * (qx * qz - qw * qy)
                 wy = ry * (1.0 - 2.0 * (qx * qx + qz * qz)) + 2.0 * rz * (qw * qx + qy * qz)
                 wz = 2.0 * ry * (qy * qz - qw * qx) + rz * (1.0 - 2.0 * (qx * qx + qy * qy))
                 wn = sqrt(wx * wx + wy * wy + wz * wz)
                 if 0.0 < wn < inf:
                     used = True
-                    wx /= wn
-                    wy /= wn
-                    wz /= wn
-                    ex += my * wz - mz * wy
-                    ey += mz * wx - mx * wz
-                    ez += mx * wy - my * wx
+                    wx, wy, wz = wx / wn, wy / wn, wz / wn
+                    ex, ey, ez = ex + (my * wz - mz * wy), ey + (mz * wx - mx * wz), ez + (mx * wy - my * wx)
             kih = ki * h
-            bx -= kih * ex
-            by -= kih * ey
-            bz -= kih * ez
-            gx = gx - bx + kp * ex
-            gy = gy - by + kp * ey
-            gz = gz - bz + kp * ez
+            bx, by, bz = bx - kih * ex, by - kih * ey, bz - kih * ez
+            gx, gy, gz = gx - bx + kp * ex, gy - by + kp * ey, gz - bz + kp * ez
         else:
-            gx -= bx
-            gy -= by
-            gz -= bz
+            gx, gy, gz = gx - bx, gy - by, gz - bz
+        # q ← normalise(q + ½ q ⊗ [0, Ω] dt), the previous q where that is not finite
         hh = 0.5 * h
-        nw = qw + (-qx * gx - qy * gy - qz * gz) * hh
-        nx = qx + (qw * gx + qy * gz - qz * gy) * hh
-        ny = qy + (qw * gy - qx * gz + qz * gx) * hh
-        nz = qz + (qw * gz + qx * gy - qy * gx) * hh
+        nw, nx = qw + (-qx * gx - qy * gy - qz * gz) * hh, qx + (qw * gx + qy * gz - qz * gy) * hh
+        ny, nz = qy + (qw * gy - qx * gz + qz * gx) * hh, qz + (qw * gz + qx * gy - qy * gx) * hh
         nn = sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
         if 0.0 < nn < inf:
-            qw = nw / nn
-            qx = nx / nn
-            qy = ny / nn
-            qz = nz / nn
+            qw, qx = nw / nn, nx / nn
+            qy, qz = ny / nn, nz / nn
         append((qw, qx, qy, qz))
     if not (math.isfinite(bx) and math.isfinite(by) and math.isfinite(bz)):
         bx = by = bz = 0.0
@@ -242,17 +147,14 @@ class MahonyEstimator(AttitudeEstimator):
         return self._observed
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
-        a, g, h = sanitize_arrays(acc, gyr, dt)
-        m = None if mag is None else sanitize_mag(mag, len(a))
-        g = self._fe.debias(a, g, h)
-        kp = float(self.params["kp"])
-        ki = float(self.params["ki"])
-        if m is None:
-            self._q, self._b, out = _mahony_run(self._q, self._b, a.tolist(), g.tolist(), h.tolist(), kp, ki)
-            if out:
-                self._observed = False
-        else:
-            self._q, self._b, self._observed, out = _mahony_marg_run(
-                self._q, self._b, self._observed, a.tolist(), g.tolist(), m, h.tolist(), kp, ki
-            )
+        rows = loop_rows(acc, gyr, dt, mag, self._fe)
+        out: list = []
+        q, used = self._q, self._observed
+        if q is None:
+            q, rows, used = initialise(rows, out)
+        if q is not None:
+            kp, ki = float(self.params["kp"]), float(self.params["ki"])
+            self._q, self._b, used, filtered = _mahony_loop(q, self._b, used, rows, kp, ki)
+            out += filtered
+        self._observed = used
         return as_array(out)

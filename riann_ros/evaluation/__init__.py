@@ -1,22 +1,23 @@
 """Offline attitude evaluation, the paper's way (ROS-free core of ``riann-bag-eval``).
 
-One pipeline (:mod:`~riann_ros.evaluation.run`): a source yields recording chunks, with estimates
-recorded in the bag aligned onto them (:mod:`~riann_ros.evaluation.sources`) → its first pass finds the
-motion onset and the initial rest (:mod:`~riann_ros.evaluation.rest`) → each scenario transforms the chunks
-(:mod:`~riann_ros.evaluation.scenarios`) → a runner gives the estimates (in-process through the node's
-``EstimatorStream``, live over DDS, or recorded in the bag) → one accumulator per scenario × estimator
-scores them (:mod:`~riann_ros.evaluation.scoring`). The runners: :mod:`~riann_ros.evaluation.runners`; settings
-and result rows: :mod:`~riann_ros.evaluation.results`. Estimator specs and tuning grids:
-:mod:`~riann_ros.evaluation.specs`; statistics across sequences and tuning:
-:mod:`~riann_ros.evaluation.aggregate`; tables and files: :mod:`~riann_ros.evaluation.report`; figures:
-:mod:`~riann_ros.evaluation.plots`; the ``--out`` folder policy: :mod:`~riann_ros.evaluation.outdir`; two saved
-runs side by side: :mod:`~riann_ros.evaluation.compare` (report and compare use plots and outdir; neither
-plots nor outdir imports them).
+One pipeline (:mod:`~riann_ros.evaluation.run`): a source yields recording chunks, with estimates recorded in the
+bag aligned onto them (:mod:`~riann_ros.evaluation.sources`) → its first pass finds the motion onset and the initial
+rest (:mod:`~riann_ros.evaluation.first_pass`, :mod:`~riann_ros.evaluation.rest`) → each scenario transforms the
+chunks (:mod:`~riann_ros.evaluation.scenarios`) → a runner gives the estimates (in-process through the node's
+``EstimatorStream``, live over DDS, or recorded in the bag) → one accumulator per scenario × estimator scores them
+(:mod:`~riann_ros.evaluation.scoring`). The runners: :mod:`~riann_ros.evaluation.runners`; settings and result rows:
+:mod:`~riann_ros.evaluation.results`. Estimator specs and tuning grids: :mod:`~riann_ros.evaluation.specs`;
+statistics across sequences and tuning: :mod:`~riann_ros.evaluation.aggregate`; tables and files:
+:mod:`~riann_ros.evaluation.report`; figures: :mod:`~riann_ros.evaluation.plots`; the ``--out`` folder policy:
+:mod:`~riann_ros.evaluation.outdir`; two saved runs side by side: :mod:`~riann_ros.evaluation.compare` (report and
+compare use plots and outdir; neither plots nor outdir imports them).
 Reference: docs/evaluation.md.
 """
 
 from riann_ros.evaluation.aggregate import ALL_DATASETS, Group, aggregate, best_of, rate_order, tune
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.first_pass import load_recording, summarise
+from riann_ros.evaluation.input_hints import BROAD_SUFFIXES, input_hint
 from riann_ros.evaluation.offsets import STEPS as OFFSET_STEPS
 from riann_ros.evaluation.offsets import timing_notes
 from riann_ros.evaluation.perturb import Condition, parse_condition, parse_perturbation
@@ -48,17 +49,7 @@ from riann_ros.evaluation.scenarios import (
     sequence_seed,
 )
 from riann_ros.evaluation.scoring import ERRORS, STATS, Accumulator, ErrorStats, Score, score, stat_field
-from riann_ros.evaluation.sources import (
-    BROAD_SUFFIXES,
-    BagTopics,
-    Chunk,
-    EstimateFile,
-    Source,
-    input_hint,
-    load_recording,
-    open_source,
-    summarise,
-)
+from riann_ros.evaluation.sources import BagTopics, Chunk, EstimateFile, Source, open_source
 from riann_ros.evaluation.specs import (
     EstimatorSpec,
     available_estimators,

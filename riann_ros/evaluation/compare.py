@@ -5,7 +5,7 @@ one run), each narrowed by selections (``--select-a estimator=madgwick``, ``--se
 ``--select scenario=as-recorded`` for both; :func:`parse_selection`).
 
 Matching: rows always pair by sequence. Of the other axes — scenario, perturbation, rate, estimator — those on
-which A and B share a value also have to agree (so two runs of the same settings pair row by row, as before);
+which A and B share a value also have to agree (so two runs of the same settings pair row by row);
 an axis whose values A and B do not share at all (``madgwick`` in A, ``madgwick(beta=0.1)`` in B; a clean run and a
 perturbed one) is not matched, and each side's value is shown. A statistic (``--metric``: ``rmse`` by default, or
 another of evo ape's mean, median, std, min, max; heading and total errors where scored) is compared as B − A: per
@@ -316,7 +316,7 @@ def _csv_stats(cmp: Comparison) -> list[tuple[str, str]]:
 
 
 def write_csv(path: Path, cmp: Comparison) -> None:
-    """compare.csv: one row per pair. ``sequence, scenario, perturbation, rate, estimator`` are A's (as before),
+    """compare.csv: one row per pair. ``sequence, scenario, perturbation, rate, estimator`` are A's,
     ``rmse_a_deg, rmse_b_deg, diff_deg`` the e_α RMSEs and B − A, then B's side, the ``--metric`` and its
     difference, and A's and B's value of every other statistic."""
     extra = _csv_stats(cmp)

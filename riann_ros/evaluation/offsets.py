@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from riann_ros.constants import NS_PER_S
+
 STEPS = 3  # the search spans ± this many input steps
 GRID = 4  # candidate offsets per step (a parabola through the best three refines the best)
 GAP_STEPS = 2.5  # the reference is not interpolated across a gap longer than this many steps
@@ -94,7 +96,7 @@ class OffsetSearch:
     ``step_s``: the stream's step (1 / its nominal rate)."""
 
     def __init__(self, n_est: int, step_s: float, steps: int = STEPS, grid: int = GRID) -> None:
-        self.step_ns = step_s * 1e9
+        self.step_ns = step_s * NS_PER_S
         k = np.arange(-steps * grid, steps * grid + 1)
         self.taus = k * self.step_ns / grid  # ns
         self.reach = steps * self.step_ns  # the largest |τ|
@@ -112,7 +114,7 @@ class OffsetSearch:
     def add(self, stamps: NDArray[np.int64], quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_],
             qs: Sequence[NDArray[np.float64]]) -> None:
         """One chunk: stamps, reference (N, 4) with NaN rows (None: none), score mask and each estimator's estimates
-        (N, 4); scores the samples whose shifted times the reference now covers."""
+        (N, 4); scores the samples whose shifted times the reference covers with this chunk in."""
         if quat_ref is None or not len(stamps):
             return
         ref_ok = np.isfinite(quat_ref).all(axis=1)

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from riann_ros.constants import GRAVITY, NS_PER_S
 from riann_ros.recording import Recording
 
 #: s, time constant of the low-pass filter; VQF's ``restFilterTau`` (cut-off √2/(2π·0.5 s) ≈ 0.45 Hz:
@@ -48,11 +49,9 @@ REST_GYR_MAX_DPS = 2.0
 #: m/s², accelerometer deviation from its low-passed value; VQF's ``restThAcc`` (noise ~0.01–0.05 m/s²; a hand
 #: holding a sensor moves it by more)
 REST_ACC_DEV = 0.5
-#: m/s², standard gravity (the local value varies by ±0.03 m/s²)
-GRAVITY = 9.81
-#: m/s², tolerance of ‖acc‖ to g at rest: a consumer accelerometer's offset and scale errors (±50–80 mg per axis
-#: in datasheets, BROAD's rests 9.82–9.91 m/s²) plus the local gravity; a sustained vertical acceleration or a
-#: horizontal one above ~4.4 m/s² exceeds it
+#: m/s², tolerance of ‖acc‖ to standard gravity (:data:`~riann_ros.constants.GRAVITY`) at rest: a consumer
+#: accelerometer's offset and scale errors (±50–80 mg per axis in datasheets, BROAD's rests 9.82–9.91 m/s²) plus
+#: the local gravity (±0.03 m/s²); a sustained vertical acceleration or a horizontal one above ~4.4 m/s² exceeds it
 REST_ACC_NORM_TOL = 1.0
 #: s, shortest rest; VQF's ``restMinT``. Shorter quiet spells happen inside motions (turning points); 1.5 s of
 #: samples also average the gyro noise to ~0.01 °/s
@@ -172,7 +171,7 @@ class RestDetector:
         return self.n >= self.stop and (self.given is None or self.last_stamp >= self._ns(self.given[1]))
 
     def _ns(self, seconds: float) -> int:
-        return self.first_stamp + round(seconds * 1e9)
+        return self.first_stamp + round(seconds * NS_PER_S)
 
     def add(self, c: Recording) -> None:
         """The next chunk (its first sample follows the last one added)."""

@@ -2,7 +2,7 @@
 
 For each input and rate, a :class:`~riann_ros.evaluation.sources.Source` yields chunks (a bag chunk by
 chunk; a BROAD file or a resampled recording as one chunk); after a first pass
-(:func:`~riann_ros.evaluation.sources.summarise`) each chunk goes through every scenario's
+(:func:`~riann_ros.evaluation.first_pass.summarise`) each chunk goes through every scenario's
 :class:`~riann_ros.evaluation.scenarios.ScenarioPlan`, then each condition's perturbations
 (:mod:`~riann_ros.evaluation.perturb`), into a runner, and the runner's estimates into one
 :class:`~riann_ros.evaluation.scoring.Accumulator` per condition × scenario × estimator. A whole recording is
@@ -36,6 +36,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.first_pass import Summary, summarise
+from riann_ros.evaluation.input_hints import BROAD_SUFFIXES
 from riann_ros.evaluation.offsets import OffsetSearch
 from riann_ros.evaluation.perturb import Condition, Transform
 from riann_ros.evaluation.rest import NO_REST_WARNING, Rest
@@ -53,17 +55,10 @@ from riann_ros.evaluation.results import (
 from riann_ros.evaluation.runners import Joined, OfflineRunner, RecordedRunner, Run, Runner, run_sigmas
 from riann_ros.evaluation.scenarios import AS_RECORDED, ScenarioPlan, sequence_seed
 from riann_ros.evaluation.scoring import Accumulator, Score, error_deg, roll_pitch_deg
-from riann_ros.evaluation.sources import (
-    BROAD_SUFFIXES,
-    Source,
-    Summary,
-    open_source,
-    read_whole,
-    summarise,
-)
+from riann_ros.evaluation.sources import Source, open_source, read_whole
 from riann_ros.evaluation.specs import EstimatorSpec
+from riann_ros.gate import GateConfig
 from riann_ros.recording import Recording
-from riann_ros.stream import GateConfig
 
 
 class _ScenarioRun:

@@ -15,9 +15,10 @@ from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.evaluation.results import RECORDED, RunStats
 from riann_ros.evaluation.sources import Chunk
 from riann_ros.evaluation.specs import EstimatorSpec
+from riann_ros.gate import GateConfig
 from riann_ros.mag import MagConfig
 from riann_ros.recording import Recording
-from riann_ros.stream import EstimatorStream, GateConfig
+from riann_ros.stream import EstimatorStream
 
 
 class Run(Protocol):

@@ -18,7 +18,7 @@ Paper, section "Performance Evaluation":
 - ``as-recorded`` (not in the paper) — the recording exactly as it is: no bias removed, none added,
   estimators run from the first sample, scored on the score mask. What a user's own bag is.
 
-A :class:`ScenarioPlan` is made from the source's :class:`~riann_ros.evaluation.sources.Summary` and
+A :class:`ScenarioPlan` is made from the source's :class:`~riann_ros.evaluation.first_pass.Summary` and
 applied to each chunk in turn (:meth:`ScenarioPlan.apply`), so a bag never has to be held whole.
 """
 
@@ -30,9 +30,10 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from riann_ros.evaluation.sources import Chunk, Summary
+from riann_ros.evaluation.first_pass import Summary, summarise
+from riann_ros.evaluation.sources import Chunk, Source
+from riann_ros.gate import GateConfig
 from riann_ros.recording import Recording
-from riann_ros.stream import GateConfig
 
 RESTRICTIVE = "restrictive"
 PARTIAL = "partially-restrictive"
@@ -161,8 +162,6 @@ def scenario_recording(rec: Recording, scenario: str, seed: int = 0,
                        rest: tuple[float, float] | None = None) -> tuple[Recording, ScenarioInfo]:
     """A whole recording prepared for ``scenario``: the one-chunk case of :class:`ScenarioPlan` (``rest``: given
     by hand, seconds from the first sample)."""
-    from riann_ros.evaluation.sources import Source, summarise
-
     plan = ScenarioPlan(scenario, summarise(Source(rec.name, rec), rest), seed)
     out = plan.apply(rec, 0)
     if out is None:  # pragma: no cover - summarise guarantees scored samples, so the start is inside

@@ -11,6 +11,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
+from riann_ros import gate as gt
 from riann_ros import mag as mg
 from riann_ros import stream as st
 
@@ -124,9 +125,9 @@ class Diagnostics:
             "heading": "magnetic (9D)" if est.heading_observed() else "gyro only",
         }
         values.update(est.diagnostics())
-        for reason in st.REJECT_REASONS:
+        for reason in gt.REJECT_REASONS:
             values[f"rejected {reason} (total)"] = str(gate.rejected[reason])
-        for cause in (st.GAP, st.CLOCK_JUMP):
+        for cause in (gt.GAP, gt.CLOCK_JUMP):
             values[f"restarts {cause} (total)"] = str(gate.resets[cause])
         return values
 

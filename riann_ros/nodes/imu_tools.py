@@ -101,7 +101,7 @@ DECLINATION_PLAUSIBLE = 0.6  # rad (34°): |declination| beyond this is rare out
 
 def _declination(v: Any, est: str) -> Translation:
     """imu_tools' declination is in radians, ours (declination_deg) in degrees: a value that is implausible in
-    radians was probably meant in degrees (this package called its parameter declination once)."""
+    radians was probably meant in degrees (the unit of ours), and the translation says so."""
     t = _radians_to("declination_deg", "magnetic declination, east positive")(v, est)
     if abs(_number("declination", v)) > DECLINATION_PLAUSIBLE:
         t.note += (f" -- WARNING: {_number('declination', v):g} rad is implausible; declination is in radians "
@@ -125,22 +125,14 @@ def _debug_topics(v: Any, est: str) -> Translation:
                        note="roll, pitch, yaw on imu/rpy, in degrees (imu_tools: radians on imu/rpy/filtered)")
 
 
-def _stateless(v: Any, est: str) -> Translation:
-    t = Translation("stateless", MADGWICK)
-    if _flag("stateless", v):
-        t.refused = "there is no stateless mode (an orientation from each sample alone): every node is a filter"
-    else:
-        t.note = "false: filtering, as the nodes always do"
-    return t
-
-
-def _field_msg(v: Any, est: str) -> Translation:
-    t = Translation("use_magnetic_field_msg", MADGWICK + " (ROS 1)")
-    if _flag("use_magnetic_field_msg", v):
-        t.note = "true: imu/mag is sensor_msgs/MagneticField, as the nodes always read it"
-    else:
-        t.refused = "imu/mag must be sensor_msgs/MagneticField; geometry_msgs/Vector3Stamped is not read"
-    return t
+def _fixed_flag(name: str, source: str, kept: bool, note: str, refused: str) -> Callable[[Any, str], Translation]:
+    """A boolean imu_tools parameter whose value ``kept`` is what the nodes always do (noted) and whose other value
+    is refused."""
+    def tr(v: Any, est: str) -> Translation:
+        if _flag(name, v) == kept:
+            return Translation(name, source, note=note)
+        return Translation(name, source, refused=refused)
+    return tr
 
 
 def _bias_estimation(v: Any, est: str) -> Translation:
@@ -178,8 +170,13 @@ ALIASES: dict[str, Callable[[Any, str], Translation]] = {
     "declination": lambda v, est: _declination(v, est),
     "constant_dt": _constant_dt,
     "publish_debug_topics": _debug_topics,
-    "stateless": _stateless,
-    "use_magnetic_field_msg": _field_msg,
+    "stateless": _fixed_flag("stateless", MADGWICK, False, "false: filtering, as the nodes always do",
+                             "there is no stateless mode (an orientation from each sample alone): every node is a "
+                             "filter"),
+    "use_magnetic_field_msg": _fixed_flag("use_magnetic_field_msg", MADGWICK + " (ROS 1)", True,
+                                          "true: imu/mag is sensor_msgs/MagneticField, as the nodes always read it",
+                                          "imu/mag must be sensor_msgs/MagneticField; geometry_msgs/Vector3Stamped "
+                                          "is not read"),
     "do_bias_estimation": _bias_estimation,
     "gain_acc": _complementary_gain("gain_acc"),
     "gain_mag": _complementary_gain("gain_mag"),

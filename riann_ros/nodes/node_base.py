@@ -27,6 +27,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import Imu, MagneticField
 from std_srvs.srv import Trigger
 
+from riann_ros import gate as gt
 from riann_ros import mag as mg
 from riann_ros import stamps
 from riann_ros import stream as st
@@ -71,7 +72,7 @@ class EstimatorNode(Node):
         self._values = p
         self._est_names = {s.name for s in est_specs}
         self.stream = st.EstimatorStream(create(self.ESTIMATOR, **{k: p[k] for k in self._est_names}),
-                                         st.GateConfig(**{s.name: p[s.name] for s in st.GATE_PARAMS}),
+                                         gt.GateConfig(**{s.name: p[s.name] for s in gt.GATE_PARAMS}),
                                          mg.MagConfig(**{s.name: p[s.name] for s in mg.MAG_PARAMS}))
         self.add_pre_set_parameters_callback(self._params.coerce_sets)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -119,7 +120,7 @@ class EstimatorNode(Node):
         try:
             changes = collect_changes(params, self._params.specs)
             values = {**self._values, **changes}
-            new_gate = st.GateConfig(**{s.name: values[s.name] for s in st.GATE_PARAMS})
+            new_gate = gt.GateConfig(**{s.name: values[s.name] for s in gt.GATE_PARAMS})
             new_mag = mg.MagConfig(**{s.name: values[s.name] for s in mg.MAG_PARAMS})
             est_changes = {k: v for k, v in changes.items() if k in self._est_names}
             if est_changes:
@@ -211,10 +212,10 @@ class EstimatorNode(Node):
         else:
             self.get_logger().warning(text)
 
-    def _log_gate_result(self, r: st.GateResult) -> None:
+    def _log_gate_result(self, r: gt.GateResult) -> None:
         for w in r.warnings:
-            self.get_logger().warning(st.WARNING_TEXT[w])
-        if r.reset in (st.GAP, st.CLOCK_JUMP):
+            self.get_logger().warning(gt.WARNING_TEXT[w])
+        if r.reset in (gt.GAP, gt.CLOCK_JUMP):
             self.get_logger().info(f"{r.reset.replace('_', ' ')} at stamp {r.stamp_ns * 1e-9:.6f} s: estimator "
                                    "restarted, re-initialised from this sample")
 

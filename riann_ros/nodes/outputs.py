@@ -20,9 +20,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import Imu
 
 from riann_ros import frames
+from riann_ros.constants import GRAVITY
 from riann_ros.rotations import Quat
 
-GRAVITY = 9.80665  # m/s², what remove_gravity_vector takes out (imu_tools' value)
 TF_TOPIC = "/tf"
 TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
                     durability=DurabilityPolicy.VOLATILE)  # tf2_ros' DynamicBroadcasterQoS
@@ -58,7 +58,8 @@ def tf_frames_problem(parent: str, child: str) -> str | None:
 
 def gravity_in_sensor(q_enu: Quat) -> tuple[float, float, float]:
     """What an accelerometer at rest reads (m/s², sensor frame) in the attitude ``q_enu`` (sensor to ENU): gravity's
-    reaction, ``GRAVITY`` along the world's up axis expressed in the sensor frame."""
+    reaction, :data:`~riann_ros.constants.GRAVITY` (imu_tools' value) along the world's up axis expressed in the
+    sensor frame."""
     w, x, y, z = q_enu
     return (GRAVITY * 2.0 * (x * z - w * y), GRAVITY * 2.0 * (y * z + w * x), GRAVITY * (1.0 - 2.0 * (x * x + y * y)))
 

@@ -1,7 +1,7 @@
 """The nodes' ROS parameters: their specs, their declaration, the types users write, imu_tools' names.
 
 Every parameter is a :class:`~riann_ros.params.ParamSpec` (the node's own below, the input gate's
-:data:`riann_ros.stream.GATE_PARAMS`, the magnetometer's :data:`riann_ros.mag.MAG_PARAMS`, the estimator's
+:data:`riann_ros.gate.GATE_PARAMS`, the magnetometer's :data:`riann_ros.mag.MAG_PARAMS`, the estimator's
 ``PARAMS``). :class:`NodeParameters` declares them on the node:
 
 * **types** — YAML and the command line type a value by its spelling (``200`` is an integer, ``false`` a
@@ -22,8 +22,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from riann_ros import frames
+from riann_ros import gate as gt
 from riann_ros import mag as mg
-from riann_ros import stream as st
 from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.estimators import REGISTRY, estimator_class
 from riann_ros.nodes import imu_tools
@@ -31,7 +31,7 @@ from riann_ros.params import ParamSpec
 
 QOS_CHOICES = ("sensor_data", "reliable", "best_effort")
 
-#: Parameters of the node itself (the gate's come from :data:`riann_ros.stream.GATE_PARAMS`, the
+#: Parameters of the node itself (the gate's come from :data:`riann_ros.gate.GATE_PARAMS`, the
 #: estimator's from its ``PARAMS``); those with ``runtime=False`` only take effect at start-up.
 NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("input_qos", "sensor_data", "Input QoS: sensor_data (best effort, connects to reliable and "
@@ -71,7 +71,7 @@ NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("remove_gravity_vector", False, "Subtract gravity (9.80665 m/s² along the estimated vertical) from "
               "linear_acceleration in imu/data, as imu_tools' remove_gravity_vector.", runtime=True),
 )
-NODE_PARAMS: tuple[ParamSpec, ...] = (*st.GATE_PARAMS, *mg.MAG_PARAMS, *NODE_ONLY_PARAMS)
+NODE_PARAMS: tuple[ParamSpec, ...] = (*gt.GATE_PARAMS, *mg.MAG_PARAMS, *NODE_ONLY_PARAMS)
 
 _ROS_TYPES = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER, float: Parameter.Type.DOUBLE,
               str: Parameter.Type.STRING, tuple: Parameter.Type.DOUBLE_ARRAY}

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from riann_ros.constants import NS_PER_S
 from riann_ros.evaluation.perturb.base import Perturbation, Transform, with_samples
 from riann_ros.recording import Recording
 
@@ -41,7 +42,7 @@ class _Holes(Transform):
         self.removed = 0
 
     def _next_candidate(self, after: int) -> None:
-        self.candidate = after + round(self.rng.exponential(self.p.every) * 1e9)
+        self.candidate = after + round(self.rng.exponential(self.p.every) * NS_PER_S)
 
     def __call__(self, rec: Recording) -> Recording:
         st = rec.stamps_ns
@@ -60,7 +61,7 @@ class _Holes(Transform):
             if not len(at):
                 break  # no scored sample after the candidate in this piece: wait for the next
             start = int(st[at[0]])
-            self.hole = (start, start + round(self.rng.uniform(self.p.lo, self.p.hi) * 1e9))
+            self.hole = (start, start + round(self.rng.uniform(self.p.lo, self.p.hi) * NS_PER_S))
             self.holes += 1
         self.removed += int((~keep).sum())
         return rec if keep.all() else with_samples(rec, keep)

@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros import quaternion as quat
+from riann_ros.constants import NS_PER_S
 from riann_ros.evaluation.perturb.base import DRAW_BLOCK, Perturbation, Transform, concat, in_order, with_samples
 from riann_ros.recording import Recording
 
@@ -46,9 +47,9 @@ class Jitter(Perturbation):
 
     def draw(self, rng: np.random.Generator) -> Callable[[], NDArray[np.int64]]:
         if self.choices:
-            ns = np.round(np.asarray(self.choices) * 1e9).astype(np.int64)
+            ns = np.round(np.asarray(self.choices) * NS_PER_S).astype(np.int64)
             return lambda: rng.choice(ns, DRAW_BLOCK)
-        lo, hi = round(self.lo * 1e9), round(self.hi * 1e9)
+        lo, hi = round(self.lo * NS_PER_S), round(self.hi * NS_PER_S)
         return lambda: rng.integers(lo, hi, DRAW_BLOCK, endpoint=True)
 
     def start(self, rng: np.random.Generator) -> Transform:
@@ -75,7 +76,7 @@ class Rate(Jitter):
 
     def draw(self, rng: np.random.Generator) -> Callable[[], NDArray[np.int64]]:
         # exact ns grid (1/3 ms steps alternate 333333 and 333334 ns): stamps k * 1e9 / hz, rounded
-        step = 1e9 / self.hz
+        step = NS_PER_S / self.hz
         state = {"k": 0}
 
         def block() -> NDArray[np.int64]:
@@ -236,7 +237,7 @@ class _Latency(Transform):
         n = len(rec)
         if n == 0:
             return rec
-        delay = np.round(self.rng.uniform(self.p.lo, self.p.hi, n) * 1e9).astype(np.int64)
+        delay = np.round(self.rng.uniform(self.p.lo, self.p.hi, n) * NS_PER_S).astype(np.int64)
         out = in_order(rec.stamps_ns + delay, self.last, self.MIN_STEP_NS)
         self.last = int(out[-1])
         self.samples += n
@@ -264,7 +265,7 @@ class _Fifo(Transform):
     MIN_STEP_NS = 10_000
 
     def __init__(self, p: Fifo) -> None:
-        self.period_ns = round(p.period * 1e9)
+        self.period_ns = round(p.period * NS_PER_S)
         self.t0: int | None = None  # the first read (the sequence's first stamp)
         self.last: int | None = None  # the previous output stamp (ns)
         self.last_read: int | None = None
