@@ -17,7 +17,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu, MagneticField
-from test_node_mag import mag_msg, motion
+from test_nodes_node_base import mag_msg, motion
 
 from conftest import BIN, ROOT, wait_for, wait_matched
 from helpers_ros import imu_msg
