@@ -26,9 +26,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench_accuracy import CONDITIONS, RATES
 
 from riann_ros.datasets.broad import broad_files, find_broad_dir

@@ -27,11 +27,9 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY  # noqa: E402
-
 RESULTS = ROOT / "docs" / "results"
 PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md")
 FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_deg", "heading_rmse_deg",

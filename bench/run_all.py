@@ -20,10 +20,9 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
+from riann_ros.datasets.broad import find_broad_dir
 
-from riann_ros.datasets.broad import find_broad_dir  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 # name -> (script, short arguments, needs BROAD)
 BENCHES: dict[str, tuple[str, list[str], bool]] = {
