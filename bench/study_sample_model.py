@@ -1,4 +1,4 @@
-"""Does the IMU stream itself show how a regular low-rate stream was made (issue 28)?
+"""Does the IMU stream itself show how a regular low-rate stream was made?
 
 Usage::
 

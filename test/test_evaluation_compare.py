@@ -92,7 +92,7 @@ def params_runs(three, tmp_path_factory) -> tuple[Path, Path, Path]:
 @pytest.mark.slow
 def test_compare_two_runs_with_different_parameters(params_runs, tmp_path, capsys):
     a, b, _ = params_runs
-    assert main(["--compare", str(a), str(b)]) == 0  # as before: the shared labels pair, the others are listed
+    assert main(["--compare", str(a), str(b)]) == 0  # no selection: the shared labels pair, the others are listed
     text = capsys.readouterr().out
     assert "only in A (no partner in B): 6 row(s)" in text and "madgwick(beta=0.1)" in text
     assert "--select-a estimator=madgwick --select-b estimator='madgwick(beta=0.1)'" in text

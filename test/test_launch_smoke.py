@@ -1,5 +1,5 @@
 """The launch files run: their node actions, turned into the command lines launch_ros runs (launch_ros is not
-installable here: test/helpers_launch.py), start the real executables, checked over DDS (issue 26, item 3).
+installable here: test/helpers_launch.py), start the real executables, checked over DDS.
 
 * ``riann.launch.py namespace:=robot1 mag_topic:=/robot1/magnetometer``: the node lives in /robot1, reads the
   remapped magnetometer and publishes under /robot1;

@@ -106,7 +106,8 @@ def started(node) -> str:
     ("yaml", "false", "false"), ("yaml", "'true'", "true"), ("yaml", "True", "true"),
 ])
 def test_use_mag_takes_its_documented_values(ros, start_node, tmp_path, how, value, expected):
-    """use_mag:=false (a bool to YAML and the command line) used to kill the node with 'BOOL vs STRING'."""
+    """use_mag is a string parameter (auto, true, false), and false or True given as a bool (what YAML and the
+    command line make of them) is taken as that string: the node starts and subscribes imu/mag unless false."""
     ns = f"/use_mag_{how}_{value.strip(chr(39)).lower()}"
     if how == "cli":
         args = ("-p", f"use_mag:={value}")
@@ -193,9 +194,9 @@ def synthetic(n: int, rate: float = 200.0):
 
 
 def test_gain_sets_beta_and_unknown_names_are_named(ros, start_node):
-    """madgwick_node -p gain:=0.1 used to keep beta at 0.033 without a word. Now gain is imu_filter_madgwick's
-    name of beta (the output equals the core with beta = beta_marg = 0.1), and a typo, another node's parameter or
-    a name imu_tools means otherwise each get a warning naming what to write instead."""
+    """madgwick_node -p gain:=0.1: gain is imu_filter_madgwick's name of beta (the output equals the core with
+    beta = beta_marg = 0.1); a typo, another node's parameter or a name imu_tools means otherwise each get a warning
+    naming what to write instead."""
     node = start_node("madgwick_node", "-p", "input_qos:=reliable", "-p", "nominal_rate:=200", "-p", "gain:=0.1",
                       "-p", "gian:=1.0", "-p", "kp:=2.0", "-p", "bta:=0.3", "-p", "zeta:=0.02",
                       "-p", "mag_hard_iron:=[0, 0, 1.5e-6]")
