@@ -307,4 +307,7 @@ def test_node_killed_and_restarted_reinitialises_from_next_sample(ros, start_nod
     log = node2.output()
     assert "Traceback" not in log and "error" not in log.lower(), log
     ros.destroy(pub, att)
-
+    # the killed node said no goodbye: its endpoints stay in the graph until its DDS lease runs out; the next test
+    # must not count them as a second publisher
+    wait_for(lambda: not _gids(ros.node.get_publishers_info_by_topic("/imu/attitude")) & old_pub, 60,
+             "the killed node's endpoints to leave the graph")
