@@ -1,5 +1,5 @@
-"""The result tables and figures of README.md, docs/results.md, BENCHMARKS.md and docs/riann.md, written from
-committed results.
+"""The result tables and figures of README.md, docs/results.md, BENCHMARKS.md, docs/riann.md and bags/README.md,
+written from committed results.
 
 Usage::
 
@@ -31,7 +31,7 @@ from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results"
-PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md")
+PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md", "bags/README.md")
 FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_deg", "heading_rmse_deg",
           "total_rmse_deg", "best_t_offset_s")
 #: the uncertainty scores a file keeps when trimmed with ``--uncertainty`` (riann_ros/evaluation/uncertainty.py)
@@ -347,10 +347,52 @@ def _fig(rows: Rows, est: str) -> str:
     return rows.mean_max(est)
 
 
-def demo_figures() -> str:
-    rows = load("demo")
-    ests = sorted(rows.estimators(), key=rows.mean)
-    return ", ".join(f"{NAMES[e]} {rows.mean(e):.2f}°" for e in ests) + " mean"
+#: the demo's conditions (the Makefile's ``-p``), as the README says them; another condition is shown as written
+DEMO_CONDITIONS = {"none": "as recorded", "jitter:10/20/30ms": "stamps jittered 10/20/30 ms",
+                   "bias:3,3,0": "gyro bias (3, 3, 0) °/s"}
+
+
+#: the fast trials measured for the demo's real recording (bags/README.md), and the conditions shown for them
+DEMO_CANDIDATES = ("06", "07", "15", "21")
+CANDIDATE_CONDITIONS = ("none", "jitter:10/20/30ms", "bias:3,3,0", "dropout:0.1-0.6s@10s")
+
+
+def demo_candidates() -> str:
+    """Per candidate trial (as recorded, perturbed.json) and condition: each estimator's RMSE."""
+    rows = load("perturbed").where(scenario="as-recorded").trials(DEMO_CANDIDATES)
+    body = [[f"`{seq}`", f"`{c}`", *(f"{v:.2f}" for e in ESTIMATORS
+                                      for v in rows.where(sequence=seq, perturbation=c).values(e))]
+            for seq in rows.ordered("sequence") for c in CANDIDATE_CONDITIONS]
+    return _table(["trial", "condition", *(NAMES[e] for e in ESTIMATORS)], body, left=2)
+
+
+def run_rows(results_json: Path) -> Rows:
+    """The rows of a ``riann-bag-eval`` results.json as the tables read them (e.g. a fresh ``make demo``)."""
+    return Rows(tuple(json.loads(results_json.read_text())["results"]))
+
+
+def _synthetic(rows: Rows, synthetic: bool) -> Rows:
+    """The rows of the project's generated bags (sequences ``synthetic_…``), or of the real recordings."""
+    return Rows(tuple(r for r in rows.rows if r["sequence"].startswith("synthetic_") == synthetic))
+
+
+def _demo_table(rows: Rows, first: str, cell: Callable[[Rows, str], str]) -> str:
+    body = [[DEMO_CONDITIONS.get(c, f"`{c}`"), *(cell(rows.where(perturbation=c), e) for e in ESTIMATORS)]
+            for c in rows.ordered("perturbation")]
+    return _table([first, *(NAMES[e] for e in ESTIMATORS)], body)
+
+
+def demo_real(rows: Rows | None = None) -> str:
+    """The demo's real recording (one sequence): its RMSE per condition and estimator."""
+    real = _synthetic(load("demo") if rows is None else rows, synthetic=False)
+    (seq,) = real.ordered("sequence")
+    return _demo_table(real, f"`{seq}`", lambda r, e: f"{r.values(e)[0]:.2f}")
+
+
+def demo_synthetic(rows: Rows | None = None) -> str:
+    """The demo's synthetic bags: mean / worst RMSE over them per condition and estimator."""
+    syn = _synthetic(load("demo") if rows is None else rows, synthetic=True)
+    return _demo_table(syn, f"{len(syn.ordered('sequence'))} synthetic bags", Rows.mean_max)
 
 
 def _as_recorded(condition: str) -> Rows:
@@ -417,7 +459,9 @@ def realistic_rates_figures() -> str:
 
 TABLES: dict[str, Callable[[], str]] = {
     "readme-broad": readme_table,
-    "readme-demo": demo_figures,
+    "readme-demo-real": demo_real,
+    "readme-demo-synthetic": demo_synthetic,
+    "demo-candidates": demo_candidates,
     "readme-streams": streams_figures,
     "readme-rate-ratio": rate_ratio_figure,
     "readme-ensemble": ensemble_figures,

@@ -14,9 +14,12 @@ import numpy as np
 
 from riann_ros.recording import Recording
 
+#: the attribution CC BY 4.0 asks for (authors, title, source, licence and its address), carried into every bag
+#: made from a trial (``/dataset/info`` ``source``)
 SOURCE = (
-    "BROAD: D. Laidig, M. Caruso, A. Cereatti, T. Seel, Data 6(7):72, 2021, "
-    "https://doi.org/10.3390/data6070072 (CC BY 4.0)"
+    'BROAD: D. Laidig, M. Caruso, A. Cereatti, T. Seel, "BROAD — A Benchmark for Robust Inertial Orientation '
+    'Estimation", Data 6(7):72, 2021, https://doi.org/10.3390/data6070072; licensed under CC BY 4.0, '
+    "https://creativecommons.org/licenses/by/4.0/"
 )
 REQUIRED = ("imu_acc", "imu_gyr", "opt_quat", "movement")
 OPTIONAL = ("imu_mag",)
