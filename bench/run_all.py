@@ -31,7 +31,7 @@ BENCHES: dict[str, tuple[str, list[str], bool]] = {
     "accuracy": ("bench_accuracy.py", ["--jobs", "2"], True),
     "bags": ("bench_bags.py", ["--duration", "60"], False),
     "long_bag": ("bench_long_bag.py", ["--durations", "120", "--no-stream"], False),
-    "network": ("bench_network.py", ["--reps", "3", "--trial", "07", "--steps", "500", "--samples", "2000"], False),
+    "network": ("bench_network.py", ["--reps", "3", "--trial", "07", "--steps", "500"], False),
     "node": ("bench_node.py", ["--rates", "200,1000", "--duration", "10"], False),
     "soak": ("soak_nodes.py", ["--rates", "1000", "--duration", "20", "--probe-rates", "2000", "--probe-duration",
                                "10", "--side-by-side-duration", "20"], False),
