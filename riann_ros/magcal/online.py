@@ -1,0 +1,243 @@
+"""The online calibration: causal, per sample, gyro-aided (ROS-free).
+
+Per sample (:meth:`OnlineMagCalibrator.update`, plain floats): the gyro increment goes into the open window (one
+quaternion product), the reading is calibrated with the current estimate (a 3×3 product). Once per window (numpy,
+:meth:`OnlineMagCalibrator._add_window`): the window's innovation is tested against its covariance (the window's
+noise plus the estimate's own uncertainty, scaled by the variance of unit weight) and, if it passes, added to the
+information-form least squares ``(Λ, η)`` that started from the prior; ``θ = Λ⁻¹ η``, with the windows' information
+kept only in the directions they know at least as well as the prior (:func:`~.model.posterior`). Without rotation
+no window closes, so the estimate holds at rest and in straight motion; a rotation about one axis only informs what
+that rotation observes (the prior keeps the rest). Nothing is forgotten: no drift.
+
+What it knows: ``Λ⁻¹`` (times the variance of unit weight when the windows scatter more than the noise model says)
+is the estimate's covariance. :meth:`heading_sd_rad` turns it into the σ it adds to a tilt-compensated heading for
+the current attitude and field, per sample (a cached 3×3 field covariance, refreshed every
+:data:`REFRESH_ANGLE_RAD` of rotation); the state is *calibrated* once the largest such σ over all headings at the
+current tilt is at most :data:`CALIBRATED_SD_RAD`, *uncalibrated* while no window has been added, *converging*
+in between.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from riann_ros.mag import USABLE_MAX_T, USABLE_MIN_T
+from riann_ros.magcal.model import Array, CalModel, heading_sd_bound
+from riann_ros.magcal.records import (
+    CALIBRATED,
+    CALIBRATED_SD_RAD,
+    CONVERGING,
+    REFRESH_ANGLE_RAD,
+    STATE_HEADINGS,
+    SWITCH_WINDOWS,
+    UNCALIBRATED,
+    UT,
+    CalState,
+    MagCalibration,
+    MagCalPrior,
+    MagCalStatus,
+    SoftIronModel,
+)
+from riann_ros.magcal.solver import InfoEstimate
+from riann_ros.magcal.windows import Window, Windower, WindowSet
+from riann_ros.rotations import Quat, Vec, rotate
+
+_COS_REFRESH = math.cos(0.5 * REFRESH_ANGLE_RAD)
+_MIN2_UT, _MAX2_UT = (USABLE_MIN_T / UT) ** 2, (USABLE_MAX_T / UT) ** 2  # µT²: riann_ros.mag's plausible norms
+
+
+class OnlineMagCalibrator:
+    """The online calibration (module docstring). ``prior``: the configured or saved calibration;
+    ``soft_iron_model``: ``full`` (default: all 3×3 including the magnetometer's misalignment to the gyro, which
+    the gyro-aided constraint observes), ``symmetric`` or ``none`` (hard iron only)."""
+
+    def __init__(self, prior: MagCalPrior | None = None, soft_iron_model: SoftIronModel = "full") -> None:
+        prior = prior or MagCalPrior()
+        self.model = CalModel(soft_iron_model, np.asarray(prior.soft_iron).reshape(3, 3))
+        self.lam0, self.theta0 = self.model.prior(prior)
+        self.est = InfoEstimate(self.model, self.lam0, self.theta0)
+        self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
+        self.switches = 0  # times a candidate replaced the estimate
+        self.windower = Windower()
+        self.windows = prior.windows  # windows in the information (a saved calibration's included)
+        self.rejected = 0  # windows rejected as disturbed in this run
+        self.converged_after_s: float | None = None  # s after this run's first sample
+        self.q: Quat | None = None  # the attitude last passed (the state's tilt)
+        self.m_last: Vec | None = None  # the last raw reading (µT)
+        self.q_refresh: Quat | None = None  # the windower's attitude at the last field-covariance refresh
+        self.su: tuple[float, ...] = (0.0,) * 6  # the cached field covariance (µT²): xx, xy, xz, yy, yz, zz
+        self.bound = math.pi  # the last state bound (rad)
+        self.field_sd_ut = math.inf  # the calibrated field's σ in its worst direction (µT; refreshed with su)
+        self._cache()
+        self.state: CalState = UNCALIBRATED
+        self._set_state()
+
+    # -------------------------------------------------------------------------------------------------- per sample
+    def update(self, delta: Quat, dt: float, mag_t: Vec | None, delay_s: float = 0.0, q: Quat | None = None
+               ) -> Vec | None:
+        """One sample: ``delta`` the bias-corrected gyro increment (sensor frame), ``dt`` its step (s), ``mag_t``
+        the raw field (T; a reading that is not finite or outside riann_ros.mag's plausible 1 µT–1 mT counts as
+        none) or None, ``delay_s`` the magnetometer's latency (s), ``q`` the attitude (sensor →
+        world; only its tilt matters) when known. Returns the calibrated field (T) or None."""
+        if q is not None:
+            self.q = q
+        m = None
+        if mag_t is not None:
+            m = (mag_t[0] / UT, mag_t[1] / UT, mag_t[2] / UT)
+            n2 = m[0] * m[0] + m[1] * m[1] + m[2] * m[2]
+            if not _MIN2_UT <= n2 <= _MAX2_UT:  # not finite (NaN fails too), dead or saturated: no reading
+                m = None
+        w = self.windower.add(delta, dt, m, delay_s)
+        if w is not None:
+            self._add_window(w)
+        if m is None:
+            return None
+        first = self.m_last is None
+        self.m_last = m
+        if first:
+            self._set_state()
+        a, c = self._a, self._c
+        x, y, z = m
+        return ((a[0] * x + a[1] * y + a[2] * z - c[0]) * UT, (a[3] * x + a[4] * y + a[5] * z - c[1]) * UT,
+                (a[6] * x + a[7] * y + a[8] * z - c[2]) * UT)
+
+    def restart(self) -> None:
+        """A hole in the gyro stream: the open window is dropped; the estimate is kept."""
+        self.windower.restart()
+
+    def heading_sd_rad(self, q: Quat, field_world_t: Vec) -> float:
+        """rad; the σ the calibration adds to the heading of this sample: ``q`` its attitude (sensor → world),
+        ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical."""
+        fx, fy = field_world_t[0], field_world_t[1]
+        fh = math.sqrt(fx * fx + fy * fy)
+        if fh <= 0.0:
+            return math.pi
+        self._maybe_refresh()
+        wx, wy, wz = rotate((q[0], -q[1], -q[2], -q[3]), (fy / fh, -fx / fh, 0.0))  # across the field, sensor frame
+        s = self.su
+        var = (s[0] * wx * wx + s[3] * wy * wy + s[5] * wz * wz
+               + 2.0 * (s[1] * wx * wy + s[2] * wx * wz + s[4] * wy * wz))
+        return math.sqrt(max(var, 0.0)) * UT / fh
+
+    def field_sd_t(self) -> float:
+        """T; the calibrated field's σ in its worst direction for the current orientation: how far its norm and
+        dip can be off through the calibration alone (a disturbance test against a learned reference should widen
+        its band by a few of these while the calibration converges)."""
+        self._maybe_refresh()
+        return self.field_sd_ut * UT
+
+    # -------------------------------------------------------------------------------------------------- per window
+    def _add_window(self, w: Window) -> None:
+        ws = WindowSet.of([w])
+        jw, rw = self.model.rows(ws)
+        j, r0 = jw[0], rw[0]
+        est = self.est
+        var = float(self.model.window_var(ws, self.model.soft_iron(est.theta), est.theta[self.model.p:])[0])
+        d2, k = est.window(j, r0, var)
+        if est.passes(d2):
+            est.add(j, r0, var, d2, k)
+            self.windows += 1
+            self.cand = None
+        else:  # a disturbed field, or the magnetic situation changed: a candidate learns from the rejected windows
+            self.rejected += 1
+            self._candidate(j, r0, ws)
+        self._cache()
+        self._set_state()
+
+    def _candidate(self, j: Array, r0: Array, ws: WindowSet) -> None:
+        """A rejected window goes to the candidate (restarted from the prior when it does not fit the candidate
+        either); :data:`~.records.SWITCH_WINDOWS` consecutive rejected windows that fit one candidate replace the
+        estimate with it."""
+        cand = self.cand
+        if cand is not None:
+            var = float(self.model.window_var(ws, self.model.soft_iron(cand.theta), cand.theta[self.model.p:])[0])
+            d2, k = cand.window(j, r0, var)
+            if not cand.passes(d2):
+                cand = None
+        if cand is None:
+            cand = InfoEstimate(self.model, self.lam0, self.theta0)
+            var = float(self.model.window_var(ws, self.model.soft_iron(cand.theta), cand.theta[self.model.p:])[0])
+            d2, k = cand.window(j, r0, var)
+        cand.add(j, r0, var, d2, k)
+        self.cand = cand
+        if cand.added >= SWITCH_WINDOWS:
+            self.est, self.cand = cand, None
+            self.windows = cand.added
+            self.switches += 1
+
+    @property
+    def theta(self) -> Array:
+        """The estimate θ (:mod:`.model`)."""
+        return self.est.theta
+
+    @property
+    def added(self) -> int:
+        """Windows in the current estimate added in this run."""
+        return self.est.added
+
+    @property
+    def unit_weight(self) -> float:
+        """The current estimate's variance of unit weight (:class:`~.solver.InfoEstimate`)."""
+        return self.est.unit_weight
+
+    @property
+    def covariance(self) -> Array:
+        """θ's covariance: ``Λ⁻¹`` scaled up by the variance of unit weight when it exceeds 1, with the systematic
+        floor of the hard iron (:data:`~.records.SYSTEMATIC_SD_UT`)."""
+        return self.model.with_floor(self.est.cov * max(1.0, self.unit_weight))
+
+    def _cache(self) -> None:
+        a = self.model.soft_iron(self.theta)
+        self._a = tuple(float(v) for v in a.reshape(9))
+        self._c = tuple(float(v) for v in self.theta[self.model.p:])
+        self.q_refresh = None  # refresh the field covariance at the next heading σ
+
+    def _maybe_refresh(self) -> None:
+        qr, qw = self.q_refresh, self.windower.q
+        if qr is not None and abs(qr[0] * qw[0] + qr[1] * qw[1] + qr[2] * qw[2] + qr[3] * qw[3]) >= _COS_REFRESH:
+            return
+        self.q_refresh = qw
+        m = np.asarray(self.m_last if self.m_last is not None else (0.0, 0.0, 0.0), dtype=float)
+        su = self.model.field_covariance(m, self.covariance)
+        self.su = tuple(float(su[i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+        self.field_sd_ut = math.sqrt(max(float(np.linalg.eigvalsh(su)[-1]), 0.0))
+
+    def _set_state(self) -> None:
+        if self.m_last is None:
+            self.bound = math.pi
+        elif self.q is None:  # no attitude: the worst direction in the sensor frame, ignoring the dip
+            m = np.asarray(self.m_last)
+            su = self.model.field_covariance(m, self.covariance)
+            u = np.asarray(self._a).reshape(3, 3) @ m - np.asarray(self._c)
+            self.bound = math.sqrt(float(np.linalg.eigvalsh(su)[-1])) / max(float(np.linalg.norm(u)), 1e-9)
+        else:
+            u = np.asarray(self._a).reshape(3, 3) @ np.asarray(self.m_last) - np.asarray(self._c)
+            self.bound = heading_sd_bound(self.model, self.theta, self.covariance, self.q, u, STATE_HEADINGS)
+        if self.bound <= CALIBRATED_SD_RAD:
+            self.state = CALIBRATED
+            if self.converged_after_s is None:
+                self.converged_after_s = self.windower.t
+        else:
+            self.state = UNCALIBRATED if self.windows == 0 else CONVERGING
+
+    # -------------------------------------------------------------------------------------------------- outputs
+    def calibration(self) -> MagCalibration:
+        """The current estimate as a record (for the saved file and the node)."""
+        a, h = self.model.split(self.theta)
+        cov = self.model.output_covariance(self.theta, self.covariance)
+        scale = np.r_[np.ones(9), np.full(3, UT)]
+        cov = cov * np.outer(scale, scale)
+        return MagCalibration(hard_iron_t=tuple(float(v) * UT for v in h),  # type: ignore[arg-type]
+                              soft_iron=tuple(float(v) for v in a.reshape(9)),
+                              covariance=tuple(float(v) for v in cov.reshape(144)), state=self.state,
+                              windows=self.windows, converged_after_s=self.converged_after_s,
+                              soft_iron_model=self.model.model)
+
+    def status(self) -> MagCalStatus:
+        """The diagnostics record (module docstring)."""
+        cal = self.calibration()
+        return MagCalStatus(state=self.state, hard_iron_t=cal.hard_iron_t, hard_iron_sd_t=cal.hard_iron_sd_t,
+                            heading_sd_bound_rad=self.bound, windows=self.windows, rejected=self.rejected,
+                            unit_weight=self.unit_weight, converged_after_s=self.converged_after_s)
