@@ -203,7 +203,7 @@ def test_example_bags_are_reproducible_and_small(tmp_path: Path) -> None:
         i = argv.index("-o")
         committed = root / argv[i + 1]
         assert committed.is_file() and committed.stat().st_size < 2_000_000
-        # the script names the compression: the committed bags do not depend on the converter's default (zstd)
+        # the script names the compression, so the bags do not depend on the converter's default
         compression = argv[argv.index("--compression") + 1]
         assert bagio.bag_compression(committed) == (None if compression == "none" else compression)
         out = tmp_path / committed.name
@@ -242,7 +242,7 @@ def test_empty_imu_topic_is_an_error(tmp_path: Path) -> None:
         bagio.read_recording(p)
 
 
-# ---- unit checks ---------------------------------------------------------------------------------
+# ---- unit checks --------------------------------------------------------------------------------------
 
 
 def _csv_in_units(path: Path, time_unit: str = "ms", acc_unit: str = "g", gyr_unit: str = "deg/s") -> Path:
@@ -263,8 +263,8 @@ UNIT_FLAGS = {"time": ("--time-unit", "ms"), "acc": ("--acc-unit", "g"), "gyr": 
 
 
 def test_cli_refuses_csv_in_ms_g_degs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """ms / g / deg/s read in the default units (s, m/s², rad/s) would be 0.2 Hz, 1 m/s² and 192 rad/s: refused,
-    nothing written, every message naming the file and the flag that fits; with those flags it converts."""
+    """A CSV in ms / g / deg/s read with the default units (s, m/s², rad/s) is refused with the unit each column
+    looks like it is in, and nothing is written; with those units it converts."""
     csv = _csv_in_units(tmp_path / "imu.csv")
     out = tmp_path / "imu.mcap"
     assert main([str(csv), "-o", str(out)]) == 1
