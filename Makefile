@@ -25,7 +25,7 @@ setup: $(BIN)/.installed
 
 # the bags as recorded and under two perturbations a robot meets (stamps of a polled driver, a turn-on gyro bias),
 # 6D (the synthetic bags have no magnetometer), roll/pitch plotted for the real trial; DEMO_OUT: another folder
-# (test/test_demo.py runs the demo into one of its own)
+# (test/test_demo_smoke.py runs the demo into one of its own)
 DEMO_OUT ?= demo_out
 DEMO_TRIAL := 21_undisturbed_fast_combined
 demo: $(BIN)/.installed

@@ -34,6 +34,6 @@ total_max_deg
 # pytest and launch, in the tests: the module's test marks; a launch substitution's hook; ROS request fields
 pytestmark
 running  # test/test_cli_topic.py: a fixture the tests take by name
-_.perform  # test/test_package_files.py LaunchConfiguration stand-in, called by the launch description walk
+_.perform  # test/helpers_launch.py LaunchConfiguration stand-in, called by the launch description walk
 _.parameters  # rcl_interfaces/SetParameters.Request, GetParameters.Request
 _.string_value  # rcl_interfaces/ParameterValue

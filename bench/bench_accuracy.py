@@ -1,4 +1,4 @@
-"""Accuracy of every estimator on the BROAD trials under realistic perturbations (issue 11's table).
+"""Accuracy of every estimator on the BROAD trials under realistic perturbations.
 
 Usage::
 
@@ -16,10 +16,10 @@ Runs ``riann-bag-eval`` on the BROAD trial files (``$RIANN_BROAD_DIR`` or ``../s
    ``latency:0-10ms+dropout:0.01-0.05s@1s`` (the same on a stream stamped on arrival);
 2. the as-recorded scenario FFT-resampled to 25, 50, 100, 200, 500 and 1000 Hz (``--rates``).
 
-Prints markdown: mean / worst RMSE (°) per condition and estimator, the dropout rows also on the issue's six
-trials (02, 07, 10, 15, 24, 27), and RIANN's per-trial ratio to its native-rate RMSE for every rate. The pages'
-tables (README, docs/results.md, BENCHMARKS.md) are written by ``bench/results_tables.py`` from the results.json
-files ``--out`` keeps, committed trimmed under docs/results/ (docs/results/README.md).
+Prints markdown: mean / worst RMSE (°) per condition and estimator, the dropout rows also on the six trials with
+movement throughout (02, 07, 10, 15, 24, 27), and RIANN's per-trial ratio to its native-rate RMSE for every rate.
+The pages' tables (README, docs/results.md, BENCHMARKS.md) are written by ``bench/results_tables.py`` from the
+results.json files ``--out`` keeps, committed trimmed under docs/results/ (docs/results/README.md).
 """
 
 from __future__ import annotations
@@ -34,8 +34,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from riann_ros.cli.evaluate import main as eval_main
 from riann_ros.datasets.broad import broad_files, find_broad_dir
@@ -53,7 +51,7 @@ DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")
 def run(argv: list[str], out: Path) -> list[dict]:
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        # the issue-11 tables are 6D: the BROAD files carry a magnetometer, which --use-mag auto would use
+        # these tables are 6D: the BROAD files carry a magnetometer, which --use-mag auto would use
         rc = eval_main([*argv, "--use-mag", "false", "--out", str(out), "--no-plots", "-q", "--force"])
     if rc:
         print(buf.getvalue(), file=sys.stderr)

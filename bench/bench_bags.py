@@ -18,8 +18,6 @@ import time
 import tracemalloc
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from riann_ros import bagio
 from riann_ros.datasets.synthetic import generate
 

@@ -23,8 +23,6 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from riann_ros.cli.evaluate import main as eval_main
 from riann_ros.datasets.broad import broad_files, find_broad_dir
 from riann_ros.evaluation import Group

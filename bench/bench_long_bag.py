@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Memory and time of ``riann-bag-eval`` on long synthetic 1 kHz bags (issue 6).
+"""Memory and time of ``riann-bag-eval`` on long synthetic 1 kHz bags.
 
     .venv/bin/python bench/bench_long_bag.py [--durations 600,1800,3600] [--rate 1000]
         [--estimators madgwick] [--scenarios realistic] [--tmp DIR]

@@ -7,7 +7,7 @@ Candidates (each maps rows (copies, T, 7) and states (copies, 2, 1, 1, 200) to o
 same meaning as the published session run once per copy):
 
 * ``published 1 copy``: the published session, one run (the reference of the ratios);
-* ``published × 4``: the published session once per copy (what the estimator does today);
+* ``published × 4``: the published session once per copy (the reference);
 * ``I/O binding × 4``: the same four runs with preallocated inputs and outputs bound once (OrtValue);
 * ``batched run()``: the published graph with a batch axis (:func:`riann_ros.estimators.riann.s4b_model.batch_model`),
   one ``InferenceSession.run`` for all copies;

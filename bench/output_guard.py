@@ -6,6 +6,9 @@ Usage::
     .venv/bin/python bench/output_guard.py record DIR [--jobs 2] [--trials 02,07] [--skip-existing]
     .venv/bin/python bench/output_guard.py check DIR [--jobs 2] [--tol 1e-6] [--trials 02,07]
 
+The code it runs is the riann_ros Python imports: the checkout whose ``.venv`` runs it (``make setup`` installs
+that checkout), or another one with ``PYTHONPATH=<checkout>``; the first line it prints names it.
+
 For each BROAD trial (``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``) and each of 6D (``--use-mag false``)
 and 9D (``--use-mag auto``), RIANN at its defaults runs through the evaluator's own pipeline
 (:func:`riann_ros.evaluation.evaluate_source`, so scenario cropping, perturbations and the input gate are part of
@@ -26,11 +29,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench_accuracy import CONDITIONS, RATES
 
+import riann_ros
 from riann_ros.datasets.broad import broad_files, find_broad_dir
 
 MODES = {"6d": "false", "9d": "auto"}
@@ -89,7 +90,7 @@ def _file(trial: Path, mode: str) -> str:
 
 def _no_arena() -> None:
     """ONNX Runtime sessions without the CPU memory arena: the evaluator keeps a RIANN estimator per condition alive
-    at once, and each arena would keep its largest call's buffers (GBs per worker). Numbers are unchanged."""
+    at once, and each arena would keep its largest call's buffers (GBs per worker). The outputs do not depend on it."""
     import onnxruntime as ort
 
     class Options(ort.SessionOptions):
@@ -137,6 +138,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--modes", default="6d,9d")
     ap.add_argument("--skip-existing", action="store_true", help="record: keep the files already there")
     args = ap.parse_args(argv)
+    # the code under test is the riann_ros Python imports: the checkout its .venv installed, or PYTHONPATH=<checkout>
+    print(f"{args.action}: riann_ros from {Path(riann_ros.__file__).parent}", file=sys.stderr)
     d = find_broad_dir()
     if d is None:
         print("BROAD not found (set RIANN_BROAD_DIR)", file=sys.stderr)

@@ -27,11 +27,9 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY  # noqa: E402
-
 RESULTS = ROOT / "docs" / "results"
 PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md", "bags/README.md")
 FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_deg", "heading_rmse_deg",
@@ -41,7 +39,7 @@ UNCERTAINTY_FIELDS = ("n_scored", "nees", "cover95_pct", "err_bottom_decile_deg"
                       "yaw_cover95_mag_pct", "yaw_cover95_held_pct", "n_yaw_mag", "n_yaw_held", "sigma_hist")
 ESTIMATORS = ("riann", "vqf", "madgwick", "mahony")
 NAMES = {"riann": "RIANN", "vqf": "VQF", "madgwick": "Madgwick", "mahony": "Mahony"}
-DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")  # the six trials with movement throughout
+DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")  # the six trials with movement throughout
 MARKER = re.compile(r"<!-- results:(?P<name>[\w-]+) -->(?P<body>.*?)<!-- /results:(?P=name) -->", re.S)
 
 

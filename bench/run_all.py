@@ -20,10 +20,9 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
+from riann_ros.datasets.broad import find_broad_dir
 
-from riann_ros.datasets.broad import find_broad_dir  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 # name -> (script, short arguments, needs BROAD)
 BENCHES: dict[str, tuple[str, list[str], bool]] = {
@@ -32,7 +31,7 @@ BENCHES: dict[str, tuple[str, list[str], bool]] = {
     "accuracy": ("bench_accuracy.py", ["--jobs", "2"], True),
     "bags": ("bench_bags.py", ["--duration", "60"], False),
     "long_bag": ("bench_long_bag.py", ["--durations", "120", "--no-stream"], False),
-    "network": ("bench_network.py", ["--reps", "3", "--trial", "07", "--steps", "500", "--samples", "2000"], False),
+    "network": ("bench_network.py", ["--reps", "3", "--trial", "07", "--steps", "500"], False),
     "node": ("bench_node.py", ["--rates", "200,1000", "--duration", "10"], False),
     "soak": ("soak_nodes.py", ["--rates", "1000", "--duration", "20", "--probe-rates", "2000", "--probe-duration",
                                "10", "--side-by-side-duration", "20"], False),

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Soak / load benchmark of the four estimator nodes over real DDS (issue 6).
+"""Soak / load benchmark of the four estimator nodes over real DDS.
 
     .venv/bin/python bench/soak_nodes.py [--nodes riann,madgwick,mahony,vqf] [--rates 200,1000]
         [--duration 600] [--probe-rates 2000,4000,8000] [--probe-duration 20]

@@ -1,4 +1,4 @@
-"""Does the IMU stream itself show how a regular low-rate stream was made (issue 28)?
+"""Does the IMU stream itself show how a regular low-rate stream was made?
 
 Usage::
 
@@ -17,12 +17,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad
 from riann_ros.evaluation.perturb import parse_perturbation

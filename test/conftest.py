@@ -198,3 +198,20 @@ def rmse(rec: Recording, q) -> float:
     from riann_ros.evaluation import score
 
     return score(rec, q).rmse_deg
+
+
+@pytest.fixture(scope="module")
+def three(tmp_path_factory) -> list[Path]:
+    """Three short synthetic bags with different gyro biases and accelerometer noise (the plot and --compare tests)."""
+    import numpy as np
+    from test_evaluation import synthetic
+
+    from riann_ros import bagio
+
+    d = tmp_path_factory.mktemp("three")
+    out = []
+    for i in range(3):
+        rec = synthetic(name=f"s{i}", t0_ns=1_700_000_000_000_000_000, gyr_bias=(0.01 * i, -0.02, 0.005))
+        rec.acc = rec.acc + np.random.default_rng(i).normal(0, 0.1, rec.acc.shape)
+        out.append(bagio.write_recording(d / f"s{i}.mcap", rec))
+    return out

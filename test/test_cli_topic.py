@@ -1,4 +1,4 @@
-"""riann-topic (list, echo, hz) as a user runs it, against a running madgwick_node over real DDS (issue 26, item 7)."""
+"""riann-topic (list, echo, hz) as a user runs it, against a running madgwick_node over real DDS."""
 
 from __future__ import annotations
 

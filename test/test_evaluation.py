@@ -339,3 +339,14 @@ def test_tuning_runs_with_the_evaluations_sensors(monkeypatch):
     with pytest.raises(ev.EvalError, match="no scores"):
         ev.tune("madgwick", ["x"], ev.REALISTIC, 0, like=ev.EvalSettings(estimators=[], use_mag="false"))
     assert seen[0].use_mag == "false"
+
+
+def test_roll_pitch_ignore_heading():
+    from riann_ros import quaternion as quat
+    from riann_ros.evaluation.scoring import roll_pitch_deg
+
+    r, p = np.radians(30.0), np.radians(-20.0)
+    q_rp = quat.multiply(quat.from_rotvec([0, p, 0]), quat.from_rotvec([r, 0, 0]))
+    for yaw in (0.0, 1.0, -2.5):
+        q = quat.multiply(quat.from_rotvec([0, 0, yaw]), q_rp)[None]
+        np.testing.assert_allclose(roll_pitch_deg(q), [[30.0, -20.0]], atol=1e-9)

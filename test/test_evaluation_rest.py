@@ -76,7 +76,7 @@ def test_a_real_rest_is_found_and_its_mean_is_the_bias():
     assert s.rest.source == rs.DETECTED and s.rest.start == 0
     assert s.rest.stop == 600  # the rest ends where the rolling starts
     np.testing.assert_allclose(s.rest.bias, BIAS, atol=1e-12)
-    # the old assumption (the whole unscored span is a rest) would have removed the rolling too
+    # taking the whole unscored span as the rest would remove the rolling too
     assert not np.allclose(rec.gyr[:1000].mean(axis=0), BIAS, atol=1e-3)
     _, info = ev.scenario_recording(rec, ev.RESTRICTIVE)
     np.testing.assert_allclose(np.radians(info.bias_removed_dps), BIAS, atol=1e-8)
@@ -137,7 +137,7 @@ def test_moving_before_the_scored_part_removes_no_bias_and_madgwick_stays_accura
     for row in res.rows:
         assert row.rmse_deg < 1.0, (row.scenario, row.rmse_deg)
     assert res.scenarios[ev.RESTRICTIVE]["bias_removed_dps"] == [0.0, 0.0, 0.0]
-    # what the old assumption did: 9 °/s "bias" removed from the whole sequence
+    # the whole unscored span taken as the rest: 9 °/s "bias" removed from the whole sequence
     wrong = ev.Rest(source="assumed", start=0, stop=800, gyr_mean=rec.gyr[:800].mean(axis=0))
     assert np.degrees(wrong.bias[0]) == pytest.approx(9.0)
     s = ev.summarise(ev.Source("x", rec))

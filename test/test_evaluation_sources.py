@@ -1,11 +1,13 @@
-"""riann-bag-eval's evo habits, run as a user runs them on bags written by the project's writer: estimates in TUM
-and CSV trajectory files (--estimate-file), evo ape's error statistics, the time offset found for the user (and the
-note on the sample-time convention), and bags cut off by a crash (--salvage, riann-bag-convert --repair)."""
+"""Inputs of riann-bag-eval beyond the project's own bags (riann_ros.evaluation.sources): estimates in TUM and CSV
+trajectory files (--estimate-file) scored with evo ape's error statistics and the best time offset, their errors,
+and inputs that are not bags (a CSV file, an EuRoC folder, a folder of dataset files, a ROS 1 bag) answered with
+the commands that convert them."""
 
 from __future__ import annotations
 
 import csv
 import json
+import shlex
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +17,6 @@ from test_evaluation import synthetic
 from riann_ros import quaternion as quat
 from riann_ros.cli.convert import main as convert_main
 from riann_ros.cli.evaluate import main
-from riann_ros.recording import Recording
 
 bagio = pytest.importorskip("riann_ros.bagio")
 
@@ -100,131 +101,50 @@ def test_estimate_file_errors(run1, tmp_path, capsys):
     assert "no estimate near any scored sample" in (err := capsys.readouterr().err) and "--t-offset" in err
 
 
-@pytest.fixture(scope="module")
-def shifted(tmp_path_factory) -> dict[int, Path]:
-    """50 Hz bags (from a 1 kHz synthetic recording) whose reference is ahead of the IMU by 0 and 15 ms."""
-    d = tmp_path_factory.mktemp("shift")
-    r = synthetic(rate=1000.0, move_s=18.0, name="x", t0_ns=T0)
-    n = (len(r) - 40) // 20 * 20
-    out = {}
-    for k in (0, 15):
-        imu, ref = slice(0, n, 20), slice(k, n + k, 20)
-        rec = Recording(r.stamps_ns[imu], r.acc[imu], r.gyr[imu], r.quat_ref[ref], r.score_mask[imu],
-                        name=f"ahead{k}ms", dataset="synth")
-        out[k] = bagio.write_recording(d / f"ahead{k}ms.mcap", rec)
-    return out
+# -- inputs that are not bags: the message gives the commands that convert them ------------------------
 
 
-@pytest.mark.slow
-def test_best_offset_and_the_sample_time_note(shifted, tmp_path, capsys):
-    """RIANN's best offset follows the reference's shift; near half a step it points at the sample-time setting.
-    The bags hold point samples, so RIANN is told so (at its default it would read them a quarter step early)."""
-    out = tmp_path / "out"
-    assert main([str(shifted[0]), str(shifted[15]), "-e", "riann:input_model=points", "-s", "as-recorded", "--out",
-                 str(out), "--no-plots"]) == 0
-    text = capsys.readouterr().out
-    rows = {(r["sequence"]): r for r in json.loads((out / "results.json").read_text())["results"]}
-    a, b = rows["ahead0ms"], rows["ahead15ms"]
-    assert b["best_t_offset_s"] - a["best_t_offset_s"] == pytest.approx(-0.015, abs=1e-3)
-    # aligned: the network's own lead on ideal samples, about 5 ms (docs/riann.md, stage 2), short of half a step
-    assert a["best_t_offset_s"] == pytest.approx(0.005, abs=0.002)
-    assert b["best_t_offset_rmse_deg"] < 0.9 * b["rmse_deg"]
-    notes = [x for x in text.split("\n\n") if x.startswith("timing:")]
-    assert len(notes) == 1 and notes[0].startswith("timing: ahead15ms, as-recorded: riann")
-    assert "sample-time convention" in notes[0] and "input_model" in notes[0] and "docs/riann.md" in notes[0]
-    assert "sample_delay" in notes[0]
-    assert "- " + notes[0].removeprefix("timing: ") in (out / "report.md").read_text().split("## Timing")[1]
-    # --offset-steps 0: no search, no columns
-    assert main([str(shifted[15]), "-e", "riann", "-s", "as-recorded", "--offset-steps", "0", "--no-plots"]) == 0
-    text = capsys.readouterr().out
-    assert "best offset ms" not in text and "timing:" not in text
+def _commands(err: str) -> list[list[str]]:
+    """The commands the message says to type (its indented lines)."""
+    return [shlex.split(line) for line in err.splitlines() if line.startswith("    riann-bag-")]
 
 
-# -- truncated bags --------------------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def long_rec() -> Recording:
-    return synthetic(name="long", move_s=40.0, t0_ns=T0)  # 4,200 samples: an MCAP file of several chunks
-
-
-def _cut(src: Path, dst: Path, fraction: float) -> Path:
-    data = src.read_bytes()
-    dst.write_bytes(data[: int(len(data) * fraction)])  # head -c N src > dst
-    return dst
-
-
-def _imu_count(err: str) -> int:
-    """The readable IMU messages a message reports ('2,346 /imu/data_raw')."""
-    word = next(w for w in err.replace("(", " ").split(", ") if w.endswith(" /imu/data_raw"))
-    return int(word.split()[-2].replace(",", ""))
-
-
-@pytest.mark.slow
-def test_truncated_mcap(long_rec, tmp_path, capsys):
-    whole = bagio.write_recording(tmp_path / "long.mcap", long_rec)
-    cut = _cut(whole, tmp_path / "cut.mcap", 0.6)
-    args = ["-e", "madgwick", "-s", "as-recorded", "--no-plots", "--offset-steps", "0"]
-    assert main([str(cut), *args, "-q"]) == 1
+def test_csv_input_says_how_to_convert_it(tmp_path, capsys):
+    rec = synthetic(name="csvseq")
+    csv = tmp_path / "imu data.csv"  # a blank in the name: the command must be quoted
+    rows = np.column_stack([rec.t, rec.acc, rec.gyr, rec.quat_ref, rec.score_mask.astype(int)])
+    header = "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,qw,qx,qy,qz,scored"
+    np.savetxt(csv, rows, delimiter=",", header=header, comments="", fmt="%.17g")
+    assert main([str(csv), "-e", "madgwick", "-q"]) == 1
     err = capsys.readouterr().err
-    assert "truncated" in err and f"ends at byte {cut.stat().st_size:,}" in err and "of 4,200 IMU samples" in err
-    assert "--salvage" in err and f"riann-bag-convert --repair {cut} -o {tmp_path / 'cut_repaired.mcap'}" in err
-    n = _imu_count(err)
-    assert 1000 < n < 4200 * 0.6
-    # --salvage: the readable part is scored, with a warning and the counts in results.json
-    out = tmp_path / "salvaged"
-    assert main([str(cut), *args, "--salvage", "--out", str(out), "-q"]) == 0
-    assert "salvaged: truncated" in capsys.readouterr().err
-    data = json.loads((out / "results.json").read_text())
-    (seq,) = data["sequences"]
-    assert seq["salvaged"]["messages_per_topic"]["/imu/data_raw"] == n
-    assert seq["salvaged"]["imu_samples_recorded"] == 4200 and seq["salvaged"]["file_bytes"] == cut.stat().st_size
-    (row,) = data["results"]
-    assert row["n_samples"] == n and row["source"] == str(cut)
-    # riann-bag-convert --repair: a complete bag of the same messages; the output is never overwritten silently
-    fixed = tmp_path / "fixed.mcap"
-    assert convert_main(["--repair", str(cut), "-o", str(fixed)]) == 0
-    assert f"{n:,} /imu/data_raw" in capsys.readouterr().err
-    rec = bagio.read_recording(fixed)
-    assert len(rec) == n
-    np.testing.assert_array_equal(rec.stamps_ns, long_rec.stamps_ns[:n])
-    np.testing.assert_allclose(rec.gyr, long_rec.gyr[:n], atol=1e-12)
-    before = fixed.read_bytes()
-    assert convert_main(["--repair", str(cut), "-o", str(fixed)]) == 1
-    assert "exists" in capsys.readouterr().err and fixed.read_bytes() == before
-    assert convert_main(["--repair", str(cut), "-o", str(fixed), "--force"]) == 0
-    again = tmp_path / "again"
-    assert main([str(fixed), *args, "--out", str(again), "-q"]) == 0
-    assert _rows(again)["madgwick"]["rmse_deg"] == pytest.approx(row["rmse_deg"], abs=1e-9)
-    # a complete bag is not 'repaired'
-    assert convert_main(["--repair", str(whole), "-o", str(tmp_path / "x.mcap")]) == 1
-    assert "not truncated" in capsys.readouterr().err and not (tmp_path / "x.mcap").exists()
+    assert "a CSV file, not a bag; convert it first with riann-bag-convert" in err
+    assert "cannot read" not in err
+    convert, evaluate = _commands(err)
+    assert convert == ["riann-bag-convert", str(csv), "-o", str(tmp_path / "imu data.mcap")]
+    assert convert_main([*convert[1:], "-q"]) == 0  # the command as printed works
+    assert evaluate == ["riann-bag-eval", str(tmp_path / "imu data.mcap")]
+    assert main([*evaluate[1:], "-e", "madgwick", "-s", "realistic", "-q"]) == 0
 
 
-def test_truncated_mcap_with_nothing_readable(long_rec, tmp_path, capsys):
-    whole = bagio.write_recording(tmp_path / "long.mcap", long_rec)
-    cut = _cut(whole, tmp_path / "cut.mcap", 0.1)  # inside the first chunk
-    assert main([str(cut), "-e", "madgwick", "--salvage", "--no-plots", "-q"]) == 1
+def test_euroc_folder_says_how_to_convert_it(tmp_path, capsys):
+    root = tmp_path / "MH_01_easy"
+    (root / "mav0" / "imu0").mkdir(parents=True)
+    (root / "mav0" / "imu0" / "data.csv").write_text("#timestamp [ns],w_RS_S_x [rad s^-1]\n")
+    assert main([str(root), "-q"]) == 1
     err = capsys.readouterr().err
-    assert "truncated" in err and "no message before the cut is readable" in err
+    assert "an EuRoC/ASL folder, not a bag; convert it first with riann-bag-convert" in err
+    convert, evaluate = _commands(err)
+    assert convert == ["riann-bag-convert", str(root), "-o", str(tmp_path / "MH_01_easy.mcap")]
+    assert evaluate == ["riann-bag-eval", str(tmp_path / "MH_01_easy.mcap")]
 
 
-def test_truncated_sqlite3(long_rec, tmp_path, capsys):
-    whole = bagio.write_recording(tmp_path / "long", long_rec, storage="sqlite3")
-    cut_dir = tmp_path / "cut"
-    cut_dir.mkdir()
-    (cut_dir / "metadata.yaml").write_text((whole / "metadata.yaml").read_text())
-    _cut(whole / "long.db3", cut_dir / "long.db3", 0.6)
-    args = ["-e", "madgwick", "-s", "as-recorded", "--no-plots", "--offset-steps", "0", "-q"]
-    assert main([str(cut_dir), *args]) == 1
+def test_folder_of_dataset_files_and_ros1_bags(tmp_path, capsys):
+    d = tmp_path / "broad"
+    d.mkdir()
+    (d / "01_x.hdf5").write_bytes(b"")
+    ros1 = tmp_path / "old.bag"
+    ros1.write_bytes(b"#ROSBAG V2.0\n")
+    assert main([str(d), str(ros1), "-q"]) == 1
     err = capsys.readouterr().err
-    assert "truncated" in err and "where its header says" in err and "--salvage" in err
-    n = _imu_count(err)
-    assert 1000 < n < 4200 * 0.6
-    out = tmp_path / "salvaged"
-    assert main([str(cut_dir), *args, "--salvage", "--out", str(out)]) == 0
-    assert _rows(out)["madgwick"]["n_samples"] == n
-    fixed = tmp_path / "fixed"
-    assert convert_main(["--repair", str(cut_dir), "-o", str(fixed)]) == 0
-    assert bagio.bag_storage(fixed) == "sqlite3"
-    rec = bagio.read_recording(fixed)
-    assert len(rec) == n
-    np.testing.assert_array_equal(rec.stamps_ns, long_rec.stamps_ns[:n])
+    assert "a folder of dataset files, not a bag" in err and f"riann-bag-convert {d} -o {tmp_path}/broad_bags" in err
+    assert "a ROS 1 bag" in err and f"rosbags-convert --src {ros1} --dst {tmp_path}/old" in err

@@ -1,5 +1,5 @@
 """The launch files run: their node actions, turned into the command lines launch_ros runs (launch_ros is not
-installable here: test/helpers_launch.py), start the real executables, checked over DDS (issue 26, item 3).
+installable here: test/helpers_launch.py), start the real executables, checked over DDS.
 
 * ``riann.launch.py namespace:=robot1 mag_topic:=/robot1/magnetometer``: the node lives in /robot1, reads the
   remapped magnetometer and publishes under /robot1;
@@ -17,7 +17,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu, MagneticField
-from test_node_mag import mag_msg, motion
+from test_nodes_node_base import mag_msg, motion
 
 from conftest import BIN, ROOT, wait_for, wait_matched
 from helpers_ros import imu_msg

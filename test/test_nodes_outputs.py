@@ -1,7 +1,8 @@
-"""Node outputs in the chosen world frame, fixed_frame, imu/rpy, TF, integer parameters, the rate warning.
+"""The node's outputs (riann_ros.nodes.outputs): the orientation in the chosen world frame, fixed_frame, imu/rpy
+beside each attitude topic, the TF message.
 
-Pure parts (the TF message, the stamp-rate check, the rpy topic names) are tested in-process; the rest
-over real DDS with the node executables (they import riann_ros from PYTHONPATH, i.e. this tree).
+The pure parts (the TF message, the rpy topic names) are tested in-process, the rest over real DDS with the node
+executables.
 """
 
 from __future__ import annotations
@@ -10,19 +11,13 @@ import time
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-from rcl_interfaces.msg import Parameter as ParamMsg
-from rcl_interfaces.msg import ParameterType, ParameterValue
-from rcl_interfaces.srv import GetParameters, SetParameters
 from sensor_msgs.msg import Imu
 
 from conftest import wait_for, wait_matched
 from helpers_ros import imu_msg, quats, stamp_ns
 from riann_ros import frames
-from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
-from riann_ros.nodes.diagnostics import StampRateCheck
 from riann_ros.nodes.madgwick_node import MadgwickNode
 from riann_ros.nodes.mahony_node import MahonyNode
 from riann_ros.nodes.outputs import make_transform, rpy_topic, tf_frames_problem
@@ -55,24 +50,6 @@ def test_transform_is_fixed_frame_to_sensor_frame_rotation_only():
     assert tf_frames_problem("odom", "imu_link") is None
     assert "empty" in tf_frames_problem("odom", "")
     assert "its own parent" in tf_frames_problem("odom", "/odom")
-
-
-def test_stamp_rate_check_is_a_robust_median():
-    rng = np.random.default_rng(0)
-    c = StampRateCheck(samples=100, tolerance=0.1)
-    dts = np.full(100, 1 / 200.0) + rng.normal(0, 2e-4, 100)
-    dts[[5, 50]] = [0.3, 1e-6]  # a gap and a burst
-    done = [c.add(float(dt)) for dt in dts]
-    assert done == [False] * 99 + [True]
-    assert c.measured_hz == pytest.approx(200.0, rel=0.01)
-    assert not c.add(0.01)  # measured once
-    assert c.mismatch(200.0) is None and c.mismatch(185.0) is None  # within 10 %
-    assert c.mismatch(100.0) == pytest.approx(1.0, rel=0.02)
-    text = c.text(100.0)
-    assert "rate 199.6 Hz" in text and "nominal_rate 100.0 Hz" in text and "set the parameter nominal_rate" in text
-    assert StampRateCheck().mismatch(100.0) is None  # not measured yet
-    c2 = StampRateCheck(samples=3)
-    assert not c2.add(0.0) and not c2.add(float("nan"))  # no time step: not counted
 
 
 # -- over DDS ---------------------------------------------------------------------------------------------
@@ -181,124 +158,3 @@ def test_level_sensor_at_rest_in_each_world_frame_on_all_four_nodes(ros, start_n
     ros.destroy(pub, *att.values(), *rpy.values())
 
 
-def _param_client(ros, srv_type, node_name: str, what: str):
-    client = ros.node.create_client(srv_type, f"/{node_name}/{what}")
-    assert client.wait_for_service(timeout_sec=15)
-    return client
-
-
-def _call(client, req):
-    res = call_service(client, req, 10)
-    assert res is not None, "no answer from the parameter service"
-    return res
-
-
-def _set(client, name: str, value) -> tuple[bool, str]:
-    v = ParameterValue()
-    if isinstance(value, str):
-        v.type, v.string_value = ParameterType.PARAMETER_STRING, value
-    elif isinstance(value, int):
-        v.type, v.integer_value = ParameterType.PARAMETER_INTEGER, value
-    else:
-        v.type, v.double_value = ParameterType.PARAMETER_DOUBLE, value
-    req = SetParameters.Request()
-    req.parameters = [ParamMsg(name=name, value=v)]
-    r = _call(client, req).results[0]
-    return r.successful, r.reason
-
-
-def _get(client, name: str):
-    req = GetParameters.Request()
-    req.names = [name]
-    v = _call(client, req).values[0]
-    return {ParameterType.PARAMETER_DOUBLE: ("double", v.double_value),
-            ParameterType.PARAMETER_INTEGER: ("integer", v.integer_value)}.get(v.type, (v.type, None))
-
-
-@pytest.mark.ros
-def test_integer_values_for_float_parameters(ros, start_node, tmp_path):
-    """-p nominal_rate:=200 and `diagnostics_period: 2` in a params file start the node (stored as doubles);
-    a run-time int works, a string is refused with a clear reason, the ranges still hold."""
-    params = tmp_path / "ints.yaml"
-    params.write_text("/**:\n  ros__parameters:\n    diagnostics_period: 2\n    beta: 0\n")
-    node = start_node("madgwick_node", "--params-file", str(params), "-p", "nominal_rate:=200", "-p", "max_dt:=1")
-    get = _param_client(ros, GetParameters, "madgwick_node", "get_parameters")
-    set_ = _param_client(ros, SetParameters, "madgwick_node", "set_parameters")
-    wait_for(lambda: "parameters:" in node.output(), 10, "the start-up log")
-    log = node.output()
-    assert "nominal_rate=200.0" in log and "diagnostics_period=2.0" in log and "beta=0.0" in log, log
-    assert _get(get, "nominal_rate") == ("double", 200.0)
-    assert _get(get, "diagnostics_period") == ("double", 2.0)
-    assert _set(set_, "nominal_rate", 150) == (True, "")
-    assert _get(get, "nominal_rate") == ("double", 150.0)
-    assert _set(set_, "beta", 1)[0] and _get(get, "beta") == ("double", 1.0)
-    ok, reason = _set(set_, "nominal_rate", "fast")
-    assert not ok and "DOUBLE" in reason and "STRING" in reason, reason
-    assert not _set(set_, "nominal_rate", 0)[0]  # below the range, as an int too
-    assert not _set(set_, "beta", 11)[0]
-    assert not _set(set_, "diagnostics_period", 3)[0]  # start-up only
-    assert _get(get, "nominal_rate") == ("double", 150.0)
-    for c in (get, set_):
-        ros.node.destroy_client(c)
-
-
-@pytest.mark.ros
-@pytest.mark.parametrize("args, error", [
-    (("-p", "nominal_rate:=fast"), "nominal_rate must be a number, got 'fast'"),
-    (("-p", "nominal_rate:=0"), "nominal_rate=0 is below its minimum 1"),
-    (("-p", "world_frame:=ecef"), "world_frame must be one of enu, ned, nwu"),
-])
-def test_bad_start_up_values_exit_with_a_clear_error(start_node, args, error):
-    node = start_node("mahony_node", *args)
-    assert node.proc.wait(30) == 1
-    assert f"mahony_node: error: {error}" in node.output()
-
-
-def _diag_of(diag, node_name: str):
-    return [s for d in diag.messages for s in d.status if s.name.startswith(node_name + ":")]
-
-
-@pytest.mark.ros
-def test_rate_warning_when_nominal_rate_is_wrong(ros, start_node):
-    """200 Hz stamps into a node left at nominal_rate 100: one warning naming both rates and the parameter,
-    WARN in /diagnostics until nominal_rate is set (as an int, at run time); a node set right stays quiet."""
-    wrong = start_node("vqf_node", "-p", "input_qos:=reliable", "-p", "diagnostics_period:=0.2")
-    right = start_node("madgwick_node", "-p", "input_qos:=reliable", "-p", "nominal_rate:=200",
-                       "-p", "diagnostics_period:=0.2")
-    pub = ros.publisher(Imu, "imu/data_raw")
-    att = [ros.collect(QuaternionStamped, c.ATTITUDE_TOPIC) for c in (VqfNode, MadgwickNode)]
-    diag = ros.collect(DiagnosticArray, "/diagnostics")
-    wait_connected(pub, att, [wrong, right], n_subs=2)
-    stamps, acc, gyr = motion(160)
-    stamps[80:] += 300_000_000  # one gap (restart) inside: the median does not care
-    send(pub, stamps, acc, gyr, period=0.002)
-    wait_for(lambda: all(len(c.messages) >= 160 for c in att), 20, "outputs")
-    wait_for(lambda: "measured IMU stamp rate" in wrong.output(), 5, f"the warning (log: {wrong.output()})")
-    log = wrong.output()
-    assert log.count("measured IMU stamp rate") == 1
-    assert "measured IMU stamp rate 200.0 Hz" in log and "nominal_rate 100.0 Hz" in log
-    assert "set the parameter nominal_rate to 200.0" in log
-    assert "measured IMU stamp rate" not in right.output()
-
-    def latest(node_name):
-        st = _diag_of(diag, node_name)
-        return st[-1] if st else None
-
-    def value(status, key):
-        return {kv.key: kv.value for kv in status.values}[key]
-
-    wait_for(lambda: (s := latest("vqf_node")) is not None and "nominal_rate" in s.message, 5, "WARN diagnostics")
-    s = latest("vqf_node")
-    assert s.level == DiagnosticStatus.WARN and "measured stamp rate 200.0 Hz" in s.message
-    assert value(s, "stamp rate measured (Hz)") == "200.00" and value(s, "nominal_rate (Hz)") == "100.00"
-    # its latest status may predate its 100th sample (no ordering between two nodes' timers): wait for one after
-    wait_for(lambda: (s := latest("madgwick_node")) is not None and value(s, "stamp rate measured (Hz)") != "nan", 5,
-             "madgwick_node's measured rate in /diagnostics")
-    assert value(latest("madgwick_node"), "stamp rate measured (Hz)") == "200.00"
-    assert "nominal_rate" not in latest("madgwick_node").message
-    set_ = _param_client(ros, SetParameters, "vqf_node", "set_parameters")
-    assert _set(set_, "nominal_rate", 200) == (True, "")
-    wait_for(lambda: value(latest("vqf_node"), "nominal_rate (Hz)") == "200.00", 5, "diagnostics after the set")
-    assert "nominal_rate" not in latest("vqf_node").message
-    ros.node.destroy_client(set_)
-    ros.destroy(pub, *att, diag)

@@ -1,11 +1,13 @@
-"""Parameters as users write them, on the real node executables over DDS (issue 26, items 1 and 2).
+"""Parameters as users write them (riann_ros.nodes.parameters), on the real node executables over DDS.
 
 * every parameter of every node takes what YAML, the command line or a launch file make of a natural spelling
   (``use_mag: false`` a bool, ``nominal_rate: 200`` an integer, ``ensemble: 4.0`` a double, ``"true"`` a string,
   ``[0, 0, 1.5e-6]`` a mixed list), at start-up and at run time;
 * unknown names are warned about with the closest known name; imu_tools' names are translated or refused;
 * imu_filter_madgwick's own 9D parameter file (test/fixtures/imu_filter_madgwick_9d.yaml) starts madgwick_node
-  and riann_node with the same meaning: their outputs equal the offline core with the translated parameters.
+  and riann_node with the same meaning: their outputs equal the offline core with the translated parameters;
+* an integer where a float is declared works (start-up, run time), a string is refused with a clear reason, and a
+  start-up value out of range ends the node with a clear error.
 """
 
 from __future__ import annotations
@@ -21,11 +23,12 @@ from rcl_interfaces.msg import Parameter as ParamMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from sensor_msgs.msg import Imu, MagneticField
-from test_node_mag import mag_msg, motion
+from test_nodes_node_base import mag_msg, motion
 
 from conftest import ROOT, wait_for, wait_matched
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
 from riann_ros import frames
+from riann_ros.cli.live import call_service
 from riann_ros.estimators import create, estimator_class
 from riann_ros.mag import MagConfig, pair_fields
 from riann_ros.nodes.outputs import gravity_in_sensor, yaw_rotated
@@ -97,13 +100,14 @@ def started(node) -> str:
     return node.output()
 
 
-# -- item 1: use_mag and every other parameter in the types users write -----------------------------------------
+# -- use_mag and every other parameter in the types users write --------------------------------------------------
 @pytest.mark.parametrize("how, value, expected", [
     ("cli", "false", "false"), ("cli", "true", "true"), ("cli", "auto", "auto"), ("cli", "False", "false"),
     ("yaml", "false", "false"), ("yaml", "'true'", "true"), ("yaml", "True", "true"),
 ])
 def test_use_mag_takes_its_documented_values(ros, start_node, tmp_path, how, value, expected):
-    """use_mag:=false (a bool to YAML and the command line) used to kill the node with 'BOOL vs STRING'."""
+    """use_mag is a string parameter (auto, true, false), and false or True given as a bool (what YAML and the
+    command line make of them) is taken as that string: the node starts and subscribes imu/mag unless false."""
     ns = f"/use_mag_{how}_{value.strip(chr(39)).lower()}"
     if how == "cli":
         args = ("-p", f"use_mag:={value}")
@@ -182,7 +186,7 @@ def test_every_parameter_of_every_node_takes_what_users_write(ros, start_node, t
     assert not set_param(ros, "/every_vqf/vqf_node", "rest_bias_est", "maybe")[0]
 
 
-# -- item 2: unknown names, imu_tools' names ----------------------------------------------------------------
+# -- unknown names, imu_tools' names ------------------------------------------------------------------------
 def synthetic(n: int, rate: float = 200.0):
     rng = np.random.default_rng(5)
     stamps = 1_000_000_000 + (np.arange(n) * 1e9 / rate).astype(np.int64)
@@ -190,9 +194,9 @@ def synthetic(n: int, rate: float = 200.0):
 
 
 def test_gain_sets_beta_and_unknown_names_are_named(ros, start_node):
-    """madgwick_node -p gain:=0.1 used to keep beta at 0.033 without a word. Now gain is imu_filter_madgwick's
-    name of beta (the output equals the core with beta = beta_marg = 0.1), and a typo, another node's parameter or
-    a name imu_tools means otherwise each get a warning naming what to write instead."""
+    """madgwick_node -p gain:=0.1: gain is imu_filter_madgwick's name of beta (the output equals the core with
+    beta = beta_marg = 0.1); a typo, another node's parameter or a name imu_tools means otherwise each get a warning
+    naming what to write instead."""
     node = start_node("madgwick_node", "-p", "input_qos:=reliable", "-p", "nominal_rate:=200", "-p", "gain:=0.1",
                       "-p", "gian:=1.0", "-p", "kp:=2.0", "-p", "bta:=0.3", "-p", "zeta:=0.02",
                       "-p", "mag_hard_iron:=[0, 0, 1.5e-6]")
@@ -238,7 +242,7 @@ def test_a_parameter_file_for_another_node_name_is_reported(ros, start_node):
     assert "beta=0.033" in log
 
 
-# -- acceptance: imu_filter_madgwick's own 9D file ---------------------------------------------------------
+# -- imu_filter_madgwick's own 9D file ---------------------------------------------------------------------
 RATE = 400.0
 IMU_TOOLS = yaml.safe_load(FIXTURE.read_text())["imu_filter"]["ros__parameters"]
 
@@ -332,3 +336,77 @@ def test_imu_filter_madgwick_9d_file_starts_the_node_with_the_same_meaning(ros, 
     wrap = (rpy_deg - want + 180.0) % 360.0 - 180.0
     assert np.abs(wrap).max() < 0.01
     ros.destroy(pub_imu, pub_mag, att, imu_out, rpy)
+
+
+# -- numbers in either type, start-up values out of range --------------------------------------------------
+def _param_client(ros, srv_type, node_name: str, what: str):
+    client = ros.node.create_client(srv_type, f"/{node_name}/{what}")
+    assert client.wait_for_service(timeout_sec=15)
+    return client
+
+
+def _call(client, req):
+    res = call_service(client, req, 10)
+    assert res is not None, "no answer from the parameter service"
+    return res
+
+
+def _set(client, name: str, value) -> tuple[bool, str]:
+    v = ParameterValue()
+    if isinstance(value, str):
+        v.type, v.string_value = ParameterType.PARAMETER_STRING, value
+    elif isinstance(value, int):
+        v.type, v.integer_value = ParameterType.PARAMETER_INTEGER, value
+    else:
+        v.type, v.double_value = ParameterType.PARAMETER_DOUBLE, value
+    req = SetParameters.Request()
+    req.parameters = [ParamMsg(name=name, value=v)]
+    r = _call(client, req).results[0]
+    return r.successful, r.reason
+
+
+def _get(client, name: str):
+    req = GetParameters.Request()
+    req.names = [name]
+    v = _call(client, req).values[0]
+    return {ParameterType.PARAMETER_DOUBLE: ("double", v.double_value),
+            ParameterType.PARAMETER_INTEGER: ("integer", v.integer_value)}.get(v.type, (v.type, None))
+
+
+@pytest.mark.ros
+def test_integer_values_for_float_parameters(ros, start_node, tmp_path):
+    """-p nominal_rate:=200 and `diagnostics_period: 2` in a params file start the node (stored as doubles);
+    a run-time int works, a string is refused with a clear reason, the ranges still hold."""
+    params = tmp_path / "ints.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    diagnostics_period: 2\n    beta: 0\n")
+    node = start_node("madgwick_node", "--params-file", str(params), "-p", "nominal_rate:=200", "-p", "max_dt:=1")
+    get = _param_client(ros, GetParameters, "madgwick_node", "get_parameters")
+    set_ = _param_client(ros, SetParameters, "madgwick_node", "set_parameters")
+    wait_for(lambda: "parameters:" in node.output(), 10, "the start-up log")
+    log = node.output()
+    assert "nominal_rate=200.0" in log and "diagnostics_period=2.0" in log and "beta=0.0" in log, log
+    assert _get(get, "nominal_rate") == ("double", 200.0)
+    assert _get(get, "diagnostics_period") == ("double", 2.0)
+    assert _set(set_, "nominal_rate", 150) == (True, "")
+    assert _get(get, "nominal_rate") == ("double", 150.0)
+    assert _set(set_, "beta", 1)[0] and _get(get, "beta") == ("double", 1.0)
+    ok, reason = _set(set_, "nominal_rate", "fast")
+    assert not ok and "DOUBLE" in reason and "STRING" in reason, reason
+    assert not _set(set_, "nominal_rate", 0)[0]  # below the range, as an int too
+    assert not _set(set_, "beta", 11)[0]
+    assert not _set(set_, "diagnostics_period", 3)[0]  # start-up only
+    assert _get(get, "nominal_rate") == ("double", 150.0)
+    for c in (get, set_):
+        ros.node.destroy_client(c)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("args, error", [
+    (("-p", "nominal_rate:=fast"), "nominal_rate must be a number, got 'fast'"),
+    (("-p", "nominal_rate:=0"), "nominal_rate=0 is below its minimum 1"),
+    (("-p", "world_frame:=ecef"), "world_frame must be one of enu, ned, nwu"),
+])
+def test_bad_start_up_values_exit_with_a_clear_error(start_node, args, error):
+    node = start_node("mahony_node", *args)
+    assert node.proc.wait(30) == 1
+    assert f"mahony_node: error: {error}" in node.output()

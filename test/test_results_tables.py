@@ -5,16 +5,12 @@ from __future__ import annotations
 
 import json
 import shutil
-import sys
 from pathlib import Path
 
 import pytest
+import results_tables as rt
 
 from conftest import ROOT
-
-sys.path.insert(0, str(ROOT / "bench"))
-
-import results_tables as rt
 
 
 def test_committed_pages_match_the_committed_results():

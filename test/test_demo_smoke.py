@@ -18,16 +18,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import results_tables as rt
 import yaml
 
 from conftest import ROOT, executable
 from riann_ros import bagio
 from riann_ros.bagio.layout import INFO_KEY, STRING_TYPE, typestore
 from riann_ros.datasets.broad import read_broad
-
-sys.path.insert(0, str(ROOT / "bench"))
-
-import results_tables as rt
 
 TRIAL = "21_undisturbed_fast_combined"
 BAG = ROOT / "bags" / f"broad_{TRIAL}.mcap"
