@@ -10,11 +10,10 @@ import csv
 import json
 import math
 import platform
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
@@ -87,31 +86,6 @@ PRINT_ROWS = 48  # per-sequence tables longer than this are not printed (they ar
 # ---------------------------------------------------------------------------------------------------
 # terminal
 # ---------------------------------------------------------------------------------------------------
-class Progress:
-    """A one-line progress bar on stderr (plain lines when stderr is not a terminal)."""
-
-    def __init__(self, total: int, stream: TextIO | None = None, width: int = 30, enabled: bool = True) -> None:
-        self.total = max(total, 1)
-        self.stream = stream or sys.stderr
-        self.width = width
-        self.enabled = enabled
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-
-    def __call__(self, done: int, total: int, result: SequenceResult | None = None) -> None:
-        if not self.enabled:
-            return
-        name = (result.name or Path(result.source).name) if result else ""
-        status = "FAILED" if result is not None and result.error else f"{result.seconds if result else 0.0:.1f}s"
-        filled = int(self.width * done / self.total)
-        bar = "#" * filled + "-" * (self.width - filled)
-        line = f"[{bar}] {done}/{total} {name} ({status})"
-        if self.tty:
-            self.stream.write("\r\033[K" + line + ("\n" if done >= total else ""))
-        else:
-            self.stream.write(line + "\n")
-        self.stream.flush()
-
-
 def _cells(agg: Sequence[Group]) -> tuple[list[str], list[list[str]]]:
     """Headers and cells of the summary table: perturbation and rate columns only when they vary."""
     prt = len({a.perturbation for a in agg}) > 1
