@@ -104,7 +104,7 @@ def _check_scaling(args: argparse.Namespace) -> None:
     if args.resume and (args.force or args.write_estimates):
         raise ValueError("--resume does not combine with --force (which starts over) or --write-estimates (the "
                          "estimates of the inputs finished earlier are not kept)")
-    if args.scheduler:
+    if args.scheduler is not None:
         if args.live or args.jobs > 1:
             raise ValueError("--scheduler runs the inputs on a Dask cluster's workers: it does not combine with "
                              "--jobs (the cluster's workers are the parallelism) or --live")
