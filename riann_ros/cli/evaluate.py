@@ -28,7 +28,7 @@ from pathlib import Path
 
 from riann_ros import evaluation as ev
 from riann_ros.cli import eval_inputs, input_lists
-from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, build_parser
+from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, SETTING_OPTIONS, build_parser
 from riann_ros.cli.pipe import quiet_when_reader_leaves
 from riann_ros.evaluation import executors, outdir, perturb, report, seq_tables, session, store
 from riann_ros.evaluation.estimate_bags import write_estimate_bags
@@ -218,7 +218,8 @@ def _check_out(args: argparse.Namespace, run: session.EvalRun | None = None) -> 
     if old:
         raise ValueError(str(outdir.OutputExists(args.out, old)))
     if args.out and run is not None:
-        store.check(args.out, store.fingerprint(run.settings, run.tune, run.tune_scenario), _mode(args))
+        store.check(args.out, store.fingerprint(run.settings, run.tune, run.tune_scenario), _mode(args),
+                    SETTING_OPTIONS)
 
 
 def _print_messages(rep: report.Report) -> None:

@@ -14,6 +14,15 @@ from riann_ros.evaluation import perturb
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
+#: the options behind each evaluation setting, named when a resumed run asks for other settings (--resume)
+SETTING_OPTIONS = {
+    "estimators": "--estimators", "scenarios": "--scenarios", "seed": "--seed", "rates": "--rates",
+    "conditions": "--perturb", "with_heading": "--heading", "use_mag": "--use-mag",
+    "series_for": "--plot-sequence, --no-plots", "series_conditions": "--plot-perturb",
+    "keep_estimates": "--write-estimates", "rest": "--rest", "offset_steps": "--offset-steps", "salvage": "--salvage",
+    "topics": "--imu-topic, --ground-truth-topic, --estimate-topic, --estimate-file, --t-offset, --max-gap",
+    "tune": "--tune", "tune_scenario": "--tune-scenario",
+}
 
 
 def build_parser() -> argparse.ArgumentParser:

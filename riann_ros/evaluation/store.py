@@ -21,7 +21,7 @@ import json
 import os
 import pickle
 import shutil
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -70,10 +70,12 @@ def _short(v: Any) -> str:
     return text if len(text) <= 160 else text[:157] + "..."
 
 
-def differences(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
-    """Each setting of ``new`` that ``old`` has otherwise, as ``name: OLD in the earlier run, NEW now``."""
-    return [f"{k}: {_short(old.get(k))} in the earlier run, {_short(new.get(k))} now"
-            for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
+def differences(old: dict[str, Any], new: dict[str, Any], labels: Mapping[str, str] | None = None) -> list[str]:
+    """Each setting of ``new`` that ``old`` has otherwise, as ``name: OLD in the earlier run, NEW now`` (``labels``:
+    what to call a setting, e.g. by its command-line options)."""
+    labels = labels or {}
+    return [f"{k}{f' ({labels[k]})' if k in labels else ''}: {_short(old.get(k))} in the earlier run, "
+            f"{_short(new.get(k))} now" for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
 
 
 def shard_keys(sources: Sequence[str]) -> list[tuple[int, str]]:
@@ -95,9 +97,10 @@ def unfinished(out: Path) -> int:
     return n if (d / MANIFEST).is_file() else (-1 if n else 0)
 
 
-def check(out: Path, fp: dict[str, Any], mode: str) -> None:
+def check(out: Path, fp: dict[str, Any], mode: str, labels: Mapping[str, str] | None = None) -> None:
     """Refuse (:class:`RunMismatch`) before any work: a new run into a folder holding an earlier run's shards, or a
-    resumed run whose settings differ from the earlier run's (naming each difference)."""
+    resumed run whose settings differ from the earlier run's (naming each difference; ``labels``: as
+    :func:`differences`)."""
     d = out / SHARDS
     if mode == REPLACE or not d.is_dir():
         return
@@ -116,7 +119,7 @@ def check(out: Path, fp: dict[str, Any], mode: str) -> None:
         if old.get("format") != FORMAT:
             raise RunMismatch(f"cannot resume: {d} was written in shard format {old.get('format')}, this riann_ros "
                               f"reads format {FORMAT}; --force starts over")
-        diff = differences(old.get("settings", {}), fp)
+        diff = differences(old.get("settings", {}), fp, labels)
         if diff:
             raise RunMismatch("cannot resume: this run asks for other settings than the earlier run in "
                               f"{out} (give the same options, or --force to start over):\n  " + "\n  ".join(diff))
