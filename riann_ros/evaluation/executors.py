@@ -33,6 +33,7 @@ INSTALL_HINT = ("--scheduler needs Dask's distributed scheduler: pip install 'ri
                 "(or pip install -r requirements-cluster.txt from the source tree)")
 LOCAL_PREFIX = "local:"
 WORKER_WAIT_S = 60.0  # how long a run waits for the first worker of a cluster
+MIN_WINDOW = 256  # inputs submitted to a cluster ahead of those finished (more with more than 64 worker threads)
 
 
 class Executor(Protocol):
@@ -215,21 +216,43 @@ class DaskCluster(AbstractContextManager["DaskCluster"]):
             return False
 
     def map(self, unit: Unit, items: Sequence[Item], settings: EvalSettings) -> Results:
+        """One task per input, at most :meth:`window` of them on the scheduler at a time (a new one as each
+        finishes), so a corpus of any size costs the scheduler and this process the same."""
         from distributed import as_completed
 
         run = uuid.uuid4().hex[:12]
-        futures = {}
-        for i, src in items:
-            fut = self.client.submit(on_worker, unit, src, settings, key=f"riann-eval-{run}-{i}", pure=False)
-            futures[fut.key] = (i, src, fut)
+        todo = iter(items)
+        futures: dict[str, tuple[int, str, Any]] = {}
+        finished = as_completed()
+
+        def submit() -> None:
+            item = next(todo, None)
+            if item is not None:
+                fut = self.client.submit(on_worker, unit, item[1], settings, key=f"riann-eval-{run}-{item[0]}",
+                                         pure=False)
+                futures[fut.key] = (item[0], item[1], fut)
+                finished.add(fut)
+
+        for _ in range(self.window()):
+            submit()
         try:
-            for fut in as_completed([f for _, _, f in futures.values()]):
+            for fut in finished:
                 i, src, _ = futures.pop(fut.key)
-                yield i, self._result(fut, src)
+                res = self._result(fut, src)
                 fut.release()
+                submit()
+                yield i, res
         finally:
             if futures:  # interrupted: the cluster drops what is left of this run
                 self.client.cancel([f for _, _, f in futures.values()])
+
+    def window(self) -> int:
+        """Tasks in flight: enough to keep every worker thread busy with a queue behind it."""
+        try:
+            threads = sum(self.client.nthreads().values())
+        except Exception:
+            threads = 0
+        return max(MIN_WINDOW, 4 * threads)
 
     @staticmethod
     def _result(fut: Any, src: str) -> SequenceResult:
