@@ -32,9 +32,9 @@ from riann_ros import mag as mg
 from riann_ros import stamps
 from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
-from riann_ros.nodes import ros_args
+from riann_ros.nodes import ros_args, usage
 from riann_ros.nodes.diagnostics import Diagnostics
-from riann_ros.nodes.outputs import Outputs
+from riann_ros.nodes.outputs import Outputs, rpy_topic
 from riann_ros.nodes.parameters import NODE_PARAMS, QOS_CHOICES, NodeParameters, collect_changes
 
 INPUT_TOPIC = "imu/data_raw"
@@ -252,9 +252,32 @@ class EstimatorNode(Node):
         return response
 
 
+def help_text(node_cls: type[EstimatorNode]) -> str:
+    """``--help`` of a node executable: its topics and every parameter it declares (:mod:`riann_ros.nodes.usage`)."""
+    est = estimator_class(node_cls.ESTIMATOR)
+    topics = [("in", INPUT_TOPIC, "sensor_msgs/Imu: m/s², rad/s, sensor frame (REP-145)")]
+    if est.USES_MAG:
+        topics.append(("in", MAG_TOPIC, "sensor_msgs/MagneticField: tesla, optional (use_mag)"))
+    topics += [
+        ("out", node_cls.ATTITUDE_TOPIC, "geometry_msgs/QuaternionStamped: sensor → world_frame, in fixed_frame"),
+        ("out", node_cls.IMU_TOPIC, "sensor_msgs/Imu: the input with orientation and its covariance"),
+        ("out", rpy_topic(node_cls.ATTITUDE_TOPIC), "geometry_msgs/Vector3Stamped: roll, pitch, yaw, ° (publish_rpy)"),
+        ("out", "/tf", "tf2_msgs/TFMessage: fixed_frame → sensor frame (publish_tf)"),
+        ("out", "/diagnostics", "diagnostic_msgs/DiagnosticArray: rates, rejections, warnings"),
+        ("srv", "~/reset", "std_srvs/Trigger: clear the estimator state"),
+    ]
+    doc = sys.modules[node_cls.__module__].__doc__ or node_cls.NODE_NAME
+    return usage.usage(node_cls.NODE_NAME, doc.strip().splitlines()[0], topics, NODE_PARAMS, node_cls.ESTIMATOR,
+                       est.PARAMS)
+
+
 def run(node_cls: type[EstimatorNode], args: list[str] | None = None) -> int:
-    """Entry point shared by all node executables: init, spin until Ctrl-C / shutdown, clean up."""
+    """Entry point shared by all node executables: ``-h``/``--help`` prints the help and returns; else init, spin
+    until Ctrl-C / shutdown, clean up."""
     argv = list(args if args is not None else sys.argv)
+    if usage.help_requested(argv):
+        print(help_text(node_cls), end="")
+        return 0
     fixed, notes = ros_args.normalise(argv)
     temp_files = [f for f in ros_args.params_files(fixed) if f not in ros_args.params_files(argv)]
     node = None
