@@ -185,7 +185,7 @@ class RiannEstimator(AttitudeEstimator):
     def _run(self, x: list[Row6], dt: list[float], mag: list[Vec | None] | None) -> Array:
         """A block of samples through the chain."""
         self.samples += len(x)
-        s = Samples(x, dt, [d if math.isfinite(d) and d > 0.0 else 0.0 for d in dt], mag)
+        s = Samples.of(x, dt, mag)
         g = self._rows(s)
         b = self.bias.run(g)
         n = self.network.run(NetworkIn(g, b))

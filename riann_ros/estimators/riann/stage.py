@@ -11,6 +11,7 @@ physics of each stage is in ``docs/riann.md`` ("The pipeline"), which shows the 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from enum import Enum
 from typing import NamedTuple, Protocol, TypeVar
@@ -138,6 +139,11 @@ class Samples(NamedTuple):
     dt_s: list[float]
     step_s: list[float]
     mag: list[Vec | None] | None
+
+    @classmethod
+    def of(cls, x: list[Row6], dt_s: list[float], mag: list[Vec | None] | None = None) -> Samples:
+        """The block of samples ``x`` with steps ``dt_s`` (s) and fields ``mag``."""
+        return cls(x, dt_s, [d if math.isfinite(d) and d > 0.0 else 0.0 for d in dt_s], mag)
 
 
 class GridSpec(NamedTuple):
