@@ -38,8 +38,8 @@ def test_rate_tracker_tells_a_jittered_clock_from_random_sample_times():
 def test_a_regular_stream_with_a_few_lost_messages_is_never_taken_for_a_clock():
     """A 285.7 Hz stream that loses 2-13 messages about once a second: one long step in the window. The
     variance ratio counts each step only once all 16 spans over it are in, so the long step does not look
-    like a clock while its spans come in (it did: ratio ~1/16 for 15 samples after each hole, and the
-    de-jittered timeline then swallowed the hole's time; BROAD with such holes 1.73 -> 1.15 deg)."""
+    like a clock while its spans come in (counted at once, the ratio falls to ~1/16 for the 15 samples after each
+    hole, and a de-jittered timeline would swallow the hole's time)."""
     r = RateTracker(0.0035)
     rng = np.random.default_rng(0)
     ever = False
@@ -58,7 +58,7 @@ def test_a_regular_stream_with_a_few_lost_messages_is_never_taken_for_a_clock():
 def test_short_holes_are_bridged_like_the_samples_they_lost():
     """The swing losing 2-13 samples every 1500 (so that each hole is alone among the tracker's 1024 steps) gives
     what the stream filled by linear interpolation gives: the grid bridges the hole on the stamps' time, not
-    on a clock's (before: 16° apart)."""
+    on a clock's."""
     acc, gyr, dt, _ = swing(285.7, means=False, seconds=30.0)
     t = np.cumsum(dt)
     keep = np.ones(len(t), bool)
@@ -82,9 +82,9 @@ def test_short_holes_are_bridged_like_the_samples_they_lost():
 @pytest.mark.parametrize("delivery", ["delays", "fifo"])
 def test_lost_messages_of_a_clock_stamped_on_arrival_advance_its_timeline(delivery):
     """The 200 Hz swing stamped on arrival (0-10 ms late, or a FIFO read 6 at a time) loses 3-14 messages every
-    2 s. The de-jittered timeline advances by the lost periods too (before, it swallowed each hole's time and
-    the clock period was stretched by the lost share: 9.9° and 12.7° here, against 1.6° and 1.1° without
-    losses; now 2.1° and 3.0°)."""
+    2 s. The de-jittered timeline advances by the lost periods too, and the clock period counts them (a timeline
+    that swallowed each hole's time, with a period stretched by the lost share, is 9.9° and 12.7° off here; this
+    one 2.1° and 3.0°, against 1.6° and 1.1° without losses)."""
     acc, gyr, dt, truth = swing(200.0, means=False, seconds=40.0)
     n = len(dt)
     stamps = receive_stamps(n, 0.005, 0.010, seed=3) if delivery == "delays" else fifo_stamps(n, 0.005, 6)

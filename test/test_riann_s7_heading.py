@@ -69,8 +69,8 @@ def test_heading_starts_at_zero_and_follows_the_gyro():
 
 @pytest.mark.parametrize("roll_deg", [20.0, 120.0, -75.0])
 def test_tilted_sensor_at_rest_gets_the_network_roll_and_heading_zero(roll_deg):
-    """Issue 12: a sensor at rest, rolled, gave a quaternion with heading near 180°; the output's heading
-    (ZYX yaw) starts at 0 and stays there, its roll is the tilt."""
+    """A sensor at rest, rolled: the output's heading (ZYX yaw) starts at 0 and stays there (not near 180°), its roll
+    is the tilt."""
     n = 400
     r = math.radians(roll_deg)
     acc = np.tile([0.0, G * math.sin(r), G * math.cos(r)], (n, 1))

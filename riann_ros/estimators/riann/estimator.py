@@ -25,7 +25,6 @@ replaced by one row per sample with its own dt.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -120,15 +119,10 @@ class RiannEstimator(AttitudeEstimator):
         """The stages, each in its RESET state (its constructor restarts it so)."""
         p = self.params
         self.timeline: Timeline | None = None
-        self.grid: Grid | DirectRows
+        self.grid: Grid | DirectRows = DirectRows()
         if p["rate_adaptation"]:
-            timeline, grid = Timeline(p["restart_gap"], p["input_model"], p["sample_delay"]), Grid()
-            self.timeline, self.grid = timeline, grid
-            self._rows: Callable[[Samples], GridBlock] = lambda s: grid.run(timeline.run(s))  # stages 1 and 2
-            front: list[Stage[Any, Any]] = [timeline, grid]
-        else:
-            direct = DirectRows()
-            self.grid, self._rows, front = direct, direct.run, [direct]
+            self.timeline, self.grid = Timeline(p["restart_gap"], p["input_model"], p["sample_delay"]), Grid()
+        front: list[Stage[Any, Any]] = [self.grid] if self.timeline is None else [self.timeline, self.grid]
         self.bias = Bias(p["gyro_bias_estimation"], p["bias_clip"], p["bias_sigma_init"],
                          fixed_step=self.timeline is None)
         self.network = Network(self.model)
@@ -194,6 +188,13 @@ class RiannEstimator(AttitudeEstimator):
         q = self.heading.run(HeadingIn(s, c, h))
         self.last = self.uncertainty.run(UncertaintyIn(s, g, b, n, h, q))
         return q.q
+
+    def _rows(self, s: Samples) -> GridBlock:
+        """Stages 1 and 2: the network rows of the samples (with ``rate_adaptation`` off, one row per sample)."""
+        if isinstance(self.grid, DirectRows):
+            return self.grid.run(s)
+        assert self.timeline is not None
+        return self.grid.run(self.timeline.run(s))
 
     # -- public API -----------------------------------------------------------------------------
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:

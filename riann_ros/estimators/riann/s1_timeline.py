@@ -97,7 +97,7 @@ class Timeline:
         d = self.input_step
         # up-sampled: the grid takes an integer number (>= 2) of rows per input step. A clocked stream fed straight in
         # has a grid step (the running median of its jittered stamps) hovering around its period, a hair above or
-        # below it: comparing the two directly switched the delay on and off from sample to sample.
+        # below it: compared directly, the two would switch the delay on and off from sample to sample.
         return self.sample_delay * d if d > UPSAMPLED * steps.step else 0.0
 
     def spec(self) -> GridSpec:

@@ -8,7 +8,7 @@ point becomes a row as soon as the samples cover its window, from the samples up
 resampling is causal. A grid value is the signal at the grid point, or its mean over the box width: up-sampled
 (point samples or interval means), the cell *centred* on the grid point (the network reads a row as the signal at
 its time, as it reads a sample fed straight in; a cell ending there, or the interval mean holding the grid point,
-made the rows half a cell late on average); for blocks the width before it.
+would make the rows half a cell late on average); for blocks the width before it.
 Each sample also gets the raw gyro means the carry stage (5) turns into rotations. After a hole the grid goes on
 across it (the rows in the hole are interpolated: the *bridge*) and marks where a fresh network starts.
 

@@ -35,8 +35,8 @@ GYR_LP_TAU = 0.5  # s, low-pass of |ω| for NEW_MIN_GYR
 # re-acquiring after a hole
 #: deg; the σ a field heading is weighed with against the bridged heading (and the fields before it) while the
 #: heading re-acquires after a hole: a weight that sets how fast the heading leaves the bridge for the fields. It is
-#: not the field heading's σ that stage 8 reports (MAG_HEADING_SD_DEG, fitted on BROAD); that one would trust the
-#: first fields after a hole twice as much
+#: not the field heading's σ that stage 8 reports (MAG_HEADING_SD_DEG, fitted on BROAD); that one would weigh the
+#: first fields after a hole four times as much
 REACQUIRE_FIELD_SD_DEG = 5.0
 BRIDGE_GATE = 3.0  # the bridge is dropped if the first field after the hole is this many standard deviations off
 

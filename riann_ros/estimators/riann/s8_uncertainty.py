@@ -11,8 +11,7 @@ a bias error tilts the network's estimate by about the bias times its memory, ``
 rate |ω − b| low-passed with :data:`TAU_MOTION` (the network's error grows with the motion it has to follow, as the
 paper's fast trials show), ``σ₀`` a floor (the reference's own error and the network's at rest), ``σ_h`` the
 hand-over's σ after a hole (stage 6). The constants are fitted on the 12 shared BROAD trials by maximum likelihood
-(``bench/fit_uncertainty.py``). The linear acceleration | |a| − g | (low-passed alike) was measured as a candidate
-too and is kept as a feature: the fit gives it no weight; docs/riann.md, stage 8.
+(``bench/fit_uncertainty.py``); docs/riann.md, stage 8, has the inputs measured and left out.
 
 Heading (:func:`heading_sigma`): without a field the heading is unobservable (:data:`YAW_FREE_SD`), and so it is
 again after a gap (no bridge) until a field corrects it. From then on ``σ_ψ² = σ_m² + (tan(dip)·σ_i)² + x²``:
