@@ -26,8 +26,6 @@ from riann_ros.estimators.riann.s7a_mag import MagHeading
 from riann_ros.estimators.riann.stage import SMALL_BLOCK, Cause, HeadingBlock, HeadingIn, Quat, Vec
 from riann_ros.rotations import about_z, conj, qmul, twist
 
-TWO_PI = math.tau
-
 
 class Heading:
     """Stage 7 (see the module docstring)."""
@@ -73,11 +71,11 @@ class Heading:
         if self.q_prev is None:
             self.psi = -2.0 * math.atan2(qc[3], qc[0])  # the output starts at zero heading
         else:
-            self.psi = math.remainder(self.psi + twist(qmul(qmul(self.q_prev, delta), conj(qc))), TWO_PI)
+            self.psi = math.remainder(self.psi + twist(qmul(qmul(self.q_prev, delta), conj(qc))), math.tau)
         self.q_prev = qc
         if mag is not None or self.mag.started:
             qo = qmul(about_z(self.psi), qc)
-            self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), TWO_PI)
+            self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), math.tau)
             gain[i] = self.mag.gain
             dip[i] = self.mag.ref_dip
         w, x, y, z = qmul(about_z(self.psi), qc)
@@ -95,7 +93,7 @@ class Heading:
         n = len(qc)
         prev = np.vstack([np.asarray(self.q_prev or qc_l[0])[None, :], qc[:-1]])
         e = quat.multiply(quat.multiply(prev, np.asarray(delta)), quat.conjugate(qc))
-        tw = np.remainder(2.0 * np.arctan2(e[:, 3], e[:, 0]) + np.pi, TWO_PI) - np.pi
+        tw = np.remainder(2.0 * np.arctan2(e[:, 3], e[:, 0]) + np.pi, math.tau) - np.pi
         if self.q_prev is None:
             tw[0] = -2.0 * math.atan2(qc[0, 3], qc[0, 0]) - self.psi  # the output starts at zero heading
         first = self._first_field(mag, n)
@@ -105,7 +103,7 @@ class Heading:
                                         delta[first:], dt[first:], None if mag is None else mag[first:],
                                         {k - first: b for k, b in bridges.items() if k >= first}, tilt_sd[first:],
                                         gain, dip, first)
-        self.psi = math.remainder(float(psi[-1]), TWO_PI)
+        self.psi = math.remainder(float(psi[-1]), math.tau)
         self.q_prev = qc_l[-1]
         rz = np.column_stack([np.cos(0.5 * psi), np.zeros(n), np.zeros(n), np.sin(0.5 * psi)])
         q = quat.normalize(quat.multiply(rz, qc))

@@ -41,7 +41,6 @@ REACQUIRE_FIELD_SD_DEG = 5.0
 BRIDGE_GATE = 3.0  # the bridge is dropped if the first field after the hole is this many standard deviations off
 
 
-
 class MagHeading:
     """The heading correction state (see the module docstring); :meth:`step` per sample."""
 
