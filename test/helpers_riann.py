@@ -9,12 +9,13 @@ from typing import Any
 import numpy as np
 
 from riann_ros import quaternion as quat
+from riann_ros.constants import GRAVITY
 from riann_ros.estimators.riann import RiannEstimator
 from riann_ros.estimators.riann.s1_timeline import Timeline
 from riann_ros.estimators.riann.stage import Samples
 from riann_ros.evaluation.scoring import roll_pitch_deg
 
-G = 9.81  # m/s²: the synthetic streams' gravity
+G = GRAVITY  # m/s²: the synthetic streams' gravity
 AT_REST = (0.0, 0.0, G, 0.0, 0.0, 0.0)
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from riann_ros.constants import GRAVITY
 from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.estimators import create
 
@@ -17,7 +18,7 @@ def _motion(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     t = np.arange(n) / RATE
     gyr = np.column_stack([np.sin(t), 0.5 * np.cos(2 * t), 0.3 * np.sin(0.5 * t)]) * (t > n / RATE / 2)[:, None]
     gyr += rng.normal(0, 0.01, (n, 3))
-    acc = np.array([0.0, 0.0, 9.81]) + rng.normal(0, 0.05, (n, 3))
+    acc = np.array([0.0, 0.0, GRAVITY]) + rng.normal(0, 0.05, (n, 3))
     return acc, gyr, np.full(n, 1.0 / RATE)
 
 

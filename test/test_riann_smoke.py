@@ -8,6 +8,7 @@ import pytest
 
 from conftest import gate_dts, rmse
 from riann_ros import quaternion as quat
+from riann_ros.constants import GRAVITY
 from riann_ros.estimators import create
 from riann_ros.resample import resample_recording
 
@@ -15,7 +16,7 @@ from riann_ros.resample import resample_recording
 def test_rest_gives_level_attitude_and_unit_quaternions():
     est = create("riann")
     n = 400
-    acc = np.tile([0.0, 0.0, 9.81], (n, 1))
+    acc = np.tile([0.0, 0.0, GRAVITY], (n, 1))
     q = est.update_batch(acc, np.zeros((n, 3)), np.full(n, 0.005))
     assert np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-9)
     err = np.degrees(quat.inclination_error(quat.IDENTITY, q[-1]))
@@ -25,7 +26,7 @@ def test_rest_gives_level_attitude_and_unit_quaternions():
 def test_tilted_rest_is_recognised():
     est = create("riann")
     q_true = quat.from_rotvec([np.radians(30.0), 0.0, 0.0])
-    acc = quat.rotate(quat.conjugate(q_true), [0.0, 0.0, 9.81])  # gravity reaction in the sensor frame
+    acc = quat.rotate(quat.conjugate(q_true), [0.0, 0.0, GRAVITY])  # gravity reaction in the sensor frame
     n = 600
     q = est.update_batch(np.tile(acc, (n, 1)), np.zeros((n, 3)), np.full(n, 0.005))
     assert np.degrees(quat.inclination_error(q_true, q[-1])) < 2.0

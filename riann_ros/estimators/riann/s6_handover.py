@@ -15,11 +15,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from riann_ros.constants import RAD
+from riann_ros.constants import GRAVITY, RAD
 from riann_ros.estimators.riann.stage import Cause, HandoverBlock, HandoverIn, Quat, Vec
 from riann_ros.rotations import gravity, rotate, tilt_to, toward, unit
 
-G = 9.81  # m/s²
 TAU = 0.5  # s: a fresh network's error decays with about this time constant after a restart in motion
 S_REST = 2.0  # deg: the fresh network's starting error at rest
 S_RATE = 10.0  # deg per rad/s of the fastest rotation rate seen since the hole
@@ -52,7 +51,7 @@ class FreshNetwork:
             self._see(acc)
 
     def _see(self, acc: Vec) -> None:
-        self.lin = max(self.lin, abs(math.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) - G))
+        self.lin = max(self.lin, abs(math.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) - GRAVITY))
 
     def advance(self, delta: Quat, dt: float, acc: Vec) -> None:
         """The next sample: bias-corrected gyro increment ``delta`` over ``dt`` s, accelerometer ``acc``. The first
@@ -69,7 +68,7 @@ class FreshNetwork:
 
     def sigma(self) -> float:
         """σ_f (deg) now."""
-        s0 = S_REST + S_RATE * self.w_max + S_LIN * RAD * math.atan2(self.lin, G)
+        s0 = S_REST + S_RATE * self.w_max + S_LIN * RAD * math.atan2(self.lin, GRAVITY)
         return s0 * math.exp(-self.t / TAU)
 
 
