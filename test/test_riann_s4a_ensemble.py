@@ -82,7 +82,7 @@ def test_combine_maps_each_copy_back_and_averages_the_gravity_directions():
     assert one is exact[0] and not none.any()
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), copies=st.integers(2, MAX_COPIES), rows=st.integers(1, 4),
        scale=st.floats(0.5, 2.0))
 def test_combine_in_floats_equals_the_vectorised_reference(seed, copies, rows, scale):

@@ -236,7 +236,7 @@ def test_riann_heading_sigma_stays_wide_when_the_field_returns_only_after_the_re
     assert s[-1] == pytest.approx(180.0 * np.prod(1.0 - k[first:]), rel=0.02)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(st.lists(st.floats(0.0, 3.0), min_size=4, max_size=4), st.lists(st.floats(0.0, 2.0), min_size=3, max_size=3),
        st.sampled_from([FREE, USED, HELD]))
 def test_the_stage_and_the_fit_share_each_formula(f, y, state):
