@@ -68,8 +68,9 @@ def children_cpu() -> float:
 
 
 def timed(cmd: list[str]) -> tuple[float, float, float, float]:
-    """Wall seconds of a whole process, the 1-min load average before and after, and the CPU seconds of the
-    process and every process it started and waited for (pool or cluster workers)."""
+    """Wall seconds of a whole process, the 1-min load average before and after, and the CPU seconds the operating
+    system accounts to it: the whole run in-process; without the workers of a pool or cluster, which are children of a
+    fork server or nanny that is not waited for."""
     before, cpu = load(), children_cpu()
     t = time.perf_counter()
     r = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)

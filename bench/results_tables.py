@@ -478,16 +478,18 @@ def cluster_held_out() -> str:
     h = c["held_out"]
     body = []
     for m in CLUSTER_MODES:
-        walls, cpus, loads = h["walls_s"][m], h["cpu_s"][m], h["loads"][m]
+        walls, loads = h["walls_s"][m], h["loads"][m]
+        cpus = ", ".join(f"{x:.0f}" for x in h["cpu_s"][m]) if m == "in-process" else "–"  # workers not accounted
         body.append([f"`{m}`" if m != "in-process" else m, ", ".join(f"{w:.1f}" for w in walls),
-                     f"**{statistics.median(walls):.1f}**", ", ".join(f"{x:.0f}" for x in cpus),
+                     f"**{statistics.median(walls):.1f}**", cpus,
                      ", ".join(f"{a:.1f} / {b:.1f}" for a, b in loads)])
     r = _ratios()
     note = (f"`{c['command']}` ({c['machine']}): {h['trials']} trials, {h['recorded_s'] / 60:.0f} min of recording, "
-            f"`{h['held_out_args']}`, {h['rows']} rows; the modes in turn, round by round; every mode's rows equal "
-            f"the in-process rows within {max(h['max_rmse_diff_deg'], 1e-15):.0e}°. **`--scheduler local:2` / "
+            f"`{c['held_out_args']}`, {h['rows']} rows; the modes in turn, round by round; every mode's RMSEs "
+            + (f"within {h['max_rmse_diff_deg']:.0e}° of" if h["max_rmse_diff_deg"] else "equal to")
+            + f" the in-process ones. **`--scheduler local:2` / "
             f"`--jobs 2`, round by round: {', '.join(f'{x:.2f}' for x in r)}** (median {statistics.median(r):.2f}).")
-    return _table(["mode", "wall s, per round", "median s", "CPU s (all processes)", "1-min load before / after"],
+    return _table(["mode", "wall s, per round", "median s", "CPU s", "1-min load before / after"],
                   body) + "\n\n" + note
 
 
@@ -518,10 +520,10 @@ def cluster_fleet() -> str:
             f"{h['recorded_s'] / 60:.0f} min of BROAD, 4 estimators × 3 scenarios), so {FLEET_BAGS:,} bags of "
             f"{FLEET_HOURS:.0f} h each are about **{core_h:,.0f} core-hours**: **{core_h / FLEET_CORES:.0f} h on "
             f"{FLEET_CORES} worker cores**, if the work spreads evenly over workers (measured here on 2 only); "
-            f"each input costs at most {overhead:.1f} worker-seconds more whatever its length ({short['inputs']} "
-            f"short inputs on local:2, their work included), about {FLEET_BAGS * overhead / 3600 / FLEET_CORES:.1f} h "
-            f"more on {FLEET_CORES} cores; the shards take {FLEET_BAGS * short['shards_bytes_per_input'] / 1e6:.0f} "
-            f"MB, results.json {FLEET_BAGS * short['results_json_bytes_per_input'] / 1e6:.0f} MB, and the client "
+            f"each input costs at most {overhead:.2f} worker-seconds more whatever its length ({short['inputs']} "
+            f"short inputs on local:2, their work included: {FLEET_BAGS * overhead / 60:.0f} worker-minutes for "
+            f"{FLEET_BAGS:,}); the shards take {FLEET_BAGS * short['shards_bytes_per_input'] / 1e6:.0f} MB, "
+            f"results.json {FLEET_BAGS * short['results_json_bytes_per_input'] / 1e6:.0f} MB, and the client "
             f"peaked at {short['client_peak_rss_mb']:.0f} MB for {short['inputs']} inputs")
 
 

@@ -33,6 +33,11 @@ INSTALL_HINT = ("--scheduler needs Dask's distributed scheduler: pip install 'ri
                 "(or pip install -r requirements-cluster.txt from the source tree)")
 LOCAL_PREFIX = "local:"
 WORKER_WAIT_S = 60.0  # how long a run waits for the first worker of a cluster
+# a local cluster's settings (for a cluster of your own, the same as DASK_* variables of dask scheduler / dask worker):
+# no statistical profiler on the workers (it samples the task's stack every 10 ms, about a tenth of the CPU of an
+# estimator run), and a task handed to a worker only when it has a free thread, as a --jobs pool does (a long input
+# queued behind another on a busy worker while the other idles is the tail of a run of few inputs)
+LOCAL_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.scheduler.worker-saturation": 1.0}
 MIN_WINDOW = 256  # inputs submitted to a cluster ahead of those finished (more with more than 64 worker threads)
 
 
@@ -175,8 +180,11 @@ class DaskCluster(AbstractContextManager["DaskCluster"]):
             if n:
                 import logging
 
-                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                             silence_logs=logging.ERROR)
+                import dask
+
+                with dask.config.set(LOCAL_CONFIG):
+                    self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                 silence_logs=logging.ERROR)
                 self.client: Any = Client(self._cluster)
             else:
                 self.client = Client(self.address, timeout="20s")
