@@ -38,7 +38,7 @@ WORKER_WAIT_S = 60.0  # how long a run waits for the first worker of a cluster
 # estimator run), and a task handed to a worker only when it has a free thread, as a --jobs pool does (a long input
 # queued behind another on a busy worker while the other idles is the tail of a run of few inputs)
 LOCAL_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.scheduler.worker-saturation": 1.0}
-MIN_WINDOW = 256  # inputs submitted to a cluster ahead of those finished (more with more than 64 worker threads)
+MIN_WINDOW = 64  # inputs submitted to a cluster ahead of those finished (more with more than 16 worker threads)
 
 
 class Executor(Protocol):
