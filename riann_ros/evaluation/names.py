@@ -1,0 +1,71 @@
+"""Every input prints under a name of its own (ROS-free).
+
+A sequence is named by the recording (``/dataset/info``, the BROAD trial, the CSV's file stem at conversion), so two
+bags converted from one CSV file carry one name. :func:`unique_names` renames every input of a clashing name after
+its own file (``a.mcap`` → ``a``), then after its folder and file (``run1/imu.mcap`` → ``run1/imu``) where files
+share a name too, then with a number, and warns. Only the name shown and written changes: the scenario's random
+gyro bias stays seeded by the recorded name, so a bag gives the same numbers alone and in any list.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from riann_ros.evaluation.results import SequenceResult
+
+
+def _file_name(source: str) -> str:
+    p = Path(source)
+    return p.stem if p.suffix else p.name
+
+
+def _folder_and_file(source: str) -> str:
+    p = Path(source)
+    return f"{p.parent.name}/{_file_name(source)}" if p.parent.name else _file_name(source)
+
+
+def _clashes(names: Sequence[str]) -> set[str]:
+    return {n for n in names if names.count(n) > 1}
+
+
+def unique_names(results: Sequence[SequenceResult]) -> list[str]:
+    """Rename the evaluated results whose names clash (in place: the result, its rows, its series and warnings);
+    returns the warnings, also added to each renamed result's ``warnings``."""
+    done = [r for r in results if not r.error]
+    chosen = [r.name for r in done]
+    if not _clashes(chosen):
+        return []
+    rules: list[Callable[[str], str]] = [_file_name, _folder_and_file]
+    for rule in rules:
+        still = _clashes(chosen)
+        chosen = [rule(r.source) if n in still else n for r, n in zip(done, chosen, strict=True)]
+    counts: dict[str, int] = {}
+    for i, n in enumerate(chosen):
+        if chosen.count(n) > 1:
+            counts[n] = counts.get(n, 0) + 1
+            chosen[i] = f"{n}#{counts[n]}"
+    warnings = []
+    renamed = [(r, new) for r, new in zip(done, chosen, strict=True) if new != r.name]
+    for old in dict.fromkeys(r.name for r, _ in renamed):
+        group = [(r, new) for r, new in zip(done, chosen, strict=True) if r.name == old]
+        text = (f"sequence name {old} clashes ({', '.join(r.source for r, _ in group)}): named "
+                f"{', '.join(new for _, new in group)} here (results.json sequences[].recorded_name keeps {old})")
+        warnings.append(text)
+        for r, new in group:
+            if new != r.name:
+                _rename(r, new)
+            r.warnings.insert(0, text)
+    return warnings
+
+
+def _rename(r: SequenceResult, new: str) -> None:
+    old = r.name
+    r.recorded_name, r.name = old, new
+    for row in r.rows:
+        row.sequence = new
+    for series in (r.series, r.attitude_series):
+        if series is not None:
+            series["sequence"] = new
+    r.warnings = [new + w[len(old):] if w.startswith(old + ":") or w.startswith(old + " ") else w
+                  for w in r.warnings]
