@@ -46,16 +46,16 @@ def unique_names(results: Sequence[SequenceResult]) -> list[str]:
             counts[n] = counts.get(n, 0) + 1
             chosen[i] = f"{n}#{counts[n]}"
     warnings = []
-    renamed = [(r, new) for r, new in zip(done, chosen, strict=True) if new != r.name]
-    for old in dict.fromkeys(r.name for r, _ in renamed):
-        group = [(r, new) for r, new in zip(done, chosen, strict=True) if r.name == old]
-        text = (f"sequence name {old} clashes ({', '.join(r.source for r, _ in group)}): named "
-                f"{', '.join(new for _, new in group)} here (results.json sequences[].recorded_name keeps {old})")
+    original = [r.name for r in done]
+    for r, old, new in zip(done, original, chosen, strict=True):
+        if new == old:
+            continue
+        others = [o.source for o, n in zip(done, original, strict=True) if n == old and o is not r]
+        text = (f"{new}: named after its file {r.source}: the recorded name {old} is also "
+                f"{', '.join(others) or 'another input'}'s (results.json sequences[].recorded_name keeps it)")
+        _rename(r, new)
+        r.warnings.insert(0, text)
         warnings.append(text)
-        for r, new in group:
-            if new != r.name:
-                _rename(r, new)
-            r.warnings.insert(0, text)
     return warnings
 
 
