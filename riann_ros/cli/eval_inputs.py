@@ -141,7 +141,8 @@ def _check_labels(topics: tuple[str, ...], files: list[ev.EstimateFile]) -> None
             raise ValueError(f"estimate label {f.label!r} given twice: give the files labels of their own (FILE:LABEL)")
         same = [g for g in files if g.label == f.label and (g.input is None or f.input is None or g.input == f.input)]
         if len(same) > 1:
-            where = f" for input {f.input}" if f.input else ""
+            inp = next((g.input for g in same if g.input), None)
+            where = f" for input {inp}" if inp else ""
             raise ValueError(f"estimate label {f.label!r} given twice{where} ({', '.join(g.path for g in same)}): give "
                              "the files labels of their own (FILE:LABEL), or one file per input")
 

@@ -72,8 +72,11 @@ class StreamHealth:
                 self.longest_hole_ns = max(self.longest_hole_ns, int(steps[hole].max(initial=0)))
         self.gate.check_batch(st, c.acc, c.gyr)
         self.rests.add(c)
-        for f in check_units(c) if len(c) > 1 else []:
-            self.findings.setdefault(f.check, f.message)
+        ok = np.isfinite(c.acc).all(axis=1) & np.isfinite(c.gyr).all(axis=1)  # what the gate lets through
+        if ok.sum() > 1:
+            finite = Recording(st[ok], c.acc[ok], c.gyr[ok], mag=None if c.mag is None else c.mag[ok], meta=c.meta)
+            for f in check_units(finite):
+                self.findings.setdefault(f.check, f.message)
 
     def result(self) -> dict[str, Any]:
         """The health figures (results.json ``sequences[].health``); times in ms (steps) and s (holes, rests)."""

@@ -41,8 +41,9 @@ def unique_names(results: Sequence[SequenceResult]) -> list[str]:
         still = _clashes(chosen)
         chosen = [rule(r.source) if n in still else n for r, n in zip(done, chosen, strict=True)]
     counts: dict[str, int] = {}
+    still = _clashes(chosen)
     for i, n in enumerate(chosen):
-        if chosen.count(n) > 1:
+        if n in still:
             counts[n] = counts.get(n, 0) + 1
             chosen[i] = f"{n}#{counts[n]}"
     warnings = []
