@@ -5,8 +5,12 @@ SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-# DDS traffic stays on this machine, in a domain of its own (see README "Quick start").
+# DDS traffic stays on this machine, in a domain of its own (see README "Quick start"): ROS_DOMAIN_ID, 42 unless you
+# set one. The tests follow a ROS_DOMAIN_ID you set, each pytest-xdist worker in a domain of its own (ROS_DOMAIN_ID +
+# the worker's number: 42 and 43 with JOBS=2 for ROS_DOMAIN_ID=42); without one every test run picks its own from
+# 100 up, so that concurrent runs never meet (test/conftest.py). USER_ROS_DOMAIN_ID: yours, before the default.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+USER_ROS_DOMAIN_ID := $(ROS_DOMAIN_ID)
 export ROS_DOMAIN_ID ?= 42
 export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 # test processes in parallel (pytest-xdist; each worker in a DDS domain of its own, test/conftest.py)
@@ -42,11 +46,11 @@ lint: $(BIN)/.installed
 
 # the whole suite: real DDS, BROAD accuracy, colcon (the README's second command)
 test: $(BIN)/.installed lint
-	$(BIN)/python -m pytest -n $(JOBS)
+	ROS_DOMAIN_ID=$(USER_ROS_DOMAIN_ID) $(BIN)/python -m pytest -n $(JOBS)
 
 # the tests that need no DDS and are not marked slow (41 s on 2 cores with lint, warm): while you work
 test-fast: $(BIN)/.installed
-	$(BIN)/python -m pytest -m "not ros and not slow" -q -n $(JOBS)
+	ROS_DOMAIN_ID=$(USER_ROS_DOMAIN_ID) $(BIN)/python -m pytest -m "not ros and not slow" -q -n $(JOBS)
 
 check: lint test-fast
 

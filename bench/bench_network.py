@@ -9,8 +9,8 @@ same meaning as the published session run once per copy):
 * ``published 1 copy``: the published session, one run (the reference of the ratios);
 * ``published × 4``: the published session once per copy (the reference);
 * ``I/O binding × 4``: the same four runs with preallocated inputs and outputs bound once (OrtValue);
-* ``batched run()``: the published graph with a batch axis (:func:`riann_ros.estimators.riann.s4b_model.batch_model`),
-  one ``InferenceSession.run`` for all copies;
+* ``batched run()``: the published graph with a batch axis
+  (:func:`riann_ros.estimators.riann.s4c_batch_axis.batch_model`), one ``InferenceSession.run`` for all copies;
 * ``BatchedModel.run``: :class:`riann_ros.estimators.riann.s4b_model.BatchedModel` (the batched graph, I/O binding);
 * ``numpy GRU × 4``: the two GRU layers stepped in numpy (float32) from the file's initializers (timed at
   T = ``--rows`` on a thirtieth of the calls; in the trial check on the first trial only).
@@ -43,6 +43,7 @@ import numpy as np
 import onnxruntime as ort
 
 from riann_ros.estimators.riann import s4b_model as nw
+from riann_ros.estimators.riann import s4c_batch_axis as pb
 from riann_ros.estimators.riann.s4a_ensemble import copy_rows, frames, rotate_rows
 
 Fn = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -52,11 +53,11 @@ Fn = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 def _tensor(t: bytes) -> tuple[str, np.ndarray | None]:
     """name, array of a float32 TensorProto (raw_data or float_data); None for other types."""
     name, dims, data, float32 = "", [], None, True
-    for n, w, p in nw._fields(t):
+    for n, w, p in pb.fields(t):
         if n == 1:  # dims: one varint each, or packed
-            dims += [nw._varint(p, 0)[0]] if w == 0 else _packed(p)
+            dims += [pb.varint(p, 0)[0]] if w == 0 else _packed(p)
         elif n == 2:
-            float32 = nw._varint(p, 0)[0] == 1
+            float32 = pb.varint(p, 0)[0] == 1
         elif n == 8:
             name = p.decode()
         elif n in (4, 9):  # float_data (packed), raw_data: little-endian float32
@@ -67,15 +68,15 @@ def _tensor(t: bytes) -> tuple[str, np.ndarray | None]:
 def _packed(p: bytes) -> list[int]:
     out, i = [], 0
     while i < len(p):
-        v, i = nw._varint(p, i)
+        v, i = pb.varint(p, i)
         out.append(v)
     return out
 
 
 def read_graph(path: str) -> tuple[dict[str, np.ndarray], list[dict[str, int]]]:
     """Initializers and Constant values by name; the GRU nodes' integer attributes, in order."""
-    model = nw._fields(open(path, "rb").read())
-    graph = nw._fields(next(p for n, _, p in model if n == nw.MODEL_GRAPH))
+    model = pb.fields(open(path, "rb").read())
+    graph = pb.fields(next(p for n, _, p in model if n == pb.MODEL_GRAPH))
     values: dict[str, np.ndarray] = {}
     grus = []
     for n, _, p in graph:
@@ -84,15 +85,15 @@ def read_graph(path: str) -> tuple[dict[str, np.ndarray], list[dict[str, int]]]:
             if t is not None:
                 values[k] = t
         elif n == 1:  # node: output 2, op_type 4, attribute 5 (name 1, i 3, t 5, s 4, strings 9)
-            f = nw._fields(p)
+            f = pb.fields(p)
             op = next(q.decode() for m, _, q in f if m == 4)
-            attrs = [nw._fields(q) for m, _, q in f if m == 5]
+            attrs = [pb.fields(q) for m, _, q in f if m == 5]
             t = _tensor(next(q for m, _, q in attrs[0] if m == 5))[1] if op == "Constant" else None
             if t is not None:
                 values[next(q.decode() for m, _, q in f if m == 2)] = t
             elif op == "GRU":
                 grus.append({next(q.decode() for m, _, q in a if m == 1): next(
-                    (nw._varint(q, 0)[0] for m, _, q in a if m == 3), -1) for a in attrs})
+                    (pb.varint(q, 0)[0] for m, _, q in a if m == 3), -1) for a in attrs})
     return values, grus
 
 
@@ -176,7 +177,7 @@ def batched_run(session: ort.InferenceSession) -> Fn:
 
 def candidates(net: nw.BatchedModel, rows: int, numpy: bool) -> dict[str, Fn]:
     s = net.session
-    batched = nw._session(nw.batch_model(net.path.read_bytes()), 1)
+    batched = nw._session(pb.batch_model(net.path.read_bytes()), 1)
     out: dict[str, Fn] = {
         "published 1 copy": lambda x, h: s.run(["output", "hn"], {"input": x[:1], "h0": h[0]}),
         "published × 4": net.run_per_copy,

@@ -66,8 +66,8 @@ def trial_features(path: Path, est: RiannEstimator, holes: bool = False) -> dict
 
         def kept(*args: object) -> np.ndarray:  # stage 8's features of each run between restarts
             out = run(*args)  # type: ignore[arg-type]
-            f.append(est.uncertainty.features.copy())
-            yf.append(est.uncertainty.yaw_features.copy())
+            f.append(est.last.features.copy())
+            yf.append(est.last.yaw_features.copy())
             return out
 
         est.update_batch = kept  # type: ignore[method-assign]
@@ -87,7 +87,7 @@ def trial_features(path: Path, est: RiannEstimator, holes: bool = False) -> dict
     assert rec.quat_ref is not None
     e = quat.inclination_error(rec.quat_ref, q)
     ok = np.asarray(rec.score_mask, dtype=bool) & np.isfinite(e)
-    return {"f": est.uncertainty.features[ok], "yf": est.uncertainty.yaw_features[ok], "e": e[ok],
+    return {"f": est.last.features[ok], "yf": est.last.yaw_features[ok], "e": e[ok],
             "eh": quat.heading_error(rec.quat_ref, q)[ok]}
 
 
@@ -99,9 +99,8 @@ def load(step: int, cache: Path | None, holes: bool = False) -> dict[str, dict[s
     out = {}
     for p in broad_files(d):
         c = cache / f"{p.stem}{'_holes' if holes else ''}.npz" if cache else None
-        if c is not None and c.exists():
-            z = dict(np.load(c))
-        else:
+        z = dict(np.load(c)) if c is not None and c.exists() else {}
+        if not z or z["f"].shape[1] != len(FEATURES):  # not cached, or cached with other inputs
             z = trial_features(p, est, holes)
             if c is not None:
                 np.savez(c, **z)

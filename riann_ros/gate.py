@@ -16,8 +16,10 @@ docs/node.md, "Bad input"):
 * the first sample after a (re)start gets dt = 1 / ``nominal_rate``;
 * a zero stamp (drivers that do not stamp) → the receive time is used instead, warned once
   (``zero_stamp``); with no receive time (offline) such a sample is rejected;
-* a median |acc| between 0.5 and 1.5 over the first accepted samples → warned once that the
-  accelerometer seems to report in g instead of m/s² (``acc_in_g``); samples are still used as they are.
+* a median |acc| between 0.5 and 1.5 over the first accepted samples of a sequence → warned that the
+  accelerometer seems to report in g instead of m/s² (``acc_in_g``; once, again only after a later sequence
+  looked right); samples are still used as they are. Every (re)start checks anew (a restarted driver may have
+  been fixed): :attr:`InputGate.acc_in_g` holds the latest verdict.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ RESET_CAUSES = (START, GAP, CLOCK_JUMP)
 ZERO_STAMP = "zero_stamp"
 ACC_IN_G = "acc_in_g"
 G_CHECK_SAMPLES = 50
+G_RANGE = (0.5, 1.5)  # a median |acc| at rest inside this is 1 g read as m/s² (9.81 m/s² would be ~10)
 CLEAN_CHUNK = 8192  # samples per vectorised gate check in process_batch
 
 WARNING_TEXT = {
@@ -117,6 +120,7 @@ class InputGate:
         self.accepted = 0
         self._warned: set[str] = set()
         self._g_norms: list[float] = []
+        self.acc_median: float | None = None  # median |acc| of the latest complete g-units check window
         self._dt_n = 0
         self._dt_sum = self._dt_sq = 0.0
         self._dt_min, self._dt_max = math.inf, -math.inf
@@ -125,6 +129,12 @@ class InputGate:
     def restart(self) -> None:
         """Forget the previous stamp: the next accepted sample starts a new sequence."""
         self._last_ns: int | None = None
+
+    @property
+    def acc_in_g(self) -> bool:
+        """Whether the latest g-units check (the first :data:`G_CHECK_SAMPLES` of the current or last sequence) found
+        the accelerometer reporting in g."""
+        return self.acc_median is not None and G_RANGE[0] < self.acc_median < G_RANGE[1]
 
     def _warn(self, key: str, out: list[str]) -> None:
         if key not in self._warned:
@@ -151,6 +161,7 @@ class InputGate:
         else:
             dt = 1.0 / self.config.nominal_rate
             self.resets[reset] += 1
+            self._g_norms = []  # a new sequence checks the accelerometer's unit anew
         self._accept(stamp_ns, dt, acc_norm, warnings)
         return GateResult(True, dt=dt, stamp_ns=stamp_ns, reset=reset, warnings=warnings)
 
@@ -192,8 +203,12 @@ class InputGate:
         self._dt_max = max(self._dt_max, dt)
         if len(self._g_norms) < G_CHECK_SAMPLES:
             self._g_norms.append(acc_norm)
-            if len(self._g_norms) == G_CHECK_SAMPLES and 0.5 < float(np.median(self._g_norms)) < 1.5:
-                self._warn(ACC_IN_G, warnings)
+            if len(self._g_norms) == G_CHECK_SAMPLES:
+                self.acc_median = float(np.median(self._g_norms))
+                if self.acc_in_g:
+                    self._warn(ACC_IN_G, warnings)
+                else:
+                    self._warned.discard(ACC_IN_G)  # fixed: a later relapse is warned about again
 
     def check_clean_prefix(
         self, stamps_ns: NDArray[np.int64], acc: NDArray[np.float64], gyr: NDArray[np.float64]

@@ -23,11 +23,14 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riann_ros.params import ParamSpec, defaults
+
+F = TypeVar("F", float, NDArray[np.float64])  # one field's component (float) or a column of fields (array)
 
 USABLE_MIN_T = 1e-6  # T; below: a dead sensor or a field in the wrong unit
 USABLE_MAX_T = 1e-3  # T; above: saturated, or a magnet next to the sensor
@@ -133,6 +136,12 @@ def plausible(field: NDArray[np.float64]) -> NDArray[np.bool_]:
     return np.isfinite(n) & (n >= USABLE_MIN_T) & (n <= USABLE_MAX_T)
 
 
+def _floats(v: ArrayLike) -> tuple[float, float, float]:
+    """Three floats of a field given as a tuple or list (a message's fields, the pairing's) or an array."""
+    x, y, z = v if isinstance(v, (tuple, list)) else np.asarray(v, dtype=float).reshape(3).tolist()
+    return float(x), float(y), float(z)
+
+
 def rot_z(angle_rad: float) -> NDArray[np.float64]:
     return np.array([math.cos(0.5 * angle_rad), 0.0, 0.0, math.sin(0.5 * angle_rad)])
 
@@ -154,21 +163,27 @@ class MagInput:
         self.seen = False  # a field was passed to the estimator since the last reset
         self.state = FIELD_NONE if self.config.use_mag != "false" else FIELD_OFF
 
-    def _calibrate(self, m: NDArray[np.float64]) -> NDArray[np.float64]:
+    def _calibrated(self, x: F, y: F, z: F) -> tuple[F, F, F]:
+        """``S (m − h)`` of one field (floats) or of columns of fields (arrays): the one formula of both paths."""
         c = self.config
         if c.mag_hard_iron == (0.0, 0.0, 0.0) and c.mag_soft_iron == IDENTITY_9:
-            return m
-        s = np.asarray(c.mag_soft_iron).reshape(3, 3)
-        return (m - np.asarray(c.mag_hard_iron)) @ s.T
+            return x, y, z
+        h, s = c.mag_hard_iron, c.mag_soft_iron
+        dx, dy, dz = x - h[0], y - h[1], z - h[2]
+        return (s[0] * dx + s[1] * dy + s[2] * dz, s[3] * dx + s[4] * dy + s[5] * dz,
+                s[6] * dx + s[7] * dy + s[8] * dz)
 
     def prepare_batch(self, mag: ArrayLike | None) -> NDArray[np.float64] | None:
-        """Fields (N, 3) for the estimator, NaN rows = none; None when no field at all is passed."""
+        """Fields (N, 3) for the estimator, NaN rows = none; None when no field at all is passed (the reference of
+        :meth:`prepare`)."""
         if mag is None or self.config.use_mag == "false":
             self.state = FIELD_OFF if self.config.use_mag == "false" else self._missing()
             return None
-        m = self._calibrate(np.asarray(mag, dtype=float).reshape(-1, 3))
+        raw = np.asarray(mag, dtype=float).reshape(-1, 3)
+        with np.errstate(invalid="ignore", over="ignore"):  # a reading that is not finite is no field
+            m = np.column_stack(self._calibrated(raw[:, 0], raw[:, 1], raw[:, 2]))
         ok = plausible(m)
-        had = np.isfinite(np.asarray(mag, dtype=float).reshape(-1, 3)).all(axis=1)
+        had = np.isfinite(raw).all(axis=1)
         m = np.where(ok[:, None], m, np.nan)
         if len(m):
             missing = FIELD_STALE if self.seen or ok.any() else FIELD_NONE
@@ -184,17 +199,12 @@ class MagInput:
         if mag is None or c.use_mag == "false":
             self.state = FIELD_OFF if c.use_mag == "false" else self._missing()
             return None
-        x, y, z = (float(v) for v in mag)  # type: ignore[union-attr, arg-type]
+        x, y, z = _floats(mag)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             self.state = self._missing()
             return None
-        if c.mag_hard_iron != (0.0, 0.0, 0.0) or c.mag_soft_iron != IDENTITY_9:
-            h, s = c.mag_hard_iron, c.mag_soft_iron
-            dx, dy, dz = x - h[0], y - h[1], z - h[2]
-            x, y, z = (s[0] * dx + s[1] * dy + s[2] * dz, s[3] * dx + s[4] * dy + s[5] * dz,
-                       s[6] * dx + s[7] * dy + s[8] * dz)
-        n = math.sqrt(x * x + y * y + z * z)
-        if not USABLE_MIN_T <= n <= USABLE_MAX_T:
+        x, y, z = self._calibrated(x, y, z)
+        if not USABLE_MIN_T <= math.sqrt(x * x + y * y + z * z) <= USABLE_MAX_T:
             self.state = FIELD_BAD
             return None
         self.state = FIELD_USED

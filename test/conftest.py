@@ -12,20 +12,41 @@ from pathlib import Path
 
 import pytest
 
-# DDS traffic stays on this machine and in a domain of this test session's own, so concurrent runs
-# (CI, other developers, the Makefile's demo) never see each other.
-# With pytest-xdist (make test, make check) every worker runs its tests one after another in a domain of its own:
-# the run's base (RIANN_TEST_DOMAIN_ID, else from the controlling process's pid, so that concurrent runs differ)
-# plus the worker's number.
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-os.environ["RIANN_TEST_DOMAIN_ID"] = os.environ.get("RIANN_TEST_DOMAIN_ID") or str(
-    100 + ((os.getppid() if os.environ.get("PYTEST_XDIST_WORKER") else os.getpid()) % 25) * 4)
-os.environ["ROS_DOMAIN_ID"] = str(int(os.environ["RIANN_TEST_DOMAIN_ID"])
-                                  + int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:] or 0) % 4)
-os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad  # (no ROS: the DDS settings below
+from riann_ros.recording import Recording  # are read when a test starts rclpy or a node)
 
-from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad
-from riann_ros.recording import Recording
+# DDS traffic stays on this machine and in domains of this test run's own. The run's base domain is ROS_DOMAIN_ID when
+# it is set (the Makefile passes on only a value you set), else one picked from the controlling process's pid, so that
+# concurrent runs (CI, other developers) differ: 100, 104, ..., 196. With pytest-xdist (make test, make check) every
+# worker runs its tests one after another in a domain of its own, the base plus the worker's number (gw0: the base,
+# gw1: the base + 1, ...). The controlling process hands its base to the workers in RIANN_TEST_DOMAIN_BASE.
+DOMAIN_MAX = 232  # the largest ID Fast DDS's port mapping allows (7400 + 250 × ID + offsets below 65536)
+
+
+def dds_domain(env: dict[str, str], pid: int, ppid: int) -> tuple[int, int]:
+    """(the run's base domain, this process's domain) for the environment ``env`` of a pytest process."""
+    worker = env.get("PYTEST_XDIST_WORKER", "")
+    n = int(worker[2:] or 0) if worker.startswith("gw") else 0
+    given = env.get("RIANN_TEST_DOMAIN_BASE") or env.get("ROS_DOMAIN_ID", "").strip()
+    if given:
+        try:
+            base = int(given)
+        except ValueError:
+            raise ValueError(f"ROS_DOMAIN_ID={given!r} is not a domain ID (an integer 0 … {DOMAIN_MAX})") from None
+        count = int(env.get("PYTEST_XDIST_WORKER_COUNT") or 1)
+        if not 0 <= base <= DOMAIN_MAX + 1 - count:
+            raise ValueError(f"ROS_DOMAIN_ID={base}: the tests need domains {base} … {base + count - 1} (one per "
+                             f"pytest-xdist worker), the largest ID is {DOMAIN_MAX}")
+        return base, base + n
+    base = 100 + ((ppid if worker else pid) % 25) * 4
+    return base, base + n % 4
+
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+_base, _domain = dds_domain(dict(os.environ), os.getpid(), os.getppid())
+os.environ["RIANN_TEST_DOMAIN_BASE"] = str(_base)
+os.environ["ROS_DOMAIN_ID"] = str(_domain)
+os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent

@@ -383,3 +383,48 @@ def test_cli_csv_magnetometer_columns_units_and_gaps(tmp_path: Path, capsys: pyt
     assert paired is not None and np.isfinite(paired).all()
     np.testing.assert_allclose(paired, np.tile([20e-6, 30e-6, -25e-6], (200, 1)), rtol=1e-12)
     assert bagio.read_info(out)["has_mag"] is True
+
+
+def _broad_csv(path: Path, rec, acc_in_g: bool) -> Path:
+    """A BROAD trial's IMU as a CSV with the gyro in deg/s and the accelerometer in g or m/s² (not committed: written
+    into the test's temporary folder)."""
+    acc = rec.acc / GRAVITY if acc_in_g else rec.acc
+    data = np.column_stack([rec.t, acc, np.rad2deg(rec.gyr)])
+    np.savetxt(path, data, delimiter=",", fmt="%.9g", header="t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z", comments="")
+    return path
+
+
+def _slowed(rec, k: float):
+    """The same trial performed k times slower: stamps × k, gyro / k, and the accelerometer's linear part (its
+    reading minus gravity in the reference attitude) / k²; where the reference is missing the reading is kept."""
+    from riann_ros.recording import Recording
+
+    up = quat.rotate(quat.conjugate(rec.quat_ref), np.array([0.0, 0.0, GRAVITY]))
+    acc = rec.acc.copy()
+    ok = np.isfinite(up).all(axis=1)
+    acc[ok] = up[ok] + (rec.acc[ok] - up[ok]) / k**2
+    return Recording(rec.stamps_ns * int(k), acc, rec.gyr / k, name=rec.name)
+
+
+@pytest.mark.broad
+@pytest.mark.slow
+def test_cli_refuses_broad_imu_in_deg_s_whatever_the_acc_unit(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                              broad_trial) -> None:
+    """BROAD trial 02 (slow rotation) as a CSV with the gyro in deg/s, read as rad/s: refused with `--gyr-unit deg/s`
+    whether the accelerometer is in g (and said so) or in m/s², and also when the accelerometer's unit is wrong too
+    (then both fixes are named). As recorded the range check sees it; performed 8× slower (99th percentile of |gyr|
+    below 35 °/s) only the gyro-against-accelerometer check can, and does. With --gyr-unit deg/s it converts."""
+    trial = broad_trial("02")
+    slow = _slowed(trial, 8)
+    assert np.percentile(np.linalg.norm(slow.gyr, axis=1), 99) < np.deg2rad(35)
+    out = tmp_path / "o.mcap"
+    for rec, check in ((trial, "99th percentile of |gyr|"), (slow, "turns the gravity direction")):
+        for acc_in_g, flags, acc_wrong in ((True, ["--acc-unit", "g"], False), (False, [], False), (True, [], True)):
+            csv = _broad_csv(tmp_path / "imu.csv", rec, acc_in_g)
+            assert main([str(csv), "-o", str(out), *flags]) == 1
+            err = capsys.readouterr().err
+            assert check in err and "use --gyr-unit deg/s" in err and not out.exists(), err
+            assert ("use --acc-unit g" in err) == acc_wrong, err
+    assert main([str(csv), "-o", str(out), "--acc-unit", "g", "--gyr-unit", "deg/s", "-q"]) == 0
+    assert capsys.readouterr().err == ""
+    np.testing.assert_allclose(bagio.read_recording(out).gyr, slow.gyr, rtol=1e-6, atol=1e-9)

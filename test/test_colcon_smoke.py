@@ -9,6 +9,7 @@ import subprocess
 import pytest
 from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu
+from test_nodes_help import NODES, check_help
 
 from conftest import BIN, ROOT, wait_for, wait_matched
 from helpers_ros import imu_msg
@@ -61,3 +62,13 @@ def test_installed_riann_node_runs_after_sourcing_setup_bash(workspace, ros, sta
     wait_for(lambda: len(att.messages) >= 20, 10, "outputs from the installed node")
     assert "riann estimator on '/imu/data_raw'" in node.output()
     ros.destroy(pub, att)
+
+
+def test_installed_nodes_print_their_help_and_exit(workspace):
+    """`ros2 run riann_ros <node> --help`: the colcon-installed executables print their help and exit 0."""
+    lib = workspace / "install" / "riann_ros" / "lib" / "riann_ros"
+    for node in NODES:
+        cmd = f"source {workspace}/install/setup.bash && exec {lib / node} --help"
+        r = subprocess.run(["bash", "-c", cmd], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, r.stderr
+        check_help(node, r.stdout)

@@ -138,3 +138,55 @@ def test_estimator_colours_do_not_depend_on_the_order(three, tmp_path):
     assert colours[0][("roll_pitch_s0.svg", "madgwick")] == plots.FIXED_COLORS["madgwick"]
     assert colours[0][("rmse_boxplots.svg", "vqf")] == plots.FIXED_COLORS["vqf"]
     assert colours[0][("roll_pitch_s0.svg", "madgwick(beta=0.1)")] not in plots.FIXED_COLORS.values()
+
+
+def _min_delta_e(colours: dict[str, str]) -> float:
+    from riann_ros.evaluation.plots import lab
+
+    c = lab(list(colours.values()))
+    d = np.sqrt(((c[:, None] - c[None]) ** 2).sum(-1))
+    np.fill_diagonal(d, np.inf)
+    return float(d.min())
+
+
+def test_colours_of_one_figure_differ_by_min_delta_e():
+    """Any two labels of a figure (up to 16: the four estimators, variants of them such as a tuning grid, recorded
+    topics, files, comparisons) are at least MIN_DELTA_E apart in CIELAB; the built-in estimators keep their colours,
+    a lone variant is a shade of its estimator's, and the order of the labels does not matter."""
+    from riann_ros.evaluation import plots
+    from riann_ros.evaluation.specs import DEFAULT_GRIDS, make_label
+
+    bases = list(plots.FIXED_COLORS)
+    variants = [make_label(name, {p: v}) for name, grid in DEFAULT_GRIDS.items() for p, vals in grid.items()
+                for v in vals]
+    others = ["/my_filter/imu", "vins", "recorded:/imu/data", "madgwick → madgwick(beta=0.1)", "run_a", "ekf"]
+    rng = np.random.default_rng(0)
+    for trial in range(300):
+        n = int(rng.integers(2, 17))
+        pool = bases + variants + others
+        labels = list(rng.choice(pool, size=min(n, len(pool)), replace=False))
+        colours = plots.estimator_colors(labels)
+        assert set(colours) == set(labels)
+        assert _min_delta_e(colours) >= plots.MIN_DELTA_E, (trial, colours)
+        assert all(colours[b] == plots.FIXED_COLORS[b] for b in bases if b in labels)
+        rng.shuffle(labels)
+        assert plots.estimator_colors(labels) == colours  # whatever the order
+    # the case that was hard to tell apart: vqf and one variant of it, a lighter or darker green
+    two = plots.estimator_colors(["vqf(tau_acc=1)", "vqf"])
+    assert _min_delta_e(two) >= plots.MIN_DELTA_E
+    shade = plots.lab([two["vqf(tau_acc=1)"]])[0]
+    dist = {b: float(np.linalg.norm(shade - plots.lab([c])[0])) for b, c in plots.FIXED_COLORS.items()}
+    assert min(dist, key=lambda b: dist[b]) == "vqf", dist
+    # a whole default tuning grid beside the four (47 labels): beyond the palette's distance, still all different
+    many = plots.estimator_colors(bases + variants)
+    assert len(set(many.values())) == len(many)
+
+
+def test_colour_candidates_are_visible_and_not_grey():
+    from riann_ros.evaluation import plots
+
+    c = plots.lab(list(plots.CANDIDATES))
+    assert np.all(np.hypot(c[:, 1], c[:, 2]) >= 20) and np.all(c[:, 0] <= 85)  # chroma, lightness L*
+    assert not set(plots.CANDIDATES) & set(plots.FIXED_COLORS.values()) and len(set(plots.CANDIDATES)) == 54
+    assert plots.lab(["#ffffff"])[0] == pytest.approx([100, 0, 0], abs=0.05)  # D65 white
+    assert plots.lab(["#ff0000"])[0] == pytest.approx([53.24, 80.09, 67.20], abs=0.1)  # sRGB red, published Lab

@@ -1,6 +1,8 @@
 """The node's /diagnostics and its stamp-rate check (riann_ros.nodes.diagnostics): the measured rate is a robust
 median; a nominal_rate that does not fit the stamps gives one warning naming both rates and the parameter, WARN in
-/diagnostics until nominal_rate is set (tested in-process, then over DDS with the node executables)."""
+/diagnostics until nominal_rate is set; an accelerometer in g is WARN until a restart shows m/s², zero stamps WARN
+while they arrive, a period whose every message is rejected ERROR (tested in-process, then over DDS with the node
+executables)."""
 
 from __future__ import annotations
 
@@ -14,8 +16,10 @@ from test_nodes_outputs import motion, send, wait_connected
 from test_nodes_parameters import _param_client, _set
 
 from conftest import wait_for
+from helpers_ros import quats
 from riann_ros.nodes.diagnostics import StampRateCheck
 from riann_ros.nodes.madgwick_node import MadgwickNode
+from riann_ros.nodes.riann_node import RiannNode
 from riann_ros.nodes.vqf_node import VqfNode
 
 
@@ -85,3 +89,51 @@ def test_rate_warning_when_nominal_rate_is_wrong(ros, start_node):
     assert "nominal_rate" not in latest("vqf_node").message
     ros.node.destroy_client(set_)
     ros.destroy(pub, *att, diag)
+
+
+@pytest.mark.ros
+def test_acc_in_g_is_warn_until_a_restart_shows_m_s2(ros, start_node):
+    """An accelerometer in g (a sensor at rest, rolled 20°): the node's estimate is wrong and /diagnostics says so,
+    WARN naming g, the measured |acc| and the fix; after the driver restarts in m/s² (its clock jumps back) the check
+    runs anew and the status returns to OK. A period whose every message is rejected (NaN) is ERROR, zero header
+    stamps are WARN while they arrive."""
+    node = start_node("riann_node", "-p", "input_qos:=reliable", "-p", "nominal_rate:=200",
+                      "-p", "diagnostics_period:=0.2")
+    pub = ros.publisher(Imu, "imu/data_raw")
+    att = ros.collect(QuaternionStamped, RiannNode.ATTITUDE_TOPIC)
+    diag = ros.collect(DiagnosticArray, "/diagnostics")
+    wait_connected(pub, [att], [node])
+    roll = np.radians(20.0)
+    acc = np.tile([0.0, 9.80665 * np.sin(roll), 9.80665 * np.cos(roll)], (300, 1))
+    gyr = np.zeros((300, 3))
+    stamps = 1_000_000_000_000 + np.arange(300) * 5_000_000
+    send(pub, stamps, acc / 9.80665, gyr)  # in g
+
+    def latest():
+        st = _diag_of(diag, "riann_node")
+        return st[-1] if st else None
+
+    wait_for(lambda: (s := latest()) is not None and "accelerometer in g" in s.message, 10,
+             f"WARN for g (log: {node.output()})")
+    s = latest()
+    assert s.level == DiagnosticStatus.WARN, s.message
+    assert "median |acc| 1.00" in s.message and "estimates are wrong" in s.message and "9.80665" in s.message
+    assert {kv.key: kv.value for kv in s.values}["accelerometer median |acc| at (re)start (m/s2)"] == "1.00"
+    wait_for(lambda: len(att.messages) >= 300, 10, "outputs")
+    q = quats(att.messages[-1:])[0]
+    est_roll = np.degrees(np.arctan2(2 * (q[0] * q[1] + q[2] * q[3]), 1 - 2 * (q[1] ** 2 + q[2] ** 2)))
+    assert abs(est_roll - 20.0) > 2.0  # the estimate is wrong indeed (the network was trained on m/s²)
+    send(pub, stamps[:300], acc, gyr)  # the driver restarted in m/s²: its clock starts again (a jump back)
+    wait_for(lambda: (s := latest()) is not None and s.level == DiagnosticStatus.OK and s.message == "ok", 10,
+             f"OK after the restart in m/s² (latest: {latest().message})")
+    assert {kv.key: kv.value for kv in latest().values}["accelerometer median |acc| at (re)start (m/s2)"] == "9.81"
+    log = node.output()
+    assert log.count("seems to report in g") == 1 and "in m/s² as REP-145 wants" in log
+    bad = np.full((200, 3), np.nan)
+    send(pub, stamps[:200] + 2_000_000_000, bad, gyr[:200])  # 0.6 s of nothing usable
+    wait_for(lambda: (s := latest()) is not None and s.level == DiagnosticStatus.ERROR, 10, "ERROR")
+    assert latest().message.startswith("no estimate published: all") and "non_finite=" in latest().message
+    send(pub, np.zeros(200, dtype=np.int64), acc[:200], gyr[:200])  # a driver that does not stamp
+    wait_for(lambda: (s := latest()) is not None and "zero header stamps" in s.message, 10, "WARN for zero stamps")
+    assert latest().level == DiagnosticStatus.WARN
+    ros.destroy(pub, att, diag)

@@ -70,6 +70,27 @@ def test_acc_in_g_warns_once_after_the_check_window():
     assert not any(ok.check(S + i * 10_000_000, A, G).warnings for i in range(200))
 
 
+def test_acc_in_g_is_checked_anew_after_every_restart():
+    """The verdict is the latest (re)start's: a driver restarted in m/s² (its clock jumps back) clears it, a relapse
+    after that is warned about again; a gap or ~/reset re-checks too."""
+    gate = InputGate()
+    for i in range(60):
+        gate.check(S + i * 10_000_000, (0.0, 0.0, 1.0), G)
+    assert gate.acc_in_g and gate.acc_median == pytest.approx(1.0)
+    warned = [w for i in range(60) for w in gate.check(S + i * 10_000_000, A, G).warnings]  # clock jump back
+    assert warned == [] and not gate.acc_in_g and gate.acc_median == pytest.approx(np.linalg.norm(A))
+    assert gate.resets[gt.CLOCK_JUMP] == 1
+    t = S + 10 * S  # a gap: the check runs again, in g again: warned again
+    warned = [w for i in range(60) for w in gate.check(t + i * 10_000_000, (0.0, 0.0, 1.0), G).warnings]
+    assert warned == [gt.ACC_IN_G] and gate.acc_in_g
+    gate.restart()  # ~/reset
+    for i in range(49):
+        gate.check(t + S + i * 10_000_000, A, G)
+    assert gate.acc_in_g  # until the new window is complete, the last verdict stands
+    gate.check(t + S + 49 * 10_000_000, A, G)
+    assert not gate.acc_in_g
+
+
 def test_dt_statistics_are_popped():
     gate = InputGate()
     for i in range(11):

@@ -113,7 +113,8 @@ def _output(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--force-units",
         action="store_true",
-        help="write the bag even when the unit checks (sample rate, gravity at rest, gyro range) fail; "
+        help="write the bag even when the unit checks (sample rate, gravity at rest, gyro range, gyro against "
+        "accelerometer, magnetic field) fail; "
         "their findings are then warnings",
     )
 

@@ -10,7 +10,7 @@ Columns (names and units by option; defaults in brackets):
 * time [``t``], unit ``s`` | ``ms`` | ``us`` | ``ns`` [``s``]; parsed exactly (decimal → integer ns);
   must be strictly increasing;
 * accelerometer [``acc_x,acc_y,acc_z``], unit ``m/s2`` | ``g`` [``m/s2``] (1 g = 9.80665 m/s²);
-* gyroscope [``gyr_x,gyr_y,gyr_z``], unit ``rad/s`` | ``deg/s`` [``rad/s``];
+* gyroscope [``gyr_x,gyr_y,gyr_z``], unit ``rad/s`` | ``deg/s`` | ``mrad/s`` | ``mdeg/s`` [``rad/s``];
 * optional reference quaternion [``qw,qx,qy,qz``], listed in the order given by ``quat_order``
   (``wxyz`` | ``xyzw``) [``wxyz``], sensor → world (z up); empty or NaN cells mark a missing reference
   (NaN row); non-empty rows are normalised (norm must be within 10 % of 1);
@@ -39,7 +39,7 @@ from riann_ros.recording import Recording
 
 TIME_UNITS = {"s": 10**9, "ms": 10**6, "us": 10**3, "µs": 10**3, "ns": 1}
 ACC_UNITS = {"m/s2": 1.0, "m/s^2": 1.0, "m/s²": 1.0, "g": GRAVITY}
-GYR_UNITS = {"rad/s": 1.0, "deg/s": DEG, "dps": DEG}
+GYR_UNITS = {"rad/s": 1.0, "deg/s": DEG, "dps": DEG, "mrad/s": 1e-3, "mdeg/s": 1e-3 * DEG, "mdps": 1e-3 * DEG}
 MAG_UNITS = {"uT": 1e-6, "µT": 1e-6, "nT": 1e-9, "mT": 1e-3, "G": 1e-4, "gauss": 1e-4, "T": 1.0}
 QUAT_ORDERS = ("wxyz", "xyzw")
 DEFAULT_TIME = "t"

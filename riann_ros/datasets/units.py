@@ -1,9 +1,12 @@
-"""Physical plausibility of a recording's units (ROS-free): sample rate, gravity at rest, gyro range.
+"""Physical plausibility of a recording's units (ROS-free): sample rate, gravity at rest, gyro range, the gyro
+against the accelerometer, magnetic field.
 
 A CSV log in ms / g / deg/s read with the defaults (s / m/s² / rad/s) still makes a valid-looking
 recording: 0.1 Hz, |acc| ≈ 1 at rest, rotation rates of hundreds of "rad/s". :func:`check_units` measures
-three numbers from the recording and returns a :class:`Finding` for each one that no IMU could produce,
-with the unit that would make it plausible when there is one. It decides nothing: the converter refuses
+a few numbers from the recording and returns a :class:`Finding` for each one that no IMU could produce,
+with the unit that would make it plausible when there is one. Slow motion in deg/s stays within any gyro's range;
+there the gyro is tested against the accelerometer (:func:`check_gyro_tilt`): where the sensor tilts, the gyro
+must turn the gravity direction as far as the accelerometer sees it turn. It decides nothing: the converter refuses
 to write (or warns with ``--force-units``), and other tools can reuse it on any :class:`Recording`.
 
 The thresholds come from sensor physics; each constant below says why.
@@ -18,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from riann_ros.constants import DEG, GRAVITY, NS_PER_S
+from riann_ros.datasets.gyro_tilt import BIAS_MAX_DEG_S
+from riann_ros.datasets.gyro_tilt import measure as measure_tilts
 from riann_ros.recording import Recording
 
 # Sample rate. MEMS IMUs and the attitude filters here run at tens of Hz to a few kHz (BROAD 286 Hz,
@@ -51,9 +56,20 @@ REST_MIN_SAMPLES = 10
 # human and robot motion stays well below (fast BROAD trials: 99th percentile 11–19 rad/s); faster motion
 # saturates the gyro rather than exceeding it. The same numbers in deg/s (35–2000 °/s) are ordinary. The
 # percentile ignores up to 1 % of glitches. Not detectable by magnitude: deg/s data whose motion stays
-# below 35 °/s, and rad/s data read as deg/s (57× too small looks like slow motion).
+# below 35 °/s, and rad/s data read as deg/s (57× too small looks like slow motion); the tilt check below is.
 GYR_MAX_RAD_S = 35.0
 GYR_PERCENTILE = 99.0
+
+# Gyro against accelerometer (riann_ros.datasets.gyro_tilt): per tilt of the gravity direction, how many times as far
+# the gyro turns it. The unit whose factor is nearest is judged when at least TILT_MIN_COUNT tilts were measured and
+# at least TILT_MAJORITY of them lie within a factor TILT_RATIO_TOL of it. 3 is below √17.5 ≈ 4.2, half the
+# log-distance of the closest pair of unit factors (deg/s and mrad/s, 17.5× apart), so each tilt counts for one unit
+# at most, and wide enough for the ±50 % that bias and linear acceleration may move one tilt's ratio. Fewer tilts, or
+# no majority (apparent tilts made by linear acceleration, a gyro whose axes do not match the accelerometer's): no
+# judgement.
+TILT_MIN_COUNT = 5
+TILT_RATIO_TOL = 3.0
+TILT_MAJORITY = 0.5
 
 # Magnetic field. Earth's field is 25–65 µT at the surface (WMM); an uncalibrated magnetometer adds a
 # hard-iron offset of tens of µT, up to ~100 µT beside motors or steel, and indoor fields vary by tens of
@@ -66,9 +82,10 @@ MAG_MAX_T = 200e-6
 # Canonical units (aliases such as "µs", "dps", "m/s^2" map onto these) and their scale to ns, m/s², rad/s.
 TIME_SCALES: dict[str, float] = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}
 ACC_SCALES: dict[str, float] = {"m/s2": 1.0, "g": GRAVITY}
-GYR_SCALES: dict[str, float] = {"rad/s": 1.0, "deg/s": DEG}
+GYR_SCALES: dict[str, float] = {"rad/s": 1.0, "deg/s": DEG, "mrad/s": 1e-3, "mdeg/s": 1e-3 * DEG}
 MAG_SCALES: dict[str, float] = {"T": 1.0, "mT": 1e-3, "G": 1e-4, "uT": 1e-6, "nT": 1e-9}
-_ALIASES = {"µs": "us", "m/s^2": "m/s2", "m/s²": "m/s2", "dps": "deg/s", "µT": "uT", "gauss": "G", "tesla": "T"}
+_ALIASES = {"µs": "us", "m/s^2": "m/s2", "m/s²": "m/s2", "dps": "deg/s", "mdps": "mdeg/s", "µT": "uT", "gauss": "G",
+            "tesla": "T"}
 
 
 @dataclass(frozen=True)
@@ -215,6 +232,32 @@ def check_gyro(rec: Recording, gyr_unit: str = "rad/s") -> Finding | None:
     return _scale_finding("gyr", value, unit, GYR_SCALES, (-math.inf, GYR_MAX_RAD_S), text)
 
 
+def check_gyro_tilt(rec: Recording, gyr_unit: str = "rad/s", time_scale: float = 1.0) -> Finding | None:
+    """The gyro against the accelerometer: a Finding when the gyro turns the gravity direction by a unit factor
+    other than 1 (:mod:`riann_ros.datasets.gyro_tilt`), None when it fits or the recording cannot show it.
+    ``time_scale`` corrects stamps whose unit was already found wrong (the gyro is integrated over time)."""
+    unit = canonical_unit(gyr_unit, GYR_SCALES)
+    stamps = rec.stamps_ns if time_scale == 1.0 else np.round(rec.stamps_ns * time_scale).astype(np.int64)
+    tilts = measure_tilts(stamps, rec.acc, rec.gyr)
+    if len(tilts) < TILT_MIN_COUNT:
+        return None
+    log_r = np.log(tilts.ratio)
+    # reading numbers of unit u as `unit` makes the gyro GYR_SCALES[unit] / GYR_SCALES[u] times too large
+    expected = {u: GYR_SCALES[unit] / s for u, s in GYR_SCALES.items()}
+    # A gyro too small for the tilts might only show bias beside tilts made by linear acceleration: such a unit is
+    # taken only where the gyro, while still, would read a plausible bias in it (BIAS_MAX_DEG_S).
+    expected = {u: r for u, r in expected.items() if r >= 1.0 or tilts.still_rate / r <= BIAS_MAX_DEG_S * DEG}
+    votes = {u: int((np.abs(log_r - math.log(r)) < math.log(TILT_RATIO_TOL)).sum()) for u, r in expected.items()}
+    best = max(votes, key=lambda u: votes[u])
+    if best == unit or votes[best] < max(TILT_MIN_COUNT, TILT_MAJORITY * len(tilts)):
+        return None
+    ratio = float(np.exp(np.median(log_r)))
+    text = (f"the gyro, read as {unit}, turns the gravity direction {ratio:.3g} times as far as the accelerometer "
+            f"shows it turn (median of {len(tilts)} tilts of {np.median(tilts.tilt_deg):.0f}°, {votes[best]} "
+            f"fitting {best}): looks like {best} read as {unit}")
+    return Finding("gyr", "gyr_unit", ratio, unit, best, text)
+
+
 def check_mag(rec: Recording, mag_unit: str = "T") -> Finding | None:
     """Median |field| over the finite magnetometer samples within [MAG_MIN_T, MAG_MAX_T], else a Finding
     (None without a magnetometer)."""
@@ -244,8 +287,15 @@ def check_units(
     time_unit = time_unit or rec.meta.get("time_unit", "s")
     acc_unit = acc_unit or rec.meta.get("acc_unit", "m/s2")
     gyr_unit = gyr_unit or rec.meta.get("gyr_unit", "rad/s")
-    findings = [check_rate(rec, time_unit)]
+    rate = check_rate(rec, time_unit)
+    findings = [rate]
     gyr = check_gyro(rec, gyr_unit)
+    tilt = None
+    if rate is None or rate.suggest is not None:  # the gyro is integrated over time: in the time unit that fits
+        time_scale = 1.0 if rate is None else TIME_SCALES[rate.suggest] / TIME_SCALES[rate.unit]  # type: ignore[index]
+        tilt = check_gyro_tilt(rec, gyr_unit, time_scale)
+    if tilt is not None and (gyr is None or tilt.suggest != gyr.suggest):
+        gyr = tilt  # the tilt check measures the factor; the range check only bounds it
     gyr_scale = 1.0
     if gyr is not None and gyr.suggest is not None:  # find rest with the gyro in the suggested unit
         gyr_scale = GYR_SCALES[gyr.suggest] / GYR_SCALES[gyr.unit]

@@ -26,34 +26,62 @@ def _plt():
     return plt
 
 
-# Every estimator keeps its colour in every figure of every run, whatever the order of -e: the four built-in
-# estimators by name (tab10's blue, green, orange, red), any other label (parameters, tuned, recorded topics,
-# comparisons) by a hash of the label into the rest of the palette (the next free colour when two labels of one
-# figure hash alike, in sorted order, so a figure's colours do not depend on the order either).
+# Colours. The four built-in estimators keep theirs in every figure (tab10's blue, green, orange, red), whatever the
+# order of -e. Every other label of a figure (a variant such as vqf(tau_acc=1), a tuned filter, a recorded topic, a
+# file, a comparison) gets a colour of CANDIDATES at least MIN_DELTA_E (CIELAB ΔE*ab) from every colour already in
+# the figure, taken in sorted label order so that the order of -e does not matter: for a variant of a built-in
+# estimator the one nearest its estimator's colour (a lighter or darker shade where one is far enough), for any other
+# label the one farthest from the rest. ΔE 20 is ten times the just-noticeable difference (~2.3), so two lines or
+# points of a figure are told apart at a glance; when a figure holds more labels than the candidates allow at that
+# distance (about 20), the farthest free colour is taken (test/test_evaluation_plots.py checks both).
 FIXED_COLORS = {"riann": "#1f77b4", "vqf": "#2ca02c", "madgwick": "#ff7f0e", "mahony": "#d62728"}
-PALETTE = ("#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f", "#aec7e8", "#ffbb78", "#98df8a",
-           "#ff9896", "#c5b0d5", "#c49c94", "#f7b6d2", "#9edae5", "#dbdb8d", "#393b79", "#637939", "#8c6d31",
-           "#843c39", "#7b4173")
+MIN_DELTA_E = 20.0
+# matplotlib's qualitative tables (tab20, tab20b, tab20c, Dark2, Set1) in that order, without greys (chroma < 20:
+# the reference is drawn in grey-black, rest phases are shaded grey), colours too light to see on white (L* > 85),
+# and FIXED_COLORS.
+CANDIDATES = ("#ffbb78", "#98df8a", "#ff9896", "#9467bd", "#c5b0d5", "#8c564b", "#e377c2", "#f7b6d2", "#bcbd22",
+              "#17becf", "#9edae5", "#393b79", "#5254a3", "#6b6ecf", "#9c9ede", "#637939", "#8ca252", "#b5cf6b",
+              "#8c6d31", "#bd9e39", "#e7ba52", "#e7cb94", "#843c39", "#ad494a", "#d6616b", "#e7969c", "#7b4173",
+              "#a55194", "#ce6dbd", "#de9ed6", "#3182bd", "#6baed6", "#e6550d", "#fd8d3c", "#fdae6b", "#31a354",
+              "#74c476", "#a1d99b", "#756bb1", "#9e9ac8", "#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e",
+              "#e6ab02", "#a6761d", "#e41a1c", "#377eb8", "#4daf4a", "#984ea3", "#ff7f00", "#a65628", "#f781bf")
 
 
-def _hashed(label: str) -> int:
-    import hashlib
+def lab(colors: Sequence[str]) -> np.ndarray:
+    """CIELAB (D65) of hex sRGB colours, (N, 3)."""
+    rgb = np.array([[int(c[i : i + 2], 16) / 255.0 for i in (1, 3, 5)] for c in colors]).reshape(-1, 3)
+    lin = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    xyz = lin @ np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]).T
+    xyz /= np.array([0.95047, 1.0, 1.08883])
+    f = np.where(xyz > (6 / 29) ** 3, np.cbrt(xyz), xyz / (3 * (6 / 29) ** 2) + 4 / 29)
+    return np.column_stack([116 * f[:, 1] - 16, 500 * (f[:, 0] - f[:, 1]), 200 * (f[:, 1] - f[:, 2])])
 
-    return int.from_bytes(hashlib.sha256(label.encode()).digest()[:4], "big") % len(PALETTE)
+
+_CANDIDATE_LAB = lab(CANDIDATES)
+
+
+def base_estimator(label: str) -> str | None:
+    """The built-in estimator a label is a variant of (``vqf(tau_acc=1)`` → ``vqf``), or None."""
+    base = label.split("(", 1)[0].split(":", 1)[0].strip()
+    return base if base in FIXED_COLORS and base != label else None
 
 
 def estimator_colors(labels: Sequence[str]) -> dict[str, str]:
-    """The colour of each label (see :data:`FIXED_COLORS`)."""
+    """The colour of each label of one figure (see :data:`FIXED_COLORS`)."""
     out = {lbl: FIXED_COLORS[lbl] for lbl in labels if lbl in FIXED_COLORS}
-    used = set(out.values())
     for lbl in sorted(set(labels) - set(out)):
-        k = _hashed(lbl)
-        for i in range(len(PALETTE)):
-            c = PALETTE[(k + i) % len(PALETTE)]
-            if c not in used or i == len(PALETTE) - 1:
-                break
-        out[lbl] = c
-        used.add(c)
+        used = lab(list(out.values()))
+        free = np.array([c not in out.values() for c in CANDIDATES])
+        dist = (np.sqrt(((_CANDIDATE_LAB[:, None, :] - used[None]) ** 2).sum(-1)).min(axis=1) if len(used)
+                else np.full(len(CANDIDATES), np.inf))
+        far = free & (dist >= MIN_DELTA_E)
+        base = base_estimator(lbl)
+        if base is not None and far.any():  # the shade nearest its estimator's colour that is far enough
+            near = np.sqrt(((_CANDIDATE_LAB - lab([FIXED_COLORS[base]])) ** 2).sum(-1))
+            k = int(np.argmin(np.where(far, near, np.inf)))
+        else:
+            k = int(np.argmax(np.where(free, dist, -np.inf)))
+        out[lbl] = CANDIDATES[k]
     return out
 
 

@@ -14,7 +14,8 @@ The heading the same way with one degree of freedom (``χ²₁(0.95) = 3.841``),
 unobservable 180°, split into those corrected by a field and those held by the gyro after one (the field rejected or
 absent): by the state the estimator reports with its σ
 (:meth:`~riann_ros.estimators.base.AttitudeEstimator.heading_state`, run in process), else by the σ (at most the
-field's 5°: corrected; larger: held), as for a covariance read from a bag. Samples without a σ (NaN) are not
+field's, :data:`~riann_ros.defaults.MAG_HEADING_SD_DEG`: corrected; larger: held), as for a covariance read from a
+bag. Samples without a σ (NaN) are not
 counted. The tables, ``--compare`` lines and the plot: :mod:`riann_ros.evaluation.uncertainty_report`.
 """
 

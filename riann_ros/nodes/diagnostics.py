@@ -80,25 +80,45 @@ class Diagnostics:
         self._pub = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._start = time.monotonic()
         self.inputs = 0
+        self.zero_stamped = 0  # messages of the period with a zero header stamp (stamped on receipt)
         self.rejected: Counter[str] = Counter()
         self.proc_us: list[float] = []
         self.est_us: list[float] = []
+        self.config_warnings: list[str] = []  # the start-up warnings on parameters (values written but not applied)
         node.create_timer(period_s, self.publish)
 
     def level(self) -> tuple[bytes, str]:
-        """(level, message) of this period: no input, rejections, a nominal_rate far from the stamp rate."""
+        """(level, message) of this period. ERROR: input arrived but no estimate was published (every message
+        rejected). WARN, for as long as it holds: no input, rejections, an accelerometer in g, zero stamps, a
+        nominal_rate far from the stamp rate, use_mag true without a field, parameters not applied. The message
+        names each with what to do."""
         problems = []
         if self.inputs == 0:
             problems.append("no input on " + self.input_topic)
-        if sum(self.rejected.values()):
+        n_rejected = sum(self.rejected.values())
+        if n_rejected:
             problems.append("samples rejected: " + ", ".join(f"{k}={v}" for k, v in self.rejected.items()))
-        nominal = self.stream.gate.config.nominal_rate
+        gate = self.stream.gate
+        if gate.acc_in_g:
+            problems.append(f"accelerometer in g? median |acc| {gate.acc_median:.2f} over the first "
+                            f"{gt.G_CHECK_SAMPLES} samples, REP-145 wants m/s² (9.81 at rest): estimates are wrong, "
+                            f"scale the driver's output by {gt.GRAVITY}")
+        if self.zero_stamped:
+            problems.append(f"{self.zero_stamped} messages with zero header stamps, stamped on receipt: dt includes "
+                            "transport jitter (fix the driver's stamping)")
+        nominal = gate.config.nominal_rate
         if self.rate.mismatch(nominal) is not None:
             problems.append(f"nominal_rate {nominal:.1f} Hz differs from the measured stamp rate "
                             f"{self.rate.measured_hz:.1f} Hz: set nominal_rate")
         mag = self.stream.mag
         if mag.config.use_mag == "true" and self.stream.estimator.USES_MAG and mag.state != mg.FIELD_USED:
             problems.append(f"use_mag is true but {mag.state[4:]} on {self.mag_topic}")
+        if self.config_warnings:
+            problems.append(f"{len(self.config_warnings)} parameter warning(s) at start-up, values not applied "
+                            f"(see the log): {self.config_warnings[0][:100]}")
+        if self.inputs and n_rejected >= self.inputs:
+            return DiagnosticStatus.ERROR, "; ".join([f"no estimate published: all {self.inputs} messages rejected",
+                                                      *problems])
         if problems:
             return DiagnosticStatus.WARN, "; ".join(problems)
         return DiagnosticStatus.OK, "ok"
@@ -114,6 +134,9 @@ class Diagnostics:
             "nominal_rate (Hz)": f"{gate.config.nominal_rate:.2f}",
             **{f"dt {k} (ms)": f"{dts.get(k, math.nan) * 1e3:.3f}" for k in ("min", "mean", "max", "std")},
             "samples accepted (total)": str(gate.accepted),
+            "accelerometer median |acc| at (re)start (m/s2)": (f"{gate.acc_median:.2f}" if gate.acc_median is not None
+                                                               else "nan"),
+            "zero stamps in period": str(self.zero_stamped),
             "inference time mean (us)": _stat(self.est_us, "mean"),
             "inference time max (us)": _stat(self.est_us, "max"),
             "processing time mean (us)": _stat(self.proc_us, "mean"),
@@ -144,6 +167,7 @@ class Diagnostics:
         self._pub.publish(arr)
         self._start = now
         self.inputs = 0
+        self.zero_stamped = 0
         self.rejected.clear()
         self.proc_us = []
         self.est_us = []

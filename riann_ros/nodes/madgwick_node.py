@@ -1,4 +1,7 @@
-"""madgwick_node: Madgwick gradient-descent filter attitude from imu/data_raw (all behaviour lives in node_base)."""
+"""madgwick_node: attitude from imu/data_raw by Madgwick's gradient-descent filter.
+
+All behaviour lives in node_base; ``madgwick_node --help`` lists its topics and parameters.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""mahony_node: Mahony complementary filter attitude from imu/data_raw (all behaviour lives in node_base)."""
+"""mahony_node: attitude from imu/data_raw by Mahony's complementary filter.
+
+All behaviour lives in node_base; ``mahony_node --help`` lists its topics and parameters.
+"""
 
 from __future__ import annotations
 

@@ -32,9 +32,9 @@ from riann_ros import mag as mg
 from riann_ros import stamps
 from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
-from riann_ros.nodes import ros_args
+from riann_ros.nodes import ros_args, usage
 from riann_ros.nodes.diagnostics import Diagnostics
-from riann_ros.nodes.outputs import Outputs
+from riann_ros.nodes.outputs import Outputs, rpy_topic
 from riann_ros.nodes.parameters import NODE_PARAMS, QOS_CHOICES, NodeParameters, collect_changes
 
 INPUT_TOPIC = "imu/data_raw"
@@ -78,6 +78,7 @@ class EstimatorNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._last_warn: dict[str, float] = {}
+        self._acc_in_g = False  # the gate's g-units verdict last logged
         self.outputs = Outputs(self, self.ATTITUDE_TOPIC, self.IMU_TOPIC, p, self._warn_throttled)
         qos = input_qos(p["input_qos"], int(p["input_depth"]))
         self._imu_sub = self.create_subscription(Imu, INPUT_TOPIC, self._on_imu_queue, qos)
@@ -104,16 +105,21 @@ class EstimatorNode(Node):
         )
         for text in notes:
             log.info(f"arguments: {text}")
+        warnings = []
         for level, text in self._params.log:
             if level == "warning":  # (rclpy's logger wants one severity per call site)
                 log.warning(text)
+                warnings.append(text)
             else:
                 log.info(text)
         fqn = self.get_fully_qualified_name()
         for path, key, names in ros_args.foreign_sections(params_files, fqn):
-            log.warning(f"parameter file {path}: section '{key}' does not apply to this node ({fqn}); its parameters "
-                        f"{', '.join(names)} are not used (key the section '/**' or '{self.get_name()}', or start the "
-                        f"node under that name: --ros-args -r __node:={key.rsplit('/', 1)[-1]})")
+            text = (f"parameter file {path}: section '{key}' does not apply to this node ({fqn}); its parameters "
+                    f"{', '.join(names)} are not used (key the section '/**' or '{self.get_name()}', or start the "
+                    f"node under that name: --ros-args -r __node:={key.rsplit('/', 1)[-1]})")
+            log.warning(text)
+            warnings.append(text)
+        self.diag.config_warnings = warnings  # WARN in /diagnostics too: values written but not applied
 
     # -- run-time parameters ----------------------------------------------------------------------
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
@@ -175,6 +181,8 @@ class EstimatorNode(Node):
         receive_ns = self.get_clock().now().nanoseconds if stamp_ns == 0 else None
         diag = self.diag
         diag.inputs += 1
+        if stamp_ns == 0:
+            diag.zero_stamped += 1
         t1 = time.perf_counter_ns()
         field = self._mag.at(stamp_ns, self.stream.mag.config.timeout_ns)[0] if self._mag.received else None
         q, r = self.stream.process(stamp_ns, (la.x, la.y, la.z), (av.x, av.y, av.z), receive_ns, field)
@@ -215,6 +223,11 @@ class EstimatorNode(Node):
     def _log_gate_result(self, r: gt.GateResult) -> None:
         for w in r.warnings:
             self.get_logger().warning(gt.WARNING_TEXT[w])
+        if self._acc_in_g != self.stream.gate.acc_in_g:
+            self._acc_in_g = not self._acc_in_g
+            if not self._acc_in_g:  # (the warning itself came with r.warnings)
+                self.get_logger().info(f"accelerometer: median |acc| {self.stream.gate.acc_median:.2f} m/s² after "
+                                       "the (re)start, in m/s² as REP-145 wants")
         if r.reset in (gt.GAP, gt.CLOCK_JUMP):
             self.get_logger().info(f"{r.reset.replace('_', ' ')} at stamp {r.stamp_ns * 1e-9:.6f} s: estimator "
                                    "restarted, re-initialised from this sample")
@@ -239,9 +252,32 @@ class EstimatorNode(Node):
         return response
 
 
+def help_text(node_cls: type[EstimatorNode]) -> str:
+    """``--help`` of a node executable: its topics and every parameter it declares (:mod:`riann_ros.nodes.usage`)."""
+    est = estimator_class(node_cls.ESTIMATOR)
+    topics = [("in", INPUT_TOPIC, "sensor_msgs/Imu: m/s², rad/s, sensor frame (REP-145)")]
+    if est.USES_MAG:
+        topics.append(("in", MAG_TOPIC, "sensor_msgs/MagneticField: tesla, optional (use_mag)"))
+    topics += [
+        ("out", node_cls.ATTITUDE_TOPIC, "geometry_msgs/QuaternionStamped: sensor → world_frame, in fixed_frame"),
+        ("out", node_cls.IMU_TOPIC, "sensor_msgs/Imu: the input with orientation and its covariance"),
+        ("out", rpy_topic(node_cls.ATTITUDE_TOPIC), "geometry_msgs/Vector3Stamped: roll, pitch, yaw, ° (publish_rpy)"),
+        ("out", "/tf", "tf2_msgs/TFMessage: fixed_frame → sensor frame (publish_tf)"),
+        ("out", "/diagnostics", "diagnostic_msgs/DiagnosticArray: rates, rejections, warnings"),
+        ("srv", "~/reset", "std_srvs/Trigger: clear the estimator state"),
+    ]
+    doc = sys.modules[node_cls.__module__].__doc__ or node_cls.NODE_NAME
+    return usage.usage(node_cls.NODE_NAME, doc.strip().splitlines()[0], topics, NODE_PARAMS, node_cls.ESTIMATOR,
+                       est.PARAMS)
+
+
 def run(node_cls: type[EstimatorNode], args: list[str] | None = None) -> int:
-    """Entry point shared by all node executables: init, spin until Ctrl-C / shutdown, clean up."""
+    """Entry point shared by all node executables: ``-h``/``--help`` prints the help and returns; else init, spin
+    until Ctrl-C / shutdown, clean up."""
     argv = list(args if args is not None else sys.argv)
+    if usage.help_requested(argv):
+        print(help_text(node_cls), end="")
+        return 0
     fixed, notes = ros_args.normalise(argv)
     temp_files = [f for f in ros_args.params_files(fixed) if f not in ros_args.params_files(argv)]
     node = None

@@ -1,4 +1,7 @@
-"""riann_node: RIANN neural network (no tuning) attitude from imu/data_raw (all behaviour lives in node_base)."""
+"""riann_node: attitude from imu/data_raw by RIANN, a recurrent neural network that needs no tuning.
+
+All behaviour lives in node_base; ``riann_node --help`` lists its topics and parameters.
+"""
 
 from __future__ import annotations
 

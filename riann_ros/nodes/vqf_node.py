@@ -1,4 +1,7 @@
-"""vqf_node: VQF (Laidig and Seel), 6D attitude from imu/data_raw (all behaviour lives in node_base)."""
+"""vqf_node: attitude from imu/data_raw by VQF (Laidig and Seel).
+
+All behaviour lives in node_base; ``vqf_node --help`` lists its topics and parameters.
+"""
 
 from __future__ import annotations
 

@@ -14,9 +14,12 @@ with the physics; :data:`~.stage.RESTARTS` says what each does when the stream r
 7. :mod:`.s7_heading` — a heading that follows the gyro, and the magnetometer when there is one
 8. :mod:`.s8_uncertainty` — each output's standard deviations (inclination, heading), read-only (:meth:`sigma`)
 
-One output per input sample, at its stamp. ``update`` is a block of one; ``update_batch`` runs the same stages on
-the whole block (the network once over all its rows), so both give the same numbers (within float32 round-off).
-With ``rate_adaptation`` off stages 1–2 are replaced by one row per sample with its own dt.
+Each stage is a :class:`~.stage.Stage`: ``run`` takes one record and returns one (:mod:`.stage` defines them all),
+so what a stage reads is what it is given here, and nothing else. A gap and a reset reach every stage through its
+``restart`` (:data:`~.stage.RESTARTS`); a hole travels in the blocks. One output per input sample, at its stamp.
+``update`` is a block of one; ``update_batch`` runs the same stages on the whole block (the network once over all
+its rows), so both give the same numbers (within float32 round-off). With ``rate_adaptation`` off stages 1–2 are
+replaced by one row per sample with its own dt.
 """
 
 from __future__ import annotations
@@ -32,17 +35,26 @@ from riann_ros.estimators.bias import front_end_params
 from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY, Timeline
 from riann_ros.estimators.riann.s2_grid import DirectRows, Grid
 from riann_ros.estimators.riann.s3_bias import Bias
-from riann_ros.estimators.riann.s4_network import Network
-from riann_ros.estimators.riann.s4a_ensemble import MAX_COPIES
+from riann_ros.estimators.riann.s4_network import MAX_COPIES, Network
 from riann_ros.estimators.riann.s4b_model import BatchedModel
 from riann_ros.estimators.riann.s5_carry import Carry
 from riann_ros.estimators.riann.s6_handover import Handover
 from riann_ros.estimators.riann.s7_heading import Heading
-from riann_ros.estimators.riann.s7a_mag import MagHeading
 from riann_ros.estimators.riann.s8_uncertainty import Uncertainty
-from riann_ros.estimators.riann.stage import Cause, Row6, Vec
-
-RESTART_WARMUP = 0.0  # s a fresh network runs beside the old one after a hole before it takes over
+from riann_ros.estimators.riann.stage import (
+    CarryIn,
+    Cause,
+    GridBlock,
+    HandoverIn,
+    HeadingIn,
+    NetworkIn,
+    Row6,
+    Samples,
+    Stage,
+    Uncertainties,
+    UncertaintyIn,
+    Vec,
+)
 
 
 class RiannEstimator(AttitudeEstimator):
@@ -73,15 +85,12 @@ class RiannEstimator(AttitudeEstimator):
                   "network. Compute grows with it.", min=1, max=MAX_COPIES),
         *front_end_params(True, "the network"),
         ParamSpec("restart_gap", 0.1,
-                  "s; after a stamp step longer than this (and than 4 input steps) a fresh network takes "
-                  "over after restart_warmup. 0 = never.", min=0.0, max=3600.0),
+                  "s; after a stamp step longer than this (and than 4 input steps) a fresh network state takes "
+                  "over from the first row after the hole. 0 = never.", min=0.0, max=3600.0),
         ParamSpec("hole_blend", True,
                   "After a hole, start from the gyro bridge and hand the inclination over to the fresh network "
                   "as its error falls below the bridge's (weights from the gyro across the hole and the motion "
                   "since). Off: the fresh network's output at once.", runtime=True),
-        ParamSpec("restart_warmup", RESTART_WARMUP,
-                  "s; how long the fresh network runs beside the old one after a hole before it takes over.",
-                  min=0.0, max=60.0),
         ParamSpec("tau_mag", 9.0, "s; time constant of the heading correction toward the magnetometer (9D only; "
                   "the default is VQF's tauMag).", min=0.01, max=1000.0, runtime=True),
         ParamSpec("mag_delay", 0.0, "s; latency of the magnetometer behind the gyro, compensated by rotating the "
@@ -97,63 +106,72 @@ class RiannEstimator(AttitudeEstimator):
 
     def __init__(self, model: BatchedModel | None = None, **params: Any) -> None:
         """``model``: an already loaded model to share (its ``copies`` must equal ``ensemble``); else loaded from
-        ``model_path``."""
+        ``model_path``. The stages are built at the first :meth:`reset` (the base class's constructor calls it)."""
         copies = int(params.get("ensemble", MAX_COPIES))
         if model is not None and model.copies != copies:
             raise ValueError(f"the model runs {model.copies} copies, ensemble is {copies}")
         self.model = model or BatchedModel(params.get("model_path") or None, copies=copies)
+        self.stages: list[Stage[Any, Any]] = []
         super().__init__(**params)
 
     # -- the chain --------------------------------------------------------------------------------
-    def reset(self) -> None:
+    def _build(self) -> None:
+        """The stages, each in its RESET state (its constructor restarts it so)."""
         p = self.params
-        grid = bool(p["rate_adaptation"])
-        self.timeline = Timeline(p["restart_gap"], p["input_model"], p["sample_delay"]) if grid else None
-        self.grid: Grid | DirectRows = Grid() if grid else DirectRows()
-        self.bias = Bias(p["gyro_bias_estimation"], p["bias_clip"], p["bias_sigma_init"], fixed_step=not grid)
-        self.network = Network(self.model, p["restart_warmup"])
+        self.timeline: Timeline | None = None
+        self.grid: Grid | DirectRows = DirectRows()
+        if p["rate_adaptation"]:
+            self.timeline, self.grid = Timeline(p["restart_gap"], p["input_model"], p["sample_delay"]), Grid()
+        front: list[Stage[Any, Any]] = [self.grid] if self.timeline is None else [self.timeline, self.grid]
+        self.bias = Bias(p["gyro_bias_estimation"], p["bias_clip"], p["bias_sigma_init"],
+                         fixed_step=self.timeline is None)
+        self.network = Network(self.model)
         self.carry = Carry()
         self.handover = Handover(p["hole_blend"])
-        self.heading = Heading(MagHeading(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"],
-                                          p["estimate_mag_delay"]))
+        self.heading = Heading(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"], p["estimate_mag_delay"])
         self.uncertainty = Uncertainty()
-        self.samples = 0  # input samples taken since reset
+        self.stages = [*front, self.bias, self.network, self.carry, self.handover, self.heading, self.uncertainty]
 
-    @property
-    def stages(self) -> list[Any]:
-        head = [self.timeline] if self.timeline is not None else []
-        return [*head, self.grid, self.bias, self.network, self.carry, self.handover, self.heading]
+    def reset(self) -> None:
+        """Every stage anew (what :data:`~.stage.RESTARTS` says for a reset); the stages are built on the first."""
+        if self.stages:
+            self._restart(Cause.RESET)
+        else:
+            self._build()
+        self.samples = 0  # input samples taken since reset
+        self.last = _NONE  # stage 8's record of the last call
 
     def on_gap(self) -> None:
         """A stamp gap longer than the gate's ``max_dt``: each stage does what :data:`~.stage.RESTARTS` says for a
         gap (the network starts afresh without a bridge; bias, rate statistics and heading carry on)."""
+        self._restart(Cause.GAP)
+
+    def _restart(self, cause: Cause) -> None:
         for stage in self.stages:
-            stage.restart(Cause.GAP)
-        self.uncertainty.restart(Cause.GAP)
+            stage.restart(cause)
 
     def _on_params_changed(self) -> None:
-        h, p = self.heading.mag, self.params
-        h.tau_mag, h.mag_delay, h.reject, h.estimate_delay = (p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"],
-                                                              p["estimate_mag_delay"])
-        self.handover.enabled = p["hole_blend"]
+        p = self.params
+        self.heading.configure(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"], p["estimate_mag_delay"])
+        self.handover.configure(p["hole_blend"])
 
     def heading_observed(self) -> bool:
         return self.heading.mag.observed
 
     def diagnostics(self) -> dict[str, str]:
-        out: dict[str, str] = {}
-        for stage in (self.bias, *(s for s in self.stages if s is not self.bias), self.uncertainty):
+        out = self.bias.diagnostics()  # first: the entry all the estimators with a front end give
+        for stage in self.stages:
             out.update(stage.diagnostics())
         return out
 
     def heading_state(self) -> Array:
         """Stage 8's heading state of the samples of the last call (its FREE, USED, HELD are the base class's codes)."""
-        return self.uncertainty.yaw_features[:, 0].copy()
+        return self.last.yaw_features[:, 0].copy()
 
     def sigma(self, fields: np.ndarray) -> Array:
         """Stage 8's σ of the samples of the last call (``fields`` is not needed: the heading stage knows which
         samples its field corrected)."""
-        s = self.uncertainty.sigma
+        s = self.last.sigma_rad
         if len(s) != len(fields):
             raise ValueError(f"sigma for {len(fields)} samples asked, the last call had {len(s)}")
         return s.copy()
@@ -161,34 +179,31 @@ class RiannEstimator(AttitudeEstimator):
     def _run(self, x: list[Row6], dt: list[float], mag: list[Vec | None] | None) -> Array:
         """A block of samples through the chain."""
         self.samples += len(x)
-        if self.timeline is not None:
-            tl = self.timeline.run(x, dt)
-            g = self.grid.run(x, tl)  # type: ignore[arg-type]
-            holes = tl.holes
-        else:
-            g = self.grid.run(x, dt)  # type: ignore[arg-type]
-            holes = []
-        rows, bias = self.bias.run(g.rows, g.steps)
-        net = self.network.run(rows, g.forks)
-        qc, delta = self.carry.run(net, g, bias)
-        dts = [d if math.isfinite(d) and d > 0.0 else 0.0 for d in dt]  # the heading's step (0 for a bad dt)
-        qc, tilt_sd, bridges = self.handover.run(qc, delta, dts, [(r[0], r[1], r[2]) for r in x], holes)
-        q = self.heading.run(qc, delta, dts, mag, bridges, tilt_sd)
-        hand_sd = [h + f for h, f in zip(tilt_sd, self.handover.fresh_sd, strict=True)]  # never both non-zero
-        self.uncertainty.run(g, self.network.spread, self.bias.sigma, x, bias, dts, hand_sd, self.heading.gain,
-                             self.heading.dip, bridges)
-        return q
+        s = Samples.of(x, dt, mag)
+        g = self._rows(s)
+        b = self.bias.run(g)
+        n = self.network.run(NetworkIn(g, b))
+        c = self.carry.run(CarryIn(g, b, n))
+        h = self.handover.run(HandoverIn(s, g, c))
+        q = self.heading.run(HeadingIn(s, c, h))
+        self.last = self.uncertainty.run(UncertaintyIn(s, g, b, n, h, q))
+        return q.q
+
+    def _rows(self, s: Samples) -> GridBlock:
+        """Stages 1 and 2: the network rows of the samples (with ``rate_adaptation`` off, one row per sample)."""
+        if isinstance(self.grid, DirectRows):
+            return self.grid.run(s)
+        assert self.timeline is not None
+        return self.grid.run(self.timeline.run(s))
 
     # -- public API -----------------------------------------------------------------------------
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
-        a0, a1, a2 = acc  # type: ignore[misc, str-unpack]
-        g0, g1, g2 = gyr  # type: ignore[misc, str-unpack]
-        x = (float(a0), float(a1), float(a2), float(g0), float(g1), float(g2))  # type: ignore[arg-type]
-        m = None
-        if mag is not None:
-            m0, m1, m2 = (float(v) for v in mag)  # type: ignore[union-attr, arg-type]
-            m = (m0, m1, m2) if math.isfinite(m0) and math.isfinite(m1) and math.isfinite(m2) else None
-        return self._run([x], [float(dt)], [m])[0]
+        a0, a1, a2 = _vec3(acc)
+        g0, g1, g2 = _vec3(gyr)
+        m = None if mag is None else _vec3(mag)
+        if m is not None and not (math.isfinite(m[0]) and math.isfinite(m[1]) and math.isfinite(m[2])):
+            m = None
+        return self._run([(a0, a1, a2, g0, g1, g2)], [float(dt)], [m])[0]
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
         acc = np.asarray(acc, dtype=float).reshape(-1, 3)
@@ -197,10 +212,22 @@ class RiannEstimator(AttitudeEstimator):
         if n == 0:
             return np.empty((0, 4))
         dts = np.broadcast_to(np.asarray(dt, dtype=float), (n,)).tolist()
-        xs = list(map(tuple, np.column_stack([acc, gyr]).tolist()))
-        fields = None
+        xs: list[Row6] = np.column_stack([acc, gyr]).tolist()
+        fields: list[Vec | None] | None = None
         if mag is not None:
             m = np.asarray(mag, dtype=float).reshape(n, 3)
             ok = np.isfinite(m).all(axis=1).tolist()
-            fields = [tuple(v) if good else None for v, good in zip(m.tolist(), ok, strict=True)]
+            fields = [(v[0], v[1], v[2]) if good else None for v, good in zip(m.tolist(), ok, strict=True)]
         return self._run(xs, dts, fields)
+
+
+_NONE = Uncertainties(np.zeros((0, 2)), np.zeros((0, 4)), np.zeros((0, 4)))  # before the first call
+
+
+def _vec3(v: ArrayLike) -> Vec:
+    """Three floats of a 3-vector given as a list or tuple (a message's fields) or as an array."""
+    if isinstance(v, (list, tuple)):
+        a, b, c = v
+    else:
+        a, b, c = np.asarray(v, dtype=float).reshape(3).tolist()
+    return float(a), float(b), float(c)

@@ -10,11 +10,10 @@ the :data:`~.stage.GridSpec` the grid (stage 2) reads it with. docs/riann.md, st
 
 from __future__ import annotations
 
-from riann_ros.defaults import FALLBACK_DT_S
-from riann_ros.estimators.riann.s1a_rate import DT_MIN, REL_EPS, StepTracker
+from riann_ros.estimators.riann.s1a_rate import REL_EPS, StepTracker
 from riann_ros.estimators.riann.s1b_clock import Clock
 from riann_ros.estimators.riann.s1c_sample_model import SampleModelTest
-from riann_ros.estimators.riann.stage import Cause, GridSpec, Hole, Row6, TimelineBlock, Vec
+from riann_ros.estimators.riann.stage import ZERO3, Cause, GridSpec, Hole, Samples, TimelineBlock, Vec, first_step
 
 HOLE_STEPS = 4.0  # a hole is also longer than this many median input steps
 SAMPLE_DELAY = 0.25  # input steps: an up-sampled regular stream's sample is read as the signal this long before
@@ -28,25 +27,21 @@ class Timeline:
 
     NAME = "timeline"
 
-    def __init__(self, restart_gap: float, input_model: str, sample_delay: float = SAMPLE_DELAY) -> None:
-        self.restart_gap = restart_gap
+    def __init__(self, restart_gap_s: float, input_model: str, sample_delay: float = SAMPLE_DELAY) -> None:
+        self.restart_gap_s = restart_gap_s
         self.forced = None if input_model == "auto" else input_model == "means"  # None: judged from the stream
         self.sample_delay = sample_delay if input_model == "auto" else 0.0
-        self._clear()
-
-    def _clear(self) -> None:
-        self.steps: StepTracker | None = None
-        self.clock = Clock()
-        self.model = SampleModelTest()
-        self._started = False
-        self._w_prev: Vec = (0.0, 0.0, 0.0)
+        self.restart(Cause.RESET)
 
     def restart(self, cause: Cause) -> None:
         if cause is Cause.RESET:
-            self._clear()
-        else:  # GAP
-            self._started = False
-            self.model.clear_window()  # the stamps start again from 0
+            self.steps: StepTracker | None = None
+            self.clock = Clock()
+            self.model = SampleModelTest()
+            self._w_prev: Vec = ZERO3
+        else:  # GAP: the stamps start again from 0
+            self.model.clear_window()
+        self._started = False
 
     # -- what the grid needs to know ---------------------------------------------------------------
     @property
@@ -102,18 +97,22 @@ class Timeline:
         d = self.input_step
         # up-sampled: the grid takes an integer number (>= 2) of rows per input step. A clocked stream fed straight in
         # has a grid step (the running median of its jittered stamps) hovering around its period, a hair above or
-        # below it: comparing the two directly switched the delay on and off from sample to sample.
+        # below it: compared directly, the two would switch the delay on and off from sample to sample.
         return self.sample_delay * d if d > UPSAMPLED * steps.step else 0.0
 
     def spec(self) -> GridSpec:
         assert self.steps is not None
-        return self.steps.step, self.box_width(), self.means, self.upsampled, self.delay()
+        return GridSpec(self.steps.step, self.box_width(), self.means, self.upsampled, self.delay())
 
     # -- the stage ---------------------------------------------------------------------------------
-    def run(self, x: list[Row6], dt: list[float]) -> TimelineBlock:
-        out = TimelineBlock()
+    def run(self, block: Samples) -> TimelineBlock:
+        t_ns: list[float] = []
+        spec: list[GridSpec] = []
+        starts: list[bool] = []
+        switches: list[bool] = []
+        holes: list[Hole] = []
         clock, model = self.clock, self.model
-        for k, (xk, d) in enumerate(zip(x, dt, strict=True)):
+        for k, (xk, d) in enumerate(zip(block.x, block.dt_s, strict=True)):
             w = (xk[3], xk[4], xk[5])
             hole = switched = False
             start = not self._started
@@ -123,10 +122,10 @@ class Timeline:
             else:
                 steps = self.steps
                 assert steps is not None
-                gap = self.restart_gap
+                gap = self.restart_gap_s
                 if gap > 0.0 and d > gap and d > HOLE_STEPS * steps.median:
                     hole = True
-                    out.holes.append(Hole(k, d, self._w_prev, w))
+                    holes.append(Hole(k, d, self._w_prev, w))
                 else:
                     clock.push(d)
                     switched = steps.push(d, clock.period(steps.median) if clock.clocked else None, clock.clocked)
@@ -135,17 +134,16 @@ class Timeline:
                 model.clear_window()
             model.push(t, w, self.forced is None and self.irregular and not clock.clocked)
             self._w_prev = w
-            out.t.append(t)
-            out.spec.append(self.spec())
-            out.start.append(start)
-            out.switched.append(switched)
-        return out
+            t_ns.append(t)
+            spec.append(self.spec())
+            starts.append(start)
+            switches.append(switched)
+        return TimelineBlock(block, t_ns, spec, starts, switches, holes)
 
     def _start(self, dt: float) -> None:
         """The first sample after a reset or a gap: the rate tracker starts at its step (or keeps its estimate)."""
-        d = dt if DT_MIN * 0.01 < dt < 10.0 else FALLBACK_DT_S
         if self.steps is None:
-            self.steps = StepTracker(d)
+            self.steps = StepTracker(first_step(dt))
         self.clock.start()
         self._started = True
 

@@ -80,8 +80,8 @@ class StepTracker:
         d = self.median if input_step is None else input_step
         if self.jittery and not clocked and DT_MIN * (1.0 - REL_EPS) <= self.step <= STEP_MAX:
             # irregular sample times never sit on any grid: every step inside the trained range serves, and
-            # a switch only changes the network's dt mid-stream (a median of 64 jittered steps wanders:
-            # 5-15 ms steps flipped a ratio-keeping grid between 5 and 3.7 ms 42 times in 150 s)
+            # a switch only changes the network's dt mid-stream (a median of 64 jittered steps wanders: 5-15 ms
+            # steps would flip a ratio-keeping grid between 5 and 3.7 ms 42 times in 150 s)
             self._pending = 0
             return False
         # the current ratio of grid step to input step, kept while it still fits: a rate drifting

@@ -83,7 +83,6 @@ class SampleModelTest:
             self.points = False
 
 
-
 def _misfit(t: Sequence[float], w: Sequence[Sample]) -> float:
     """Squared distance of the middle of five samples ``w`` (at times ``t``) from the cubic through the other
     four, at its time."""

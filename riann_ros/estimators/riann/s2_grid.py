@@ -8,7 +8,7 @@ point becomes a row as soon as the samples cover its window, from the samples up
 resampling is causal. A grid value is the signal at the grid point, or its mean over the box width: up-sampled
 (point samples or interval means), the cell *centred* on the grid point (the network reads a row as the signal at
 its time, as it reads a sample fed straight in; a cell ending there, or the interval mean holding the grid point,
-made the rows half a cell late on average); for blocks the width before it.
+would make the rows half a cell late on average); for blocks the width before it.
 Each sample also gets the raw gyro means the carry stage (5) turns into rotations. After a hole the grid goes on
 across it (the rows in the hole are interpolated: the *bridge*) and marks where a fresh network starts.
 
@@ -22,13 +22,31 @@ from collections import deque
 from collections.abc import Sequence
 
 from riann_ros.estimators.riann.s1a_rate import REL_EPS
-from riann_ros.estimators.riann.stage import Cause, GridBlock, Row6, TimelineBlock
+from riann_ros.estimators.riann.stage import ZERO3, Cause, GridBlock, GridSpec, Row6, Samples, TimelineBlock, Vec
 
 TIME_EPS_NS = 1000.0  # a grid point this close after the newest stamp counts as reached (1 µs)
 CURVE_MIN_RATIO = 0.5  # the curved signal model needs neighbouring sample steps less than 2x apart
-ZERO3 = (0.0, 0.0, 0.0)
 
 Sample = Sequence[float]
+
+
+class _Rows:
+    """The lists of one block's :class:`~.stage.GridBlock`, filled sample by sample."""
+
+    def __init__(self) -> None:
+        self.rows: list[Row6] = []
+        self.row_step_s: list[float] = []
+        self.forks: list[int] = []
+        self.r0: list[int] = []
+        self.r1: list[int] = []
+        self.gyr_delta: list[Vec] = []
+        self.delta_s: list[float] = []
+        self.gyr_carry: list[Vec] = []
+        self.carry_s: list[float] = []
+
+    def block(self, tl: TimelineBlock) -> GridBlock:
+        return GridBlock(self.rows, self.row_step_s, self.forks, self.r0, self.r1, self.gyr_delta, self.delta_s,
+                         self.gyr_carry, self.carry_s, tl.holes)
 
 
 class Grid:
@@ -37,9 +55,10 @@ class Grid:
     NAME = "grid"
 
     def __init__(self) -> None:
-        self._clear()
+        self.restart(Cause.RESET)
 
-    def _clear(self) -> None:
+    def restart(self, cause: Cause) -> None:
+        """GAP and RESET alike: the next sample starts a new grid (holes are bridged in run)."""
         self.hist = SignalHistory()
         self._anchor = 0.0  # ns; grid point m is at anchor + m * T
         self._m = 0
@@ -48,54 +67,53 @@ class Grid:
         self._s = 0.0  # ns of its signal time (the stamp less the sample delay)
         self._w: Sample = ZERO3  # its raw gyro
 
-    def restart(self, cause: Cause) -> None:
-        self._clear()  # GAP and RESET alike: the next sample starts a new grid (holes are bridged in run)
-
-    def run(self, x: list[Row6], tl: TimelineBlock) -> GridBlock:
-        out = GridBlock()
-        hist = self.hist
-        holes = {h.index for h in tl.holes}
-        rows = out.rows
-        for k, xk in enumerate(x):
-            T, width, means, up, delay = tl.spec[k]
-            t = tl.t[k]
-            if tl.start[k]:
-                s = t - delay * 1e9
-                self._anchor = s - T * 1e9  # the first grid point on the first sample's signal time
-                self._m = 0
-                self._t_net = self._anchor
-                t_prev = s_prev = t
-                w_prev: Sample = (xk[3], xk[4], xk[5])
-            else:
-                t_prev, s_prev, w_prev = self._t, self._s, self._w
-                s = max(t - delay * 1e9, s_prev)  # the signal time never runs backwards (a larger delay)
-                if tl.switched[k]:
-                    self._anchor = self._t_net
-                    self._m = 0
-            self._t, self._s, self._w = t, s, (xk[3], xk[4], xk[5])
-            hist.append(s, xk)
-            if t > t_prev:
-                out.g_delta.append(self._delta(t - t_prev, s_prev, s, t_prev - s_prev, t - s, w_prev, means))
-                out.s_delta.append((t - t_prev) * 1e-9)
-            else:
-                out.g_delta.append(ZERO3)
-                out.s_delta.append(0.0)
-            out.r0.append(len(rows))
-            self._emit(out, s, T, width, means, up, tl.start[k])
-            out.r1.append(len(rows))
+    def run(self, block: TimelineBlock) -> GridBlock:
+        out = _Rows()
+        holes = {h.sample for h in block.holes}
+        for k, xk in enumerate(block.samples.x):
+            self._sample(out, xk, block.t_ns[k], block.spec[k], block.start[k], block.switched[k])
             if k in holes:
-                out.forks.append((len(rows), T))
-            if t > self._t_net + TIME_EPS_NS:  # the newest row carried to the stamp (beyond s the newest gyro held)
-                out.g_carry.append(tuple(hist.mean(self._t_net, t, means, 3, 6)))  # type: ignore[arg-type]
-                out.s_carry.append((t - self._t_net) * 1e-9)
-            else:
-                out.g_carry.append(ZERO3)
-                out.s_carry.append(0.0)
-            hist.trim(self._t_net - max(width * 1e9, T * 1e9) - 1.0)
-        return out
+                out.forks.append(len(out.rows))
+        return out.block(block)
+
+    def _sample(self, out: _Rows, xk: Row6, t: float, spec: GridSpec, start: bool, switched: bool) -> None:
+        """One sample at time ``t`` (ns): its rows, its gyro step from the previous sample and its carry."""
+        hist = self.hist
+        T, width, means = spec.step_s, spec.box_s, spec.means
+        if start:
+            s = t - spec.delay_s * 1e9
+            self._anchor = s - T * 1e9  # the first grid point on the first sample's signal time
+            self._m = 0
+            self._t_net = self._anchor
+            t_prev = s_prev = t
+            w_prev: Sample = (xk[3], xk[4], xk[5])
+        else:
+            t_prev, s_prev, w_prev = self._t, self._s, self._w
+            s = max(t - spec.delay_s * 1e9, s_prev)  # the signal time never runs backwards (a larger delay)
+            if switched:
+                self._anchor = self._t_net
+                self._m = 0
+        self._t, self._s, self._w = t, s, (xk[3], xk[4], xk[5])
+        hist.append(s, xk)
+        if t > t_prev:
+            out.gyr_delta.append(self._delta(t - t_prev, s_prev, s, t_prev - s_prev, t - s, w_prev, means))
+            out.delta_s.append((t - t_prev) * 1e-9)
+        else:
+            out.gyr_delta.append(ZERO3)
+            out.delta_s.append(0.0)
+        out.r0.append(len(out.rows))
+        self._emit(out, s, T, width, means, spec.upsampled, start)
+        out.r1.append(len(out.rows))
+        if t > self._t_net + TIME_EPS_NS:  # the newest row carried to the stamp (beyond s the newest gyro held)
+            out.gyr_carry.append(_vec(hist.mean(self._t_net, t, means, 3, 6)))
+            out.carry_s.append((t - self._t_net) * 1e-9)
+        else:
+            out.gyr_carry.append(ZERO3)
+            out.carry_s.append(0.0)
+        hist.trim(self._t_net - max(width * 1e9, T * 1e9) - 1.0)
 
     def _delta(self, span: float, s_prev: float, s: float, d_prev: float, d: float, w_prev: Sample,
-               means: bool) -> tuple[float, float, float]:
+               means: bool) -> Vec:
         """Mean gyro from the previous sample's stamp to this one's (``span`` ns): the outputs there are the signal
         at ``s_prev`` and ``s`` carried on by the gyro held over the delays ``d_prev`` and ``d``, so the step is
         the signal from ``s_prev`` to ``s`` less the previous carry plus this one (the steps add up exactly)."""
@@ -104,9 +122,10 @@ class Grid:
             return g[0], g[1], g[2]
         w = self._w
         a = (s - s_prev) / span
-        return tuple(a * g[j] + (w[j] * d - w_prev[j] * d_prev) / span for j in range(3))  # type: ignore[return-value]
+        return (a * g[0] + (w[0] * d - w_prev[0] * d_prev) / span, a * g[1] + (w[1] * d - w_prev[1] * d_prev) / span,
+                a * g[2] + (w[2] * d - w_prev[2] * d_prev) / span)
 
-    def _emit(self, out: GridBlock, t: float, T: float, width: float, means: bool, up: bool,
+    def _emit(self, out: _Rows, t: float, T: float, width: float, means: bool, up: bool,
               first: bool = False) -> None:
         """Append every grid row whose window ends by the newest signal time ``t`` (on a stream's ``first`` sample
         its first row, the signal held before and after that sample)."""
@@ -123,8 +142,8 @@ class Grid:
                 v = hist.mean(tau + half - w_ns, tau + half, means, curved=curved)
             else:
                 v = hist.value(tau, means)
-            out.rows.append(v)  # type: ignore[arg-type]
-            out.steps.append(T)
+            out.rows.append(v)
+            out.row_step_s.append(T)
             self._m += 1
             self._t_net = tau
 
@@ -132,20 +151,26 @@ class Grid:
         return {}
 
 
+def _vec(v: list[float]) -> Vec:
+    return v[0], v[1], v[2]
+
+
 class DirectRows:
-    """``rate_adaptation`` off: every sample is one network row with its own dt (no grid, no holes)."""
+    """``rate_adaptation`` off: every sample is one network row with its own dt (no grid, no holes). It stands in
+    for stages 1 and 2 and takes the samples themselves."""
 
     NAME = "grid"
 
     def restart(self, cause: Cause) -> None:
         pass
 
-    def run(self, x: list[Row6], dt: list[float]) -> GridBlock:
+    def run(self, block: Samples) -> GridBlock:
+        x, dt = block.x, block.dt_s
         n = len(x)
         idx = list(range(n))
-        return GridBlock(rows=x, steps=dt, forks=[], r0=idx, r1=[i + 1 for i in idx],
-                         g_delta=[(r[3], r[4], r[5]) for r in x], s_delta=dt,
-                         g_carry=[ZERO3] * n, s_carry=[0.0] * n)
+        return GridBlock(rows=x, row_step_s=dt, forks=[], r0=idx, r1=[i + 1 for i in idx],
+                         gyr_delta_rad_s=[(r[3], r[4], r[5]) for r in x], delta_s=dt,
+                         gyr_carry_rad_s=[ZERO3] * n, carry_s=[0.0] * n, holes=[])
 
     def diagnostics(self) -> dict[str, str]:
         return {}

@@ -6,8 +6,9 @@ RIANN was trained on gyros without a large bias; a MEMS gyro starts with several
 network gets, at the grid step (rebuilt, keeping its estimate, when the grid step switches), and each row's gyro
 loses the bias known before it: causal, and the network's output never feeds back. The carry stage (5) uses the
 same estimate. With ``rate_adaptation`` off the rows are the samples, at the first sample's step, each scaled by
-its own dt. VQF also gives the standard deviation of its estimate (the worst direction); it is kept per row
-(:attr:`Bias.sigma`) for stage 8's uncertainty and never changes the attitude. docs/riann.md, stage 3.
+its own dt. VQF also gives the standard deviation of its estimate (the worst direction); it goes out per row with
+the estimate (:class:`~.stage.BiasBlock`) for stage 8's uncertainty and never changes the attitude. docs/riann.md,
+stage 3.
 """
 
 from __future__ import annotations
@@ -17,16 +18,12 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from riann_ros.defaults import FALLBACK_DT_S
 from riann_ros.estimators.base import Array
 from riann_ros.estimators.bias import GyroBiasFrontEnd
 from riann_ros.estimators.common import BIAS_KEY, bias_text
-from riann_ros.estimators.riann.s1a_rate import DT_MIN
-from riann_ros.estimators.riann.stage import Cause, Row6, Vec
+from riann_ros.estimators.riann.stage import ZERO3, BiasBlock, Cause, GridBlock, Row6, Row7, Vec, first_step
 
-Row7 = tuple[float, float, float, float, float, float, float]
 BATCH_ROWS = 8  # from this many rows on, VQF takes them in one call (the same numbers as one at a time)
-ZERO3: Vec = (0.0, 0.0, 0.0)
 
 
 class FrontEnd(GyroBiasFrontEnd):
@@ -62,12 +59,12 @@ class Bias:
 
     def __init__(self, on: bool, clip: float, sigma_init: float, fixed_step: bool = False) -> None:
         self.on, self.clip, self.sigma_init, self.fixed_step = on, clip, sigma_init, fixed_step
-        self.fe: FrontEnd | None = None
-        self.sigma: list[float] = []  # per row of the last run: the σ of the bias before it (rad/s), and after the last
+        self.restart(Cause.RESET)
 
     def restart(self, cause: Cause) -> None:
+        """RESET: the front end anew at the next row; GAP: kept (the same sensor)."""
         if cause is Cause.RESET:
-            self.fe = None
+            self.fe: FrontEnd | None = None
 
     @property
     def bias(self) -> Vec:
@@ -81,10 +78,11 @@ class Bias:
             return 0.0
         return self.fe.sigma if self.fe is not None else math.radians(self.sigma_init)
 
-    def run(self, rows: list[Row6], steps: list[float]) -> tuple[list[Row7], list[Vec]]:
-        """The rows with the bias removed (acc, gyr, dt), and the bias before each row and after the last (M + 1)."""
+    def run(self, block: GridBlock) -> BiasBlock:
+        """The rows with the bias removed (acc, gyr, dt), and the bias and its σ before each row and after the last."""
+        rows, steps = block.rows, block.row_step_s
         before: list[Vec] = []
-        self.sigma = []
+        sigma: list[float] = []
         if self.on and rows:
             i = 0
             while i < len(rows):  # runs of rows at one step
@@ -94,23 +92,23 @@ class Bias:
                         j += 1
                 else:
                     j = len(rows)
-                before += self._run(rows[i:j], steps[i:j])
+                before += self._run(rows[i:j], steps[i:j], sigma)
                 i = j
         else:
             before = [self.bias] * len(rows)
-            self.sigma = [self.sigma_now] * len(rows)
-        out = [(r[0], r[1], r[2], r[3] - b[0], r[4] - b[1], r[5] - b[2], s)
-               for r, b, s in zip(rows, before, steps, strict=True)]
+            sigma = [self.sigma_now] * len(rows)
+        out: list[Row7] = [(r[0], r[1], r[2], r[3] - b[0], r[4] - b[1], r[5] - b[2], s)
+                           for r, b, s in zip(rows, before, steps, strict=True)]
         before.append(self.bias)
-        self.sigma.append(self.sigma_now)
-        return out, before
+        sigma.append(self.sigma_now)
+        return BiasBlock(out, before, sigma)
 
-    def _run(self, rows: list[Row6], steps: list[float]) -> list[Vec]:
-        """Rows at one step (or at any, ``fixed_step``) through the front end; the bias before each."""
+    def _run(self, rows: list[Row6], steps: list[float], sigma: list[float]) -> list[Vec]:
+        """Rows at one step (or at any, ``fixed_step``) through the front end; the bias before each (its σ appended
+        to ``sigma``)."""
         step = steps[0]
         if self.fe is None:
-            ts = step if DT_MIN * 0.01 < step < 10.0 else FALLBACK_DT_S
-            self.fe = FrontEnd(ts, self.clip, self.sigma_init)
+            self.fe = FrontEnd(first_step(step), self.clip, self.sigma_init)
         elif not self.fixed_step and step != self.fe.ts:
             self.fe.set_ts(step)  # the grid step switched: VQF rebuilt for it, the estimate kept
         fe = self.fe
@@ -118,13 +116,13 @@ class Bias:
             out = []
             for r, s in zip(rows, steps, strict=True):
                 out.append(fe.bias)
-                self.sigma.append(fe.sigma)
+                sigma.append(fe.sigma)
                 fe.update(r[0:3], r[3:6], s)
             return out
         x = np.asarray(rows, dtype=float)
         b = fe.update_batch(x[:, 0:3], x[:, 3:6], np.asarray(steps, dtype=float))
-        self.sigma += fe.sigma_rows
-        return [tuple(v) for v in b.tolist()]
+        sigma += fe.sigma_rows
+        return [(v[0], v[1], v[2]) for v in b.tolist()]
 
     def diagnostics(self) -> dict[str, str]:
         return {BIAS_KEY: bias_text(self.fe.bias)} if self.fe is not None else {}

@@ -3,9 +3,11 @@
 RIANN was trained with virtual IMU rotations, so a copy fed the IMU in another frame gives an estimate whose
 error is partly independent. Copy 0 is the sensor frame; the others see it turned by 180° about three orthogonal
 axes in general position (:func:`frames`). Copy ``m`` sees ``R_m acc``, ``R_m gyr``; its gravity direction maps
-back by ``R_mᵀ``; the ensemble attitude is copy 0's tilted to the normalised mean direction (:func:`combine`). How
-far the copies' directions spread around their mean (:func:`combine_spread`) is one input of the uncertainty the
-estimator reports (stage 8); it never changes the attitude. Physics and measurements: docs/riann.md, stage 4.
+back by ``R_mᵀ``; the ensemble attitude is copy 0's tilted to the normalised mean direction, and how far the copies'
+directions spread around their mean is one input of the uncertainty the estimator reports (stage 8; it never
+changes the attitude). :func:`combine` is the reference, vectorised over rows; :func:`combine_floats` does the same
+for the few rows of a node's call in plain floats (numpy's per-call overhead is most of the cost there), and is
+tested against it on random inputs. Physics and measurements: docs/riann.md, stage 4.
 """
 
 from __future__ import annotations
@@ -22,7 +24,6 @@ from riann_ros.rotations import gravity, tilt_to
 Array = NDArray[np.float64]
 
 MAX_COPIES = 4
-FLOAT_ROWS = 4  # up to this many rows are combined in plain floats
 
 
 def _axes() -> Array:
@@ -69,30 +70,18 @@ def gravity_rows(q: Array) -> Array:
     return np.column_stack([2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)])
 
 
-def combine(outs: list[Array], rots: list[Array]) -> Array:
-    """The ensemble attitude (M, 4) from the copies' outputs ``outs[m]`` in their frames ``rots[m]``: copy 0's
-    attitude tilted to the mean gravity direction. The outputs must be unit quaternions, except for up to
-    :data:`FLOAT_ROWS` rows (the node's path, in plain floats), which are normalised here."""
-    if len(outs) == 1:
-        return outs[0]
-    return combine_spread(outs, rots)[0]
-
-
-def combine_spread(outs: list[Array], rots: list[Array]) -> tuple[Array, Array]:
-    """:func:`combine`, and per row how far the copies' gravity directions spread around their mean (rad):
-    ``√(2 (1 − R))`` with ``R`` the length of the mean of the ``n`` unit directions, for small angles the root mean
-    square of their angles from the mean direction (0 for one copy)."""
-    q0 = outs[0]
-    n = len(outs)
+def combine(units: list[Array], rots: list[Array]) -> tuple[Array, Array]:
+    """The ensemble attitude (M, 4) from the copies' unit-quaternion outputs ``units[m]`` (M, 4) in their frames
+    ``rots[m]``: copy 0's attitude tilted to the mean gravity direction; and per row how far the copies' gravity
+    directions spread around their mean (rad): ``√(2 (1 − R))`` with ``R`` the length of the mean of the ``n`` unit
+    directions, for small angles the root mean square of their angles from the mean direction (0 for one copy)."""
+    q0 = units[0]
+    n = len(units)
     if n == 1:
         return q0, np.zeros(len(q0))
-    if len(q0) <= FLOAT_ROWS:  # the node's path (a row or two per message): plain floats, no numpy overhead
-        rl = [r.tolist() for r in rots]
-        rows = [_combine_row([o[i].tolist() for o in outs], rl) for i in range(len(q0))]
-        return np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
     u = gravity_rows(q0)
     v = u.copy()
-    for q, r in zip(outs[1:], rots[1:], strict=True):
+    for q, r in zip(units[1:], rots[1:], strict=True):
         v += gravity_rows(q) @ r  # row form of Rᵀ g'
     length = np.linalg.norm(v, axis=1, keepdims=True)
     v /= length
@@ -105,8 +94,15 @@ def combine_spread(outs: list[Array], rots: list[Array]) -> tuple[Array, Array]:
     return quat.normalize(quat.multiply(q0, r_inv)), spread
 
 
+def combine_floats(outs: list[Array], rots: list[Array]) -> tuple[Array, Array]:
+    """:func:`combine` of a few rows of two or more copies in plain floats, the copies' outputs normalised first."""
+    rl = [r.tolist() for r in rots]
+    rows = [_combine_row([o[i].tolist() for o in outs], rl) for i in range(len(outs[0]))]
+    return np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
+
+
 def _combine_row(qs: list[list[float]], rots: list[list[list[float]]]) -> tuple[list[float], float]:
-    """:func:`combine_spread` of one row in plain floats (the copies' outputs normalised first)."""
+    """:func:`combine` of one row in plain floats (the copies' outputs normalised first)."""
     units: list[tuple[float, float, float, float]] = []
     for q in qs:
         n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])

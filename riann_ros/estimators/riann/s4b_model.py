@@ -8,16 +8,13 @@ normalise) all take a batch, only the declared shapes do not. :class:`BatchedMod
 model twice:
 
 * the file as published (the reference, and the path whenever the batched one cannot be used);
-* the same bytes with the batch axis of the four declared shapes (``input``/``output`` axis 0,
-  ``h0``/``hn`` axis 2) turned from 1 into the symbol ``batch``. The edit rewrites those four
-  ``ValueInfoProto`` messages in the protobuf wire format (:func:`batch_model`): every other byte, the
-  weights included, is copied unchanged, so no ``onnx`` package and no derived file are needed, and any
-  RIANN-compatible ``model_path`` gets the same treatment.
+* the same bytes with the batch axis of the four declared shapes turned from 1 into a symbol
+  (:func:`~.s4c_batch_axis.batch_model`: an edit of the protobuf bytes that keeps every other byte).
 
 At load, a probe sequence run through both (every copy a different input and state) must agree within
 :data:`PROBE_TOL`, else the batched model is not used (``BatchedModel.reason`` says why) and every call runs
-the copies one by one, as before. With the published model and ONNX Runtime 1.31 the two agree
-exactly (bit for bit: ``test/test_network.py``, ``bench/bench_network.py``).
+the copies one by one. With the published model and ONNX Runtime 1.31 the two agree exactly (bit for bit:
+``test/test_riann_s4b_model.py``, ``bench/bench_network.py``).
 
 A long call runs in equal chunks of at most :data:`CHUNK` rows (the state carried across), which bounds
 the memory ONNX Runtime's GRU takes for its input projections (rows × copies × 600 floats per layer).
@@ -31,22 +28,21 @@ from __future__ import annotations
 
 import importlib.resources
 import itertools
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import onnxruntime as ort
 from numpy.typing import NDArray
 
+from riann_ros.constants import GRAVITY
+from riann_ros.estimators.riann.s4c_batch_axis import BATCH_AXES, batch_model
+from riann_ros.estimators.riann.stage import SMALL_BLOCK
+
 F32 = NDArray[np.float32]
 
 CHUNK = 4096  # at most this many rows per ONNX Runtime call (equal chunks, the state carried between them)
-BOUND_ROWS = 4  # calls of up to this many rows run on preallocated, bound buffers (the node's path)
 PROBE_TOL = 1e-6  # the batched model must agree with the published one this closely on the probe
 PROBE_ROWS = 16
-BATCH = "batch"  # name of the symbolic batch dimension in the edited model
-# axis of the batch in each declared shape of the published model
-BATCH_AXES = {"input": 0, "h0": 2, "output": 0, "hn": 2}
 
 
 def default_model_path() -> Path:
@@ -85,102 +81,6 @@ def open_model(model_path: str | Path | None = None, threads: int = 1) -> tuple[
     return path, session
 
 
-# -- protobuf wire format (https://protobuf.dev/programming-guides/encoding/), just enough to edit shapes -------
-def _varint(buf: bytes, i: int) -> tuple[int, int]:
-    value = shift = 0
-    while True:
-        c = buf[i]
-        i += 1
-        value |= (c & 0x7F) << shift
-        if c < 0x80:
-            return value, i
-        shift += 7
-
-
-def _put_varint(value: int) -> bytes:
-    out = bytearray()
-    while value >= 0x80:
-        out.append(value & 0x7F | 0x80)
-        value >>= 7
-    out.append(value)
-    return bytes(out)
-
-
-def _fields(msg: bytes) -> list[tuple[int, int, bytes]]:
-    """The fields of a message in order: (field number, wire type, payload bytes)."""
-    out = []
-    i = 0
-    while i < len(msg):
-        key, i = _varint(msg, i)
-        wire = key & 7
-        if wire == 0:
-            j = _varint(msg, i)[1]
-        elif wire == 2:
-            n, i = _varint(msg, i)
-            j = i + n
-        elif wire in (1, 5):
-            j = i + (8 if wire == 1 else 4)
-        else:
-            raise ValueError(f"unsupported protobuf wire type {wire}")
-        if j > len(msg):
-            raise ValueError("truncated protobuf message")
-        out.append((key >> 3, wire, msg[i:j]))
-        i = j
-    return out
-
-
-def _field(number: int, wire: int, payload: bytes) -> bytes:
-    length = _put_varint(len(payload)) if wire == 2 else b""
-    return _put_varint(number << 3 | wire) + length + payload
-
-
-def _map(msg: bytes, number: int, fn: Callable[[bytes], bytes], which: int | None = None) -> bytes:
-    """``msg`` with ``fn`` applied to the payload of the length-delimited field ``number`` (every occurrence, or
-    only the ``which``-th)."""
-    out = bytearray()
-    k = 0
-    for n, wire, payload in _fields(msg):
-        if n == number and wire == 2:
-            if which is None or k == which:
-                payload = fn(payload)
-            k += 1
-        out += _field(n, wire, payload)
-    return bytes(out)
-
-
-def _name(value_info: bytes) -> str:
-    return next((p.decode() for n, w, p in _fields(value_info) if n == 1 and w == 2), "")
-
-
-# field numbers of onnx.proto (stable across ONNX versions)
-MODEL_GRAPH, GRAPH_INPUT, GRAPH_OUTPUT = 7, 11, 12
-VALUE_TYPE, TYPE_TENSOR, TENSOR_SHAPE, SHAPE_DIM, DIM_PARAM = 2, 1, 2, 1, 2
-
-
-def _batch_dim(value_info: bytes) -> bytes:
-    """A ``ValueInfoProto`` with its batch axis made the symbol ``batch`` (names not in BATCH_AXES: unchanged)."""
-    axis = BATCH_AXES.get(_name(value_info))
-    if axis is None:
-        return value_info
-    dim = _field(DIM_PARAM, 2, BATCH.encode())
-
-    def shape(s: bytes) -> bytes:
-        return _map(s, SHAPE_DIM, lambda _: dim, which=axis)
-
-    return _map(value_info, VALUE_TYPE, lambda t: _map(t, TYPE_TENSOR, lambda tt: _map(tt, TENSOR_SHAPE, shape)))
-
-
-def batch_model(model: bytes) -> bytes:
-    """The serialised ONNX model ``model`` with a symbolic batch axis in the declared shapes of ``input``, ``h0``,
-    ``output`` and ``hn`` (:data:`BATCH_AXES`); every other byte (the graph, the weights) is kept as it is."""
-
-    def graph(g: bytes) -> bytes:
-        return _map(_map(g, GRAPH_INPUT, _batch_dim), GRAPH_OUTPUT, _batch_dim)
-
-    return _map(model, MODEL_GRAPH, graph)
-
-
-# -- the network ------------------------------------------------------------------------------------
 def _state_shape(session: ort.InferenceSession) -> tuple[int, ...]:
     """The state of one copy: the declared shape of h0, a symbolic axis (a batch) taken as 1."""
     shape = next(i.shape for i in session.get_inputs() if i.name == "h0")
@@ -205,7 +105,7 @@ def probe(copies: int, rows: int, seed: int = 0) -> F32:
     """Deterministic input rows (copies, rows, 7) like an IMU's: gravity plus noise, gyro, a 5 ms step."""
     rng = np.random.default_rng(seed)
     x = rng.normal(0.0, 1.0, (copies, rows, 7))
-    x[..., 2] += 9.81
+    x[..., 2] += GRAVITY
     x[..., 6] = 0.005
     return x.astype(np.float32)
 
@@ -296,7 +196,7 @@ class BatchedModel:
         rows = x.shape[1]
         if self._one is None or rows == 0:
             return self.run_per_copy(x, h)
-        if rows <= BOUND_ROWS:
+        if rows <= SMALL_BLOCK:  # the node's path: preallocated, bound buffers
             return self._run_bound(x, h)
         out = np.empty((self.copies, rows, 4), np.float32)
         cuts = np.linspace(0, rows, -(-rows // CHUNK) + 1).round().astype(int).tolist()  # equal chunks ≤ CHUNK

@@ -15,12 +15,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from riann_ros.estimators.riann.stage import Cause, Hole, Quat, Vec
+from riann_ros.constants import GRAVITY, RAD
+from riann_ros.estimators.riann.stage import Cause, HandoverBlock, HandoverIn, Quat, Vec
 from riann_ros.rotations import gravity, rotate, tilt_to, toward, unit
 
-RAD = 180.0 / math.pi  # degrees in one radian
-
-G = 9.81  # m/s²
 TAU = 0.5  # s: a fresh network's error decays with about this time constant after a restart in motion
 S_REST = 2.0  # deg: the fresh network's starting error at rest
 S_RATE = 10.0  # deg per rad/s of the fastest rotation rate seen since the hole
@@ -53,7 +51,7 @@ class FreshNetwork:
             self._see(acc)
 
     def _see(self, acc: Vec) -> None:
-        self.lin = max(self.lin, abs(math.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) - G))
+        self.lin = max(self.lin, abs(math.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]) - GRAVITY))
 
     def advance(self, delta: Quat, dt: float, acc: Vec) -> None:
         """The next sample: bias-corrected gyro increment ``delta`` over ``dt`` s, accelerometer ``acc``. The first
@@ -70,7 +68,7 @@ class FreshNetwork:
 
     def sigma(self) -> float:
         """σ_f (deg) now."""
-        s0 = S_REST + S_RATE * self.w_max + S_LIN * RAD * math.atan2(self.lin, G)
+        s0 = S_REST + S_RATE * self.w_max + S_LIN * RAD * math.atan2(self.lin, GRAVITY)
         return s0 * math.exp(-self.t / TAU)
 
 
@@ -107,34 +105,38 @@ class HoleBlend:
 
 
 class Handover:
-    """Stage 6: a :class:`HoleBlend` from each hole on, while it lasts (``enabled``: the ``hole_blend`` parameter).
+    """Stage 6: a :class:`HoleBlend` from each hole on, while it lasts (``blend``: the ``hole_blend`` parameter).
     Every hole's bridge uncertainty is passed on for the heading stage, blend or not."""
 
     NAME = "handover"
 
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
+    def __init__(self, blend: bool) -> None:
+        self.configure(blend)
+        self.restart(Cause.RESET)
+
+    def configure(self, blend: bool) -> None:
+        """``hole_blend``: hand over after a hole (else the fresh network's output at once)."""
+        self.enabled = blend
+
+    def restart(self, cause: Cause) -> None:
+        """GAP: the blend ends, a gap's fresh network starts; RESET: both end."""
         self.blend: HoleBlend | None = None
         # after a gap the output is the fresh network itself: its σ_f until it is negligible, for stage 8 only (the
         # attitude and the heading's weighting are not touched); after a reset the bias front end starts anew and its
         # σ already covers the fresh network's
-        self.fresh: FreshNetwork | None = None
-        self.fresh_sd: list[float] = []  # of the last block: σ_f (deg) while a gap's fresh network is young, else 0
+        self.fresh: FreshNetwork | None = FreshNetwork() if cause is Cause.GAP else None
 
-    def restart(self, cause: Cause) -> None:
-        self.blend = None
-        self.fresh = FreshNetwork() if cause is Cause.GAP else None
-
-    def run(self, qc: list[Quat], delta: list[Quat], dt: list[float], acc: list[Vec], holes: list[Hole]
-            ) -> tuple[list[Quat], list[float], dict[int, float]]:
-        """The attitudes after the hand-over (in place), each sample's inclination uncertainty (deg; 0 where no
-        hand-over runs), and per sample that ends a hole the uncertainty of its bridge (deg); :attr:`fresh_sd` the
-        fresh network's σ after a gap."""
+    def run(self, block: HandoverIn) -> HandoverBlock:
+        """The attitudes after the hand-over, each sample's inclination σ while a hand-over runs (deg; 0 where none
+        runs), the fresh network's σ after a gap, and per sample that ends a hole the σ of its bridge (deg)."""
+        s, holes = block.samples, block.grid.holes
+        qc, delta, dt = list(block.carry.q), block.carry.delta, s.step_s
+        acc = [(r[0], r[1], r[2]) for r in s.x]
         starts = {}
         for h in holes:
-            w_max = max(math.hypot(*h.w_before), math.hypot(*h.w_after))
-            starts[h.index] = (bridge_sigma(h.w_before, h.w_after, h.seconds), w_max)
-        self.fresh_sd = self._fresh_sd(delta, dt, acc, min(starts, default=len(qc)))
+            w_max = max(math.hypot(*h.w_before_rad_s), math.hypot(*h.w_after_rad_s))
+            starts[h.sample] = (bridge_sigma(h.w_before_rad_s, h.w_after_rad_s, h.length_s), w_max)
+        fresh_sd = self._fresh_sd(delta, dt, acc, min(starts, default=len(qc)))
         sd = [0.0] * len(qc)
         i = 0 if self.blend is not None else min(starts, default=len(qc))
         while i < len(qc):
@@ -152,7 +154,7 @@ class Handover:
             if self.blend is not None:
                 sd[i] = self.blend.sigma()
             i += 1
-        return qc, sd, {k: v[0] for k, v in starts.items()}
+        return HandoverBlock(qc, sd, fresh_sd, {k: v[0] for k, v in starts.items()})
 
     def _fresh_sd(self, delta: list[Quat], dt: list[float], acc: list[Vec], end: int) -> list[float]:
         """Each sample's σ_f (deg) while a fresh network started by a gap is young (0 elsewhere), up to ``end``

@@ -9,8 +9,9 @@ of ``q_prev ⊗ δ ⊗ q_c⁻¹``). From the first sample with a field on, the m
 adds a correction about the vertical, so the inclination is the same with and without a field. docs/riann.md,
 stage 7, and docs/magnetometer.md.
 
-Blocks of up to :data:`~.s5_carry.SCALAR_MAX` samples run in plain floats, longer ones vectorised up to the first
-field; the two give the same numbers (test_riann_stages).
+Blocks of up to :data:`~.stage.SMALL_BLOCK` samples run sample by sample in plain floats (:meth:`Heading._one`),
+longer ones vectorised up to the first field (:meth:`Heading._vector`, the reference); a test holds the two equal
+on random blocks.
 """
 
 from __future__ import annotations
@@ -21,12 +22,9 @@ import numpy as np
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
-from riann_ros.estimators.riann.s5_carry import SCALAR_MAX
 from riann_ros.estimators.riann.s7a_mag import MagHeading
-from riann_ros.estimators.riann.stage import Cause, Quat, Vec
+from riann_ros.estimators.riann.stage import SMALL_BLOCK, Cause, HeadingBlock, HeadingIn, Quat, Vec
 from riann_ros.rotations import about_z, conj, qmul, twist
-
-TWO_PI = 2.0 * math.pi
 
 
 class Heading:
@@ -34,60 +32,68 @@ class Heading:
 
     NAME = "heading"
 
-    def __init__(self, mag: MagHeading) -> None:
-        self.mag = mag
-        self.psi = 0.0  # heading of the output (rad)
-        self.q_prev: Quat | None = None  # the previous sample's carried network attitude
-        self.gain: list[float] = []  # per sample of the last block: its gain toward the field (0: not corrected)
-        self.dip: list[float] = []  # per sample of the last block: the field reference's dip (rad; 0 before a field)
+    def __init__(self, tau_mag_s: float, mag_delay_s: float, reject: bool, estimate_delay: bool) -> None:
+        self.mag = MagHeading(tau_mag_s, mag_delay_s, reject, estimate_delay)
+        self.restart(Cause.RESET)
+
+    def configure(self, tau_mag_s: float, mag_delay_s: float, reject: bool, estimate_delay: bool) -> None:
+        """The run-time parameters of the magnetic heading (:meth:`.s7a_mag.MagHeading.configure`)."""
+        self.mag.configure(tau_mag_s, mag_delay_s, reject, estimate_delay)
 
     def restart(self, cause: Cause) -> None:
+        """RESET: the heading anew (zero, or the first field); GAP: kept, the field re-acquired without a bridge (a
+        hole: re-acquired in run(), where the hole is)."""
         if cause is Cause.RESET:
-            self.psi, self.q_prev = 0.0, None
+            self.psi = 0.0  # heading of the output (rad)
+            self.q_prev: Quat | None = None  # the previous sample's carried network attitude
             self.mag.reset()
-        elif cause is Cause.GAP:
-            self.mag.reacquire()  # no bridge over a gap
-        # a hole: the magnetic heading re-acquires in run(), where the hole is
+        else:
+            self.mag.reacquire()
 
-    def run(self, qc: list[Quat], delta: list[Quat], dt: list[float], mag: list[Vec | None] | None,
-            bridges: dict[int, float], tilt_sd: list[float]) -> Array:
-        """The output attitudes (n, 4), w >= 0. ``mag``: per sample its field or None; ``bridges``: samples that end
-        a hole → the uncertainty of the bridge over it (deg); ``tilt_sd``: each sample's inclination uncertainty
-        after a hole (deg, 0: converged)."""
-        self.gain = [0.0] * len(qc)
-        self.dip = [0.0] * len(qc)
-        if len(qc) <= SCALAR_MAX:
-            return np.array([self._one(i, qc[i], delta[i], dt[i], None if mag is None else mag[i], bridges.get(i),
-                                       tilt_sd[i]) for i in range(len(qc))])
-        return self._vector(qc, delta, dt, mag, bridges, tilt_sd)
+    def run(self, block: HeadingIn) -> HeadingBlock:
+        """The output attitudes, and per sample the gain toward the field and the reference dip."""
+        s, h = block.samples, block.handover
+        qc, delta, dt, mag, bridges, tilt_sd = h.q, block.carry.delta, s.step_s, s.mag, h.bridge_sd_deg, h.blend_sd_deg
+        gain = [0.0] * len(qc)
+        dip = [0.0] * len(qc)
+        if len(qc) <= SMALL_BLOCK:
+            q = np.array([self._one(i, qc[i], delta[i], dt[i], None if mag is None else mag[i], bridges.get(i),
+                                    tilt_sd[i], gain, dip) for i in range(len(qc))])
+        else:
+            q = self._vector(block, gain, dip)
+        return HeadingBlock(q, gain, dip)
 
-    def _one(self, i: int, qc: Quat, delta: Quat, dt: float, mag: Vec | None, bridge: float | None, tilt_sd: float
-             ) -> tuple[float, float, float, float]:
+    def _one(self, i: int, qc: Quat, delta: Quat, dt: float, mag: Vec | None, bridge: float | None, tilt_sd: float,
+             gain: list[float], dip: list[float]) -> Quat:
+        """:meth:`_vector` of sample ``i`` in plain floats (its gain and dip into ``gain[i]``, ``dip[i]``)."""
         if bridge is not None:
             self.mag.reacquire(bridge)
         if self.q_prev is None:
             self.psi = -2.0 * math.atan2(qc[3], qc[0])  # the output starts at zero heading
         else:
-            self.psi = math.remainder(self.psi + twist(qmul(qmul(self.q_prev, delta), conj(qc))), TWO_PI)
+            self.psi = math.remainder(self.psi + twist(qmul(qmul(self.q_prev, delta), conj(qc))), math.tau)
         self.q_prev = qc
         if mag is not None or self.mag.started:
             qo = qmul(about_z(self.psi), qc)
-            self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), TWO_PI)
-            self.gain[i] = self.mag.gain
-            self.dip[i] = self.mag.ref_dip
+            self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), math.tau)
+            gain[i] = self.mag.gain
+            dip[i] = self.mag.ref_dip
         w, x, y, z = qmul(about_z(self.psi), qc)
         n = math.sqrt(w * w + x * x + y * y + z * z)
         if w < 0.0:  # sign convention: w >= 0
             n = -n
         return (w / n, x / n, y / n, z / n)
 
-    def _vector(self, qc_l: list[Quat], delta: list[Quat], dt: list[float], mag: list[Vec | None] | None,
-                bridges: dict[int, float], tilt_sd: list[float]) -> Array:
+    def _vector(self, block: HeadingIn, gain: list[float], dip: list[float]) -> Array:
+        """The reference, vectorised over the block up to its first field (then sample by sample)."""
+        s, h = block.samples, block.handover
+        qc_l, delta, dt, mag = h.q, block.carry.delta, s.step_s, s.mag
+        bridges, tilt_sd = h.bridge_sd_deg, h.blend_sd_deg
         qc = np.asarray(qc_l)
         n = len(qc)
         prev = np.vstack([np.asarray(self.q_prev or qc_l[0])[None, :], qc[:-1]])
         e = quat.multiply(quat.multiply(prev, np.asarray(delta)), quat.conjugate(qc))
-        tw = np.remainder(2.0 * np.arctan2(e[:, 3], e[:, 0]) + np.pi, TWO_PI) - np.pi
+        tw = np.remainder(2.0 * np.arctan2(e[:, 3], e[:, 0]) + np.pi, math.tau) - np.pi
         if self.q_prev is None:
             tw[0] = -2.0 * math.atan2(qc[0, 3], qc[0, 0]) - self.psi  # the output starts at zero heading
         first = self._first_field(mag, n)
@@ -96,8 +102,8 @@ class Heading:
             psi[first:] = self._mag_psi(float(psi[first - 1]) if first else self.psi, tw[first:], qc_l[first:],
                                         delta[first:], dt[first:], None if mag is None else mag[first:],
                                         {k - first: b for k, b in bridges.items() if k >= first}, tilt_sd[first:],
-                                        first)
-        self.psi = math.remainder(float(psi[-1]), TWO_PI)
+                                        gain, dip, first)
+        self.psi = math.remainder(float(psi[-1]), math.tau)
         self.q_prev = qc_l[-1]
         rz = np.column_stack([np.cos(0.5 * psi), np.zeros(n), np.zeros(n), np.sin(0.5 * psi)])
         q = quat.normalize(quat.multiply(rz, qc))
@@ -112,10 +118,10 @@ class Heading:
         return next((i for i, m in enumerate(mag) if m is not None), n)
 
     def _mag_psi(self, psi: float, tw: Array, qc: list[Quat], delta: list[Quat], dt: list[float],
-                 mag: list[Vec | None] | None, bridges: dict[int, float], tilt_sd: list[float], first: int
-                 ) -> Array:
+                 mag: list[Vec | None] | None, bridges: dict[int, float], tilt_sd: list[float], gain: list[float],
+                 dip: list[float], first: int) -> Array:
         """Heading angles from the first field on (sample ``first`` of the block): the gyro increment, then the
-        magnetic correction."""
+        magnetic correction (each sample's gain and dip into ``gain``, ``dip`` from ``first`` on)."""
         out = np.empty(len(tw))
         step = self.mag.step
         for i, t in enumerate(tw.tolist()):
@@ -126,8 +132,8 @@ class Heading:
             q = qc[i]
             qo = (c * q[0] - s * q[3], c * q[1] - s * q[2], c * q[2] + s * q[1], c * q[3] + s * q[0])
             psi += step(qo, delta[i], dt[i], None if mag is None else mag[i], tilt_sd[i])
-            self.gain[first + i] = self.mag.gain
-            self.dip[first + i] = self.mag.ref_dip
+            gain[first + i] = self.mag.gain
+            dip[first + i] = self.mag.ref_dip
             out[i] = psi
         return out
 

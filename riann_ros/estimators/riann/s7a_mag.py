@@ -7,7 +7,8 @@ disturbance against a reference norm and dip learned online (VQF's rules and con
 the gyro only), and the heading moves toward it with the gain ``dt / tau_mag`` (the running mean during the first
 ``tau_mag`` seconds). After a hole (:meth:`MagHeading.reacquire`; not while the field is rejected) it re-converges
 as the inverse-variance weighted mean of the bridged heading and each field heading since, a field weighing less
-while the inclination is uncertain (``1 / (σ_m² + tan²(dip) σ_t²)``, ``σ_m`` = :data:`MAG_HEADING_SD`). The
+while the inclination is uncertain (``1 / (σ_w² + tan²(dip) σ_t²)``, ``σ_w`` = :data:`REACQUIRE_FIELD_SD_DEG`, a
+weight of its own: stage 8 reports the fitted field σ, :data:`~riann_ros.defaults.MAG_HEADING_SD_DEG`). The
 correction is a rotation about the world vertical: the inclination is never changed by the field.
 docs/magnetometer.md has the physics.
 """
@@ -17,7 +18,6 @@ from __future__ import annotations
 import math
 
 from riann_ros.constants import DEG
-from riann_ros.defaults import MAG_HEADING_SD_DEG
 from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
 from riann_ros.rotations import IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
 
@@ -33,21 +33,29 @@ NEW_TIME = 20.0  # s of a stable new field (while moving) before it becomes the 
 NEW_MIN_GYR = 20.0 * DEG  # rad/s, only motion faster than this counts toward NEW_TIME
 GYR_LP_TAU = 0.5  # s, low-pass of |ω| for NEW_MIN_GYR
 # re-acquiring after a hole
-MAG_HEADING_SD = MAG_HEADING_SD_DEG  # deg; one field heading's error apart from the tilt
+#: deg; the σ a field heading is weighed with against the bridged heading (and the fields before it) while the
+#: heading re-acquires after a hole: a weight that sets how fast the heading leaves the bridge for the fields. It is
+#: not the field heading's σ that stage 8 reports (MAG_HEADING_SD_DEG, fitted on BROAD); that one would weigh the
+#: first fields after a hole four times as much
+REACQUIRE_FIELD_SD_DEG = 5.0
 BRIDGE_GATE = 3.0  # the bridge is dropped if the first field after the hole is this many standard deviations off
-
 
 
 class MagHeading:
     """The heading correction state (see the module docstring); :meth:`step` per sample."""
 
     def __init__(self, tau_mag: float, mag_delay: float, reject: bool, estimate_delay: bool = True) -> None:
-        self.tau_mag = tau_mag
-        self.mag_delay = mag_delay  # fixed latency, or the estimate's starting value
-        self.reject = reject
-        self.estimate_delay = estimate_delay
+        self.configure(tau_mag, mag_delay, reject, estimate_delay)
         self.latency = LatencyEstimator()
         self.reset()
+
+    def configure(self, tau_mag: float, mag_delay: float, reject: bool, estimate_delay: bool) -> None:
+        """The run-time parameters: ``tau_mag`` (s), ``mag_delay`` (s: the fixed latency, or the estimate's starting
+        value), disturbance rejection on, latency estimation on."""
+        self.tau_mag = tau_mag
+        self.mag_delay = mag_delay
+        self.reject = reject
+        self.estimate_delay = estimate_delay
 
     @property
     def delay(self) -> float:
@@ -156,7 +164,7 @@ class MagHeading:
         """The weight of this field's heading (error ``err``, rad; world-frame field ``mw``) in the mean since the
         hole; the first field after a hole also tests the bridge (module docstring)."""
         tan_dip = abs(mw[2]) / math.sqrt(mw[0] * mw[0] + mw[1] * mw[1])
-        var = MAG_HEADING_SD * MAG_HEADING_SD + (tan_dip * tilt_sd) ** 2
+        var = REACQUIRE_FIELD_SD_DEG * REACQUIRE_FIELD_SD_DEG + (tan_dip * tilt_sd) ** 2
         if self.gate:  # the first field after the hole: is the bridge consistent with it?
             self.gate = False
             if (err / DEG) ** 2 > BRIDGE_GATE * BRIDGE_GATE * (1.0 / self.weight + var):

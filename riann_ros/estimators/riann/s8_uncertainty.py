@@ -11,8 +11,7 @@ a bias error tilts the network's estimate by about the bias times its memory, ``
 rate |ω − b| low-passed with :data:`TAU_MOTION` (the network's error grows with the motion it has to follow, as the
 paper's fast trials show), ``σ₀`` a floor (the reference's own error and the network's at rest), ``σ_h`` the
 hand-over's σ after a hole (stage 6). The constants are fitted on the 12 shared BROAD trials by maximum likelihood
-(``bench/fit_uncertainty.py``). The linear acceleration | |a| − g | (low-passed alike) was measured as a candidate
-too and is kept as a feature: the fit gives it no weight; docs/riann.md, stage 8.
+(``bench/fit_uncertainty.py``); docs/riann.md, stage 8, has the inputs measured and left out.
 
 Heading (:func:`heading_sigma`): without a field the heading is unobservable (:data:`YAW_FREE_SD`), and so it is
 again after a gap (no bridge) until a field corrects it. From then on ``σ_ψ² = σ_m² + (tan(dip)·σ_i)² + x²``:
@@ -32,93 +31,106 @@ heading carries beyond the field's, which follows the heading stage step by step
 
 So after a long rejection, a gap or a badly bridged hole the σ stays wide until the field has pulled the heading in,
 at the heading stage's own pace.
+
+Each formula is written once (:func:`inclination_var`, :func:`heading_var`), for plain floats and numpy arrays
+alike: :meth:`Uncertainty.run` takes it per sample (the node's call is a block of one), the fit
+(:func:`inclination_sigma`, :func:`heading_sigma`) on whole arrays of the features the stage outputs.
 """
 
 from __future__ import annotations
 
 import math
+from typing import TypeVar
 
 import numpy as np
 
-from riann_ros.defaults import YAW_FREE_SD_DEG
+from riann_ros.constants import DEG
+from riann_ros.defaults import MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.estimators.base import HEADING_CORRECTED, HEADING_HELD, HEADING_UNKNOWN, Array
-from riann_ros.estimators.riann.stage import Cause, GridBlock, Row6, Vec
+from riann_ros.estimators.riann.stage import Cause, Uncertainties, UncertaintyIn
 
-G = 9.81  # m/s²
-DEG = math.pi / 180.0
-TAU_MOTION = 0.5  # s; low-pass of the rotation rate and the linear acceleration
+TAU_MOTION = 0.5  # s; low-pass of the rotation rate
 # the fitted constants (bench/fit_uncertainty.py on the 12 shared BROAD trials)
 SIGMA0 = 0.153 * DEG  # rad: a floor (the reference's own error and the network's at rest)
 K_SPREAD = 0.569  # rad per rad of spread
 K_BIAS = 2.82  # s: rad of tilt per rad/s of bias σ
 K_RATE = 0.00152  # s: rad of tilt per rad/s of (low-passed) rotation rate
 YAW_FREE_SD = YAW_FREE_SD_DEG * DEG  # rad: the heading without a field
-MAG_SD = 2.5 * DEG  # rad: the field heading's σ (fitted; the tilt's share and the carried error are added per sample)
+MAG_SD = MAG_HEADING_SD_DEG * DEG  # rad: the field heading's σ (the tilt's share and the carried error are added)
 K_BRIDGE = 0.46  # the bridge's σ (a bound, stage 6) as the heading's σ (fitted on the trials with holes)
-FEATURES = ("spread", "rate", "lin", "handover", "bias_sigma")
+# the inclination's inputs per sample: spread (rad), rate (rad/s), hand-over σ (rad), bias σ (rad/s)
+FEATURES = ("spread", "rate", "handover", "bias_sigma")
 # state: FREE (no field yet, or since a gap), USED (corrected), HELD (since one); bridge, carried: x's parts (rad)
 YAW_FEATURES = ("state", "bridge", "carried", "tan_dip")
 FREE, USED, HELD = HEADING_UNKNOWN, HEADING_CORRECTED, HEADING_HELD  # the codes heading_state() reports
 MAX_DIP = 80.0 * DEG  # the tilt's share of the heading error is capped at tan(80°)
 
+F = TypeVar("F", float, Array)  # a formula's inputs: one sample's floats, or arrays of samples
+
+
+def inclination_var(spread: F, rate: F, handover: F, bias_sigma: F,
+                    k: tuple[float, float, float, float] = (SIGMA0, K_SPREAD, K_BIAS, K_RATE)) -> F:
+    """σ_i² (rad²) from the inputs (:data:`FEATURES`) with the constants ``k`` (σ₀, k_s, k_b, k_r)."""
+    s0, ks, kb, kr = k
+    return s0 * s0 + (ks * spread) ** 2 + (kb * bias_sigma) ** 2 + (kr * rate) ** 2 + handover * handover
+
+
+def heading_var(sigma_i: F, bridge: F, carried: F, tan_dip: F, mag_sd: float = MAG_SD,
+                k_bridge: float = K_BRIDGE) -> F:
+    """σ_ψ² (rad²) of a heading the field has corrected (before the cap at :data:`YAW_FREE_SD`): the field's σ, the
+    tilt's share of it (``tan(dip)·σ_i``, the tilt compensation's error) and the heading's excess error, the
+    bridges' share scaled by ``k_bridge`` (the module docstring)."""
+    return mag_sd * mag_sd + (tan_dip * sigma_i) ** 2 + (k_bridge * bridge) ** 2 + carried * carried
+
 
 class Uncertainty:
-    """Stage 8 (see the module docstring). :attr:`sigma`: (n, 2) per sample of the last block, rad."""
+    """Stage 8 (see the module docstring)."""
 
     NAME = "uncertainty"
 
     def __init__(self) -> None:
-        self.sigma = np.zeros((0, 2))
-        self.features = np.zeros((0, len(FEATURES)))  # of the last block (the fit reads them)
-        self.yaw_features = np.zeros((0, len(YAW_FEATURES)))
-        self.x_bridge = self.x_carried = self.since = 0.0
         self.restart(Cause.RESET)
 
     def restart(self, cause: Cause) -> None:
-        self.spread = 0.0  # the newest network row's spread
-        self.rate_lp = self.lin_lp = 0.0
+        """GAP: the rate low-pass and the spread start again, the heading is unknown until a field sets it (a gap
+        has no bridge); RESET: all of it anew."""
+        self.spread = 0.0  # the newest network row's spread (rad)
+        self.rate_lp = 0.0  # rad/s
         self.started = False
-        # a gap has no bridge: the heading is unknown until a field sets it again
         self.known = False  # a field has set the heading (since the reset or the last gap)
+        if cause is Cause.RESET:
+            self.x_bridge = self.x_carried = self.since = 0.0
+            self.last: tuple[float, float] | None = None  # the newest sample's σ (rad), for diagnostics
 
-    def run(self, g: GridBlock, spread: Array, bias_sigma: list[float], x: list[Row6], bias: list[Vec],
-            dt: list[float], tilt_sd: list[float], gain: list[float], dip: list[float],
-            bridges: dict[int, float]) -> Array:
-        """Per sample (n, 2): the inclination's σ per axis and the heading's σ (rad). ``gain``: per sample the
-        heading stage's gain toward the field (0: not corrected); ``bridges``: samples that end a hole → the σ of
-        the bridge over it (deg)."""
-        frows: list[tuple[float, ...]] = []
+    def run(self, block: UncertaintyIn) -> Uncertainties:
+        """Per sample (n, 2): the inclination's σ per axis and the heading's σ (rad), and the model's inputs."""
+        s, g, bias, hand, heading = block.samples, block.grid, block.bias, block.handover, block.heading
+        frows: list[tuple[float, float, float, float]] = []
         yrows: list[tuple[float, float, float, float]] = []
         sig: list[tuple[float, float]] = []
-        sp = spread.tolist()
-        s0, ks, kb, kr, ms, kh = SIGMA0 * SIGMA0, K_SPREAD, K_BIAS, K_RATE, MAG_SD * MAG_SD, K_BRIDGE
-        for i, xi in enumerate(x):  # plain floats: the node's hot path is a block of one
+        sp = block.net.spread_rad.tolist()
+        for i, xi in enumerate(s.x):  # plain floats: the node's hot path is a block of one
             r0, r1 = g.r0[i], g.r1[i]
             if r1 > r0:
                 self.spread = sp[r1 - 1]
-            b = bias[r0]
+            b = bias.bias_rad_s[r0]
             w = math.sqrt((xi[3] - b[0]) ** 2 + (xi[4] - b[1]) ** 2 + (xi[5] - b[2]) ** 2)
-            lin = abs(math.sqrt(xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2]) - G)
             if self.started:
-                a = min(dt[i] / TAU_MOTION, 1.0)
-                self.rate_lp += a * (w - self.rate_lp)
-                self.lin_lp += a * (lin - self.lin_lp)
+                self.rate_lp += min(s.step_s[i] / TAU_MOTION, 1.0) * (w - self.rate_lp)
             else:
-                self.rate_lp, self.lin_lp, self.started = w, lin, True
-            bs, h = bias_sigma[r0], tilt_sd[i] * DEG
-            frows.append((self.spread, self.rate_lp, self.lin_lp, h, bs))
-            si = math.sqrt(s0 + (ks * self.spread) ** 2 + (kb * bs) ** 2 + (kr * self.rate_lp) ** 2 + h * h)
-            y = self._yaw(gain[i], dt[i], dip[i], bs, bridges.get(i))
+                self.rate_lp, self.started = w, True
+            bs = bias.sigma_rad_s[r0]
+            h = (hand.blend_sd_deg[i] + hand.fresh_sd_deg[i]) * DEG  # never both non-zero
+            frows.append((self.spread, self.rate_lp, h, bs))
+            si = math.sqrt(inclination_var(self.spread, self.rate_lp, h, bs))
+            y = self._yaw(heading.gain[i], s.step_s[i], heading.dip_rad[i], bs, hand.bridge_sd_deg.get(i))
             yrows.append(y)
-            if y[0] == FREE:  # = heading_sigma
-                sy = YAW_FREE_SD
-            else:
-                sy = min(math.sqrt(ms + (y[3] * si) ** 2 + (kh * y[1]) ** 2 + y[2] * y[2]), YAW_FREE_SD)
+            sy = YAW_FREE_SD if y[0] == FREE else min(math.sqrt(heading_var(si, y[1], y[2], y[3])), YAW_FREE_SD)
             sig.append((si, sy))
-        self.features = np.array(frows).reshape(-1, len(FEATURES))
-        self.yaw_features = np.array(yrows).reshape(-1, len(YAW_FEATURES))
-        self.sigma = np.array(sig).reshape(-1, 2)
-        return self.sigma
+        if sig:
+            self.last = sig[-1]
+        return Uncertainties(np.array(sig).reshape(-1, 2), np.array(frows).reshape(-1, len(FEATURES)),
+                             np.array(yrows).reshape(-1, len(YAW_FEATURES)))
 
     def _yaw(self, k: float, dt: float, dip: float, bias_sd: float, bridge: float | None
              ) -> tuple[float, float, float, float]:
@@ -142,23 +154,18 @@ class Uncertainty:
         return (HELD, self.x_bridge, self.x_carried + bias_sd * self.since, math.tan(min(abs(dip), MAX_DIP)))
 
     def diagnostics(self) -> dict[str, str]:
-        if not len(self.sigma):
+        if self.last is None:
             return {}
-        return {"inclination sd (deg)": f"{self.sigma[-1, 0] / DEG:.2f}",
-                "heading sd (deg)": f"{self.sigma[-1, 1] / DEG:.1f}"}
+        return {"inclination sd (deg)": f"{self.last[0] / DEG:.2f}", "heading sd (deg)": f"{self.last[1] / DEG:.1f}"}
 
 
 def inclination_sigma(f: Array, k: tuple[float, float, float, float] = (SIGMA0, K_SPREAD, K_BIAS, K_RATE)) -> Array:
-    """σ_i (rad) of feature rows ``f`` (columns :data:`FEATURES`) with the constants ``k`` (σ₀, k_s, k_b, k_r); the
-    per-sample formula of :meth:`Uncertainty.run`."""
-    s0, ks, kb, kr = k
-    return np.sqrt(s0 * s0 + (ks * f[:, 0]) ** 2 + (kb * f[:, 4]) ** 2 + (kr * f[:, 1]) ** 2 + f[:, 3] ** 2)
+    """σ_i (rad) of feature rows ``f`` (columns :data:`FEATURES`) with the constants ``k`` (σ₀, k_s, k_b, k_r)."""
+    return np.sqrt(inclination_var(f[:, 0], f[:, 1], f[:, 2], f[:, 3], k))
 
 
 def heading_sigma(yf: Array, sigma_i: Array, mag_sd: float = MAG_SD, k_bridge: float = K_BRIDGE) -> Array:
-    """σ_ψ (rad) of heading feature rows ``yf`` (columns :data:`YAW_FEATURES`) and the inclination's σ: the field's
-    σ, the tilt's share of it (``tan(dip)·σ_i``, the tilt compensation's error) and the heading's excess error, the
-    bridges' share scaled by ``k_bridge`` (the module docstring); 180° before any field and after a gap until one
-    (capped there)."""
-    s = np.sqrt(mag_sd * mag_sd + (yf[:, 3] * sigma_i) ** 2 + (k_bridge * yf[:, 1]) ** 2 + yf[:, 2] ** 2)
+    """σ_ψ (rad) of heading feature rows ``yf`` (columns :data:`YAW_FEATURES`) and the inclination's σ
+    (:func:`heading_var`); 180° before any field and after a gap until one (capped there)."""
+    s = np.sqrt(heading_var(sigma_i, yf[:, 1], yf[:, 2], yf[:, 3], mag_sd, k_bridge))
     return np.where(yf[:, 0] == FREE, YAW_FREE_SD, np.minimum(s, YAW_FREE_SD))
