@@ -69,13 +69,15 @@ def test_evo_ape_on_the_exported_files_gives_our_total_angle_rmse(exported, tmp_
 
 
 @pytest.mark.slow
-def test_csv_files_read_back_score_as_the_estimators(exported):
-    """The CSV files (time[s],qw,qx,qy,qz) are what --estimate-file reads: scored as the estimators they hold."""
+@pytest.mark.parametrize("fmt", ["csv", "tum"])
+def test_files_read_back_score_as_the_estimators(exported, fmt):
+    """The CSV files (time[s],qw,qx,qy,qz) and the TUM files (with their comment line) are what --estimate-file
+    reads: scored as the estimators they hold."""
     d, rows = exported
-    out = d / "back"
+    out = d / f"back_{fmt}"
     est = d / "est"
-    assert main([str(d / "run.mcap"), "-e", "none", "--estimate-file", f"{est / 'run.as-recorded.madgwick.csv'}:m",
-                 "--estimate-file", f"{est / 'run.as-recorded.vqf.csv'}:v", "--out", str(out), "--no-plots",
+    assert main([str(d / "run.mcap"), "-e", "none", "--estimate-file", f"{est / f'run.as-recorded.madgwick.{fmt}'}:m",
+                 "--estimate-file", f"{est / f'run.as-recorded.vqf.{fmt}'}:v", "--out", str(out), "--no-plots",
                  "-q"]) == 0
     back = {r["estimator"]: r for r in json.loads((out / "results.json").read_text())["results"]}
     for label, name in (("m", "madgwick"), ("v", "vqf")):

@@ -59,7 +59,8 @@ def write_trajectory(path: Path, stamps_ns: NDArray[np.int64], quats: NDArray[np
     tmp = path.with_name(path.name + ".part")
     with tmp.open("w") as f:
         if fmt == "tum":
-            f.write("# t x y z qx qy qz qw (riann-bag-eval --write-estimates; position not estimated)\n")
+            # no "," ";" or tab in the comment: a CSV reader (ours, --estimate-file) would take it for a header
+            f.write("# t x y z qx qy qz qw  riann-bag-eval --write-estimates  position not estimated: 0 0 0\n")
             f.writelines(f"{t} 0 0 0 {x:.9f} {y:.9f} {z:.9f} {w:.9f}\n" for t, (w, x, y, z) in zip(times, q.tolist(),
                                                                                                  strict=True))
         else:
