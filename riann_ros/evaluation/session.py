@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from riann_ros.evaluation.aggregate import tune
+from riann_ros.evaluation.names import unique_names
 from riann_ros.evaluation.report import Report
 from riann_ros.evaluation.results import EvalSettings, Progress
 from riann_ros.evaluation.run import evaluate_sources
@@ -58,7 +59,8 @@ class Hooks:
 def evaluate(run: EvalRun, runner: Runner | None = None, hooks: Hooks | None = None,
              started: float | None = None) -> Report:
     """Tune the grids of ``run.tune`` (each best spec is added to the estimators unless one of that label is there),
-    then evaluate every input (``runner``: None in-process, or e.g. the live DDS runner); the report with the time
+    then evaluate every input (``runner``: None in-process, or e.g. the live DDS runner), each under a name of its own
+    (:func:`~riann_ros.evaluation.names.unique_names`); the report with the time
     it took since ``started`` (a ``time.perf_counter()`` value; None: now, e.g. earlier when the runner's start-up
     counts). EvalError when the run cannot go on; an input that fails is a failure in the report."""
     hooks = hooks or Hooks()
@@ -75,4 +77,5 @@ def evaluate(run: EvalRun, runner: Runner | None = None, hooks: Hooks | None = N
         if spec.label not in {e.label for e in settings.estimators}:
             settings.estimators.append(spec)
     results = evaluate_sources(sources, settings, run.jobs, hooks.progress(len(sources)), runner)
+    unique_names(results)  # two inputs never print as one (each renamed result warns)
     return Report(run.command, sources, settings, results, time.perf_counter() - t0, run.jobs, tuning)
