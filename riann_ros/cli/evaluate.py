@@ -24,16 +24,16 @@ import shlex
 import sys
 import time
 from contextlib import AbstractContextManager, nullcontext
-from pathlib import Path
 
 from riann_ros import evaluation as ev
 from riann_ros.cli import eval_inputs, input_lists
 from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, SETTING_OPTIONS, build_parser
 from riann_ros.cli.pipe import quiet_when_reader_leaves
-from riann_ros.evaluation import executors, outdir, perturb, report, seq_tables, session, store
+from riann_ros.cli.progress import Progress
+from riann_ros.evaluation import executors, free_report, outdir, perturb, report, seq_tables, session, store
 from riann_ros.evaluation.estimate_bags import write_estimate_bags
+from riann_ros.evaluation.estimate_files import parse_formats, write_estimate_files
 from riann_ros.evaluation.fleet import Scale
-from riann_ros.evaluation.progress import Progress
 from riann_ros.evaluation.runners import Runner
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
 
@@ -59,9 +59,9 @@ def _err(msg: str) -> None:
 
 def _settings(args: argparse.Namespace) -> ev.EvalSettings:
     """The evaluation settings of the command line (ValueError / ImportError on bad usage)."""
-    if args.live and (args.tune or args.jobs > 1 or args.write_estimates):
-        raise ValueError("--live runs one replay at a time: it does not combine with --tune, --jobs or "
-                         "--write-estimates")
+    if args.live and (args.tune or args.jobs > 1):
+        raise ValueError("--live runs one replay at a time: it does not combine with --tune or --jobs")
+    parse_formats(args.write_format)
     if args.tune_scenario not in ev.SCENARIOS:
         raise ValueError(f"unknown --tune-scenario {args.tune_scenario!r}; known: {', '.join(ev.SCENARIOS)}")
     for t in args.tune:
@@ -74,7 +74,8 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
     have = ev.available_estimators()
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
     only_recorded = spec_text.strip().lower() == "none"
-    topics = eval_inputs.topics(args)
+    input_warnings: list[str] = []
+    topics = eval_inputs.topics(args, input_warnings)
     if only_recorded and not (topics.estimates or topics.files):
         raise ValueError("--estimators none needs at least one --estimate-topic or --estimate-file")
     settings = ev.EvalSettings(
@@ -92,6 +93,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         topics=topics,
         offset_steps=args.offset_steps,
         salvage=args.salvage,
+        input_warnings=input_warnings,
     )
     eval_inputs.check_recorded(settings)
     return settings
@@ -160,16 +162,38 @@ def _hooks(args: argparse.Namespace, n_sources: int) -> session.Hooks:
                          note=note)
 
 
-def _write_estimates(results: list[ev.SequenceResult], out_dir: Path, force: bool) -> list[str]:
-    """--write-estimates: the bags written (stdout is for tables: stderr), and the problems."""
+def _write_estimates(results: list[ev.SequenceResult], args: argparse.Namespace) -> list[str]:
+    """--write-estimates: the bag copies and trajectory files written (stdout is for tables: stderr), and the
+    problems."""
+    out_dir, force = args.write_estimates, args.force
     done = write_estimate_bags(results, out_dir, force)
     for dst, topics in done.written:
         print(f"wrote {dst} ({', '.join(topics)})", file=sys.stderr)
-    return done.problems
+    for src in done.not_bags:
+        print(f"{src}: a dataset file, no bag copy (its estimates are in the trajectory files)", file=sys.stderr)
+    files = write_estimate_files(results, out_dir, parse_formats(args.write_format), force)
+    if files.written:
+        names = [p.name for p in files.written]
+        print(f"wrote {len(names)} trajectory file(s) in {out_dir}: {', '.join(names)}", file=sys.stderr)
+    return done.problems + files.problems
+
+
+def _print_free(rep: report.Report) -> None:
+    """The inputs without a reference: which they are, the estimators' agreement, their bias, the stream's health."""
+    which = free_report.which_is_which(rep.results)
+    if not which:
+        return
+    print(f"\ninputs {which}")
+    for table in (free_report.format_agreement(rep.results), free_report.format_bias(rep.results, rep.rows),
+                  free_report.format_health(rep.results)):
+        if table:
+            print("\n" + table)
 
 
 def _print_summary(rep: report.Report, live: bool) -> None:
-    print(report.format_table(rep.summary))
+    if rep.summary or all(r.has_reference for r in rep.results):
+        print(report.format_table(rep.summary))
+    _print_free(rep)
     nine = seq_tables.format_heading_table(rep.rows)
     if nine:
         print("\n" + nine)
@@ -192,7 +216,9 @@ def _print_summary(rep: report.Report, live: bool) -> None:
             v[1] += live_stats.get("published", 0)
         print("live: messages lost / published: " + ", ".join(f"{k} {a} / {b}" for k, (a, b) in lost.items()))
     n_fail = len(rep.failures)
+    n_free = sum(1 for r in rep.results if not r.error and not r.has_reference)
     print(f"\n{len(rep.results) - n_fail} of {len(rep.results)} input(s) evaluated in {rep.elapsed_s:.1f} s"
+          + (f" ({n_free} without a reference: not scored)" if n_free else "")
           + (f"; {n_fail} failed" if n_fail else ""))
 
 
@@ -226,6 +252,8 @@ def _print_messages(rep: report.Report) -> None:
     """Warnings and failures on stderr, then the summary table on stdout."""
     if rep.settings.series_for not in (None, "*", "all") and not any(r.series for r in rep.results):
         _err(f"--plot-sequence {rep.settings.series_for!r} matches no evaluated sequence")
+    for w in rep.settings.input_warnings:
+        _err(f"warning: {w}")
     for res in rep.results:
         for w in res.warnings if not res.error else []:
             _err(f"warning: {w}")
@@ -321,7 +349,7 @@ def _main(argv: list[str] | None) -> int:
     results = rep.results
     _print_messages(rep)
     _print_summary(rep, args.live)
-    problems = _write_estimates(results, args.write_estimates, args.force) if args.write_estimates else []
+    problems = _write_estimates(results, args) if args.write_estimates else []
     for p in problems:
         _err(p)
     if args.out and not _write_out(args, rep):

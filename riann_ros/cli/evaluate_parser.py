@@ -31,7 +31,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Attitude RMSE (e_α, heading ignored) of RIANN, Madgwick, Mahony and VQF on dataset bags, "
         "in the paper's restrictive / partially-restrictive / realistic scenarios and as recorded; also of "
         "estimates your own filter recorded in a bag (--estimate-topic), on any rosbag2 bag (--imu-topic, "
-        "--ground-truth-topic); --compare of two saved runs. Full reference: docs/evaluation.md.",
+        "--ground-truth-topic); --compare of two saved runs. A bag without a reference orientation (your own robot's) "
+        "is run as recorded by every estimator and not scored: what it shows is whether the estimators agree (their "
+        "inclination difference, where they part most), the gyro bias each settled on beside the gyro at the "
+        "stream's rests, and the stream's health (rate, jitter, holes, rejected samples, unit warnings, restarts), "
+        "with a figure of roll, pitch and heading of every estimator; what it cannot show is which estimator is right "
+        "where they differ, or an error they share. Full reference: docs/evaluation.md.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="estimator specs: NAME[:PARAM=VALUE[:PARAM=VALUE...]], comma-separated, e.g.\n"
         "  riann,madgwick:beta=0.033,madgwick:beta=0.1,mahony:kp=1:ki=0.3,vqf:tau_acc=3\n"
@@ -114,8 +119,13 @@ def _recorded_estimates(p: argparse.ArgumentParser) -> None:
                    "a TUM file (t tx ty tz qx qy qz qw, t in seconds, no header) or a CSV with a header: a time "
                    "column (timestamp, time or t; its unit in the name, e.g. time[s], else ns) and qw, qx, qy, qz "
                    "(the IMU frame's orientation in a z-up world, as the reference). Labelled LABEL (default: the "
-                   "file name). With several inputs a file belongs to the input whose name starts its name "
-                   "(run1.mcap: run1_vins.tum). Repeatable")
+                   "file name). FILE may be a glob ('runs/*.tum', quoted) or a folder (its .tum, .csv and .txt files): "
+                   "one label for many files, each scored as that estimator on its own input, one row per input and "
+                   "one summary row. A file belongs to the input whose file name without suffix (its stem) equals the "
+                   "file's stem or starts it followed by a character other than a letter or digit (run1.mcap: "
+                   "run1.tum, run1_vins.tum; not run10.tum), the longest such stem; a single file with a single "
+                   "input belongs to it whatever its name. Inputs without a file and files without an input are "
+                   "warned about. Repeatable")
     b.add_argument("--estimate-cols", default=None, metavar="TIME,QW,QX,QY,QZ",
                    help="the --estimate-file columns, for a CSV in another layout")
     b.add_argument("--estimate-time-unit", default=None, choices=("s", "ms", "us", "ns"),
@@ -164,7 +174,10 @@ def _results(p: argparse.ArgumentParser) -> None:
                    help="write results.csv, results.json, report.md and plots (PNG+SVG) here (a folder already holding "
                    "results needs --force)")
     p.add_argument("--heading", action="store_true",
-                   help="also score heading and total error of 6D runs (heading drift; 9D runs always have them)")
+                   help="also score heading and total error of 6D runs (unaligned, as evo_ape without alignment: they "
+                   "include the start heading) and the heading drift (heading_drift_*: the heading error after "
+                   "aligning the estimate's heading with the reference's at the first scored sample), which the "
+                   "tables show for 6D runs; 9D runs always have heading and total error")
     p.add_argument("--use-mag", choices=USE_MAG_CHOICES, default="auto",
                    help="the magnetometer (/imu/mag), as the nodes' use_mag: auto (default) = every estimator runs 9D "
                    "where the recording has a field, with heading and total error in the results; false = 6D only")
@@ -184,8 +197,14 @@ def _results(p: argparse.ArgumentParser) -> None:
                    "the best one to the comparison (repeatable)")
     p.add_argument("--tune-scenario", default=ev.REALISTIC, help="scenario the tuning minimises (default realistic)")
     p.add_argument("--write-estimates", type=Path, default=None, metavar="DIR",
-                   help="write a copy of every input bag into DIR with each estimator's output as "
-                   "geometry_msgs/QuaternionStamped topics /eval/<scenario>/<estimator> (first scenario)")
+                   help="write into DIR a copy of every input bag with each estimator's output as "
+                   "geometry_msgs/QuaternionStamped topics /eval/<scenario>/<estimator> (first scenario), and per "
+                   "input and estimator a trajectory file <sequence>.<scenario>.<label>.tum (TUM: t x y z qx qy qz "
+                   "qw, position 0 0 0; evo_ape / evo_traj read it), plus <sequence>.<scenario>.reference.tum with "
+                   "the reference at the scored samples where the input has one")
+    p.add_argument("--write-format", default="tum", metavar="tum|csv|tum,csv",
+                   help="the trajectory files of --write-estimates: tum (default), csv (a header time[s],qw,qx,qy,qz: "
+                   "what --estimate-file reads) or both")
     p.add_argument("--force", action="store_true",
                    help="replace an earlier run's result files in --out (results.csv/json, report.md, compare.csv and "
                    "the plots; nothing else in the folder) and existing --write-estimates bags; without it an --out "

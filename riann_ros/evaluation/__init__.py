@@ -13,7 +13,7 @@ statistics across sequences and tuning: :mod:`~riann_ros.evaluation.aggregate`; 
 compare use plots and outdir; neither plots nor outdir imports them). Where the inputs run (this process, ``--jobs``,
 a Dask cluster): :mod:`~riann_ros.evaluation.executors`; each finished input kept for ``--resume``:
 :mod:`~riann_ros.evaluation.store`; the pass over the inputs with both: :mod:`~riann_ros.evaluation.fleet`; its
-progress bar: :mod:`~riann_ros.evaluation.progress`.
+progress bar: :mod:`riann_ros.cli.progress`.
 Reference: docs/evaluation.md.
 """
 

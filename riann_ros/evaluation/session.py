@@ -20,6 +20,7 @@ from typing import Any
 
 from riann_ros.evaluation.aggregate import tune
 from riann_ros.evaluation.fleet import Fleet, Scale
+from riann_ros.evaluation.names import unique_names
 from riann_ros.evaluation.report import Report
 from riann_ros.evaluation.results import EvalSettings, Progress
 from riann_ros.evaluation.runners import Runner
@@ -79,9 +80,10 @@ def evaluate(run: EvalRun, runner: Runner | None = None, hooks: Hooks | None = N
              started: float | None = None) -> Report:
     """Tune the grids of ``run.tune`` (each best spec is added to the estimators unless one of that label is there),
     then evaluate every input (``runner``: None in-process, or e.g. the live DDS runner; ``run.scale``: on a Dask
-    cluster, and each finished input kept in an output folder, where a resumed run finds what is done); the report
-    with the time it took since ``started`` (a ``time.perf_counter()`` value; None: now, e.g. earlier when the
-    runner's start-up counts). EvalError when the run cannot go on; an input that fails is a failure in the report.
+    cluster, and each finished input kept in an output folder, where a resumed run finds what is done), each under a
+    name of its own (:func:`~riann_ros.evaluation.names.unique_names`); the report with the time it took since
+    ``started`` (a ``time.perf_counter()`` value; None: now, e.g. earlier when the runner's start-up counts).
+    EvalError when the run cannot go on; an input that fails is a failure in the report.
     :class:`~riann_ros.evaluation.store.RunMismatch` (a ValueError) before any work for an output folder holding
     another run's shards."""
     hooks = hooks or Hooks()
@@ -94,4 +96,5 @@ def evaluate(run: EvalRun, runner: Runner | None = None, hooks: Hooks | None = N
             if spec.label not in {e.label for e in settings.estimators}:
                 settings.estimators.append(spec)
         results = fleet.evaluate(settings, hooks.progress)
+    unique_names(results)  # two inputs never print as one (each renamed result warns)
     return Report(run.command, sources, settings, results, time.perf_counter() - t0, run.jobs, [t for t, _ in tuned])

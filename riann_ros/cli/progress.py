@@ -1,4 +1,4 @@
-"""The progress bar of a pass over the inputs (ROS-free): a :data:`~riann_ros.evaluation.results.Progress`
+"""The progress bar of the command-line tools (stderr): a :data:`~riann_ros.evaluation.results.Progress`
 callback for :func:`riann_ros.evaluation.session.evaluate`'s hooks, whichever executor runs the inputs."""
 
 from __future__ import annotations
