@@ -26,13 +26,14 @@ import time
 from contextlib import AbstractContextManager, nullcontext
 
 from riann_ros import evaluation as ev
-from riann_ros.cli import eval_inputs
-from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, build_parser
+from riann_ros.cli import eval_inputs, input_lists
+from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, SETTING_OPTIONS, build_parser
 from riann_ros.cli.pipe import quiet_when_reader_leaves
 from riann_ros.cli.progress import Progress
-from riann_ros.evaluation import free_report, outdir, perturb, report, seq_tables, session
+from riann_ros.evaluation import executors, free_report, outdir, perturb, report, seq_tables, session, store
 from riann_ros.evaluation.estimate_bags import write_estimate_bags
 from riann_ros.evaluation.estimate_files import parse_formats, write_estimate_files
+from riann_ros.evaluation.fleet import Scale
 from riann_ros.evaluation.runners import Runner
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
 
@@ -67,6 +68,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         ev.parse_grid(t)
     if args.jobs < 1:
         raise ValueError("--jobs must be at least 1")
+    _check_scaling(args)
     if not 0 <= args.offset_steps <= 50:
         raise ValueError("--offset-steps must be 0 (no search) to 50")
     have = ev.available_estimators()
@@ -95,6 +97,24 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
     )
     eval_inputs.check_recorded(settings)
     return settings
+
+
+def _check_scaling(args: argparse.Namespace) -> None:
+    """--scheduler and --resume with the options they go with (ValueError otherwise)."""
+    if args.resume and not args.out:
+        raise ValueError("--resume continues the run kept in an --out folder: give --out")
+    if args.resume and (args.force or args.write_estimates):
+        raise ValueError("--resume does not combine with --force (which starts over) or --write-estimates (the "
+                         "estimates of the inputs finished earlier are not kept)")
+    if args.scheduler is not None:
+        if args.live or args.jobs > 1:
+            raise ValueError("--scheduler runs the inputs on a Dask cluster's workers: it does not combine with "
+                             "--jobs (the cluster's workers are the parallelism) or --live")
+        executors.parse_scheduler(args.scheduler)
+        try:
+            executors.require_dask()
+        except ev.EvalError as exc:
+            raise ValueError(str(exc)) from exc
 
 
 def _plotted(args: argparse.Namespace) -> tuple[str, ...] | None:
@@ -134,7 +154,12 @@ def _hooks(args: argparse.Namespace, n_sources: int) -> session.Hooks:
         _err(f"tuned {best['estimator']} on {args.tune_scenario}: {b['label']} mean {b['mean']:.2f}° "
              f"max {b['max']:.2f}°")
 
-    return session.Hooks(tuning=tuning, tuned=tuned, progress=lambda n: Progress(n, enabled=not args.quiet))
+    def note(text: str) -> None:
+        if not args.quiet:
+            _err(text)
+
+    return session.Hooks(tuning=tuning, tuned=tuned, progress=lambda n: Progress(n, enabled=not args.quiet),
+                         note=note)
 
 
 def _write_estimates(results: list[ev.SequenceResult], args: argparse.Namespace) -> list[str]:
@@ -204,15 +229,23 @@ def main(argv: list[str] | None = None) -> int:
         with quiet_when_reader_leaves():
             return _main(argv)
     except KeyboardInterrupt:
-        _err("interrupted; no results written")
+        _err("interrupted; no result files written")
         return 130
 
 
-def _check_out(args: argparse.Namespace) -> None:
-    """Refuse (ValueError, exit status 2) an --out folder holding an earlier run's results, before any work."""
-    old = outdir.previous_results(args.out) if args.out and not args.force else []
+def _mode(args: argparse.Namespace) -> str:
+    return store.RESUME if args.resume else store.REPLACE if args.force else store.NEW
+
+
+def _check_out(args: argparse.Namespace, run: session.EvalRun | None = None) -> None:
+    """Refuse (ValueError, exit status 2) an --out folder holding an earlier run's results, or another run's kept
+    inputs (``run``: this run, whose settings a resumed run must share), before any work."""
+    old = outdir.previous_results(args.out) if args.out and not (args.force or args.resume) else []
     if old:
         raise ValueError(str(outdir.OutputExists(args.out, old)))
+    if args.out and run is not None:
+        store.check(args.out, store.fingerprint(run.settings, run.tune, run.tune_scenario), _mode(args),
+                    SETTING_OPTIONS)
 
 
 def _print_messages(rep: report.Report) -> None:
@@ -231,7 +264,7 @@ def _print_messages(rep: report.Report) -> None:
 def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
     """The result files in --out; False when they could not be written."""
     try:
-        figures = report.write_results(args.out, rep, plots=not args.no_plots, replace=args.force)
+        figures = report.write_results(args.out, rep, plots=not args.no_plots, replace=args.force or args.resume)
     except outdir.OutputExists as exc:  # written meanwhile by someone else
         _err(str(exc))
         return False
@@ -246,6 +279,7 @@ def _compare(args: argparse.Namespace) -> int:
     from riann_ros.evaluation import compare_text
 
     try:
+        _check_out(args)
         both = cp.parse_selection(args.select)
         sel_a = cp.Selection(both.items + cp.parse_selection(args.select_a).items)
         sel_b = cp.Selection(both.items + cp.parse_selection(args.select_b).items)
@@ -269,37 +303,48 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _evaluate(args: argparse.Namespace, run: session.EvalRun) -> report.Report | None:
+    """The run (None: it could not go on, said on stderr). Interrupted: what the --out folder keeps, then
+    KeyboardInterrupt."""
+    started = time.perf_counter()  # the run's time includes the start of the --live nodes
+    try:
+        with _runner(args) as runner:
+            return session.evaluate(run, runner, _hooks(args, len(run.sources)), started)
+    except ev.EvalError as exc:
+        _err(str(exc))
+    except KeyboardInterrupt:
+        if args.out and (args.out / store.SHARDS).is_dir():
+            _err(f"the inputs finished so far are kept in {args.out / store.SHARDS}: add --resume to continue")
+        raise
+    return None
+
+
 def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     argv_list = sys.argv[1:] if argv is None else list(argv)
     if args.compare is not None:
-        if args.inputs:
+        if args.inputs or args.inputs_from:
             parser.error("--compare A B takes no inputs: it compares two saved runs")
-        try:
-            _check_out(args)
-        except ValueError as exc:
-            _err(str(exc))
-            return 2
         return _compare(args)
-    if not args.inputs:
-        parser.error("no input given (bags or BROAD files; or --compare A B)")
+    try:
+        args.inputs = inputs = [*map(str, args.inputs), *input_lists.inputs_from(args.inputs_from)]
+    except ValueError as exc:
+        _err(str(exc))
+        return 2
+    if not inputs:
+        parser.error("no input given (bags or BROAD files, --inputs-from FILE; or --compare A B)")
     if args.select or args.select_a or args.select_b or args.metric != "rmse":
         parser.error("--select, --select-a, --select-b and --metric belong to --compare A B")
     try:
-        settings = _settings(args)
-        _check_out(args)
+        run = session.EvalRun(tuple(inputs), _settings(args), args.jobs, tuple(args.tune), args.tune_scenario,
+                              "riann-bag-eval " + shlex.join(argv_list), Scale(args.scheduler, args.out, _mode(args)))
+        _check_out(args, run)
     except (ValueError, ImportError) as exc:
         _err(str(exc))
         return 2
-    run = session.EvalRun(tuple(str(s) for s in args.inputs), settings, args.jobs, tuple(args.tune),
-                          args.tune_scenario, "riann-bag-eval " + shlex.join(argv_list))
-    started = time.perf_counter()  # the run's time includes the start of the --live nodes
-    try:
-        with _runner(args) as runner:
-            rep = session.evaluate(run, runner, _hooks(args, len(run.sources)), started)
-    except ev.EvalError as exc:
-        _err(str(exc))
+    rep = _evaluate(args, run)
+    if rep is None:
         return 1
     results = rep.results
     _print_messages(rep)

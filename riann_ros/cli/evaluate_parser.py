@@ -14,6 +14,15 @@ from riann_ros.evaluation import perturb
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
+#: the options behind each evaluation setting, named when a resumed run asks for other settings (--resume)
+SETTING_OPTIONS = {
+    "estimators": "--estimators", "scenarios": "--scenarios", "seed": "--seed", "rates": "--rates",
+    "conditions": "--perturb", "with_heading": "--heading", "use_mag": "--use-mag",
+    "series_for": "--plot-sequence, --no-plots", "series_conditions": "--plot-perturb",
+    "keep_estimates": "--write-estimates", "rest": "--rest", "offset_steps": "--offset-steps", "salvage": "--salvage",
+    "topics": "--imu-topic, --ground-truth-topic, --estimate-topic, --estimate-file, --t-offset, --max-gap",
+    "tune": "--tune", "tune_scenario": "--tune-scenario",
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -35,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
         "exit status: 0 ok, 1 some input failed, 2 usage error, 130 interrupted",
     )
     _inputs_and_compare(p)
+    _scaling(p)
     _what_runs(p)
     _recorded_estimates(p)
     _conditions(p)
@@ -64,6 +74,25 @@ def _inputs_and_compare(p: argparse.ArgumentParser) -> None:
     c.add_argument("--metric", default="rmse",
                    help="--compare: the per-sequence statistic compared: rmse (default), mean, median, std, min, max "
                    "of e_α; heading_rmse, heading_mean, …, total_rmse, … where scored")
+
+
+def _scaling(p: argparse.ArgumentParser) -> None:
+    """Many inputs and machines: an input list, a Dask cluster, a resumable --out."""
+    s = p.add_argument_group("many inputs and machines (docs/evaluation.md#scaling-out)")
+    s.add_argument("--inputs-from", action="append", default=[], metavar="FILE",
+                   help="more inputs, read from FILE: one path or glob (*, ?, [...], ** for any depth) per line, in "
+                   "that order (a glob's matches sorted); blank lines and lines starting with # are skipped; a "
+                   "relative path is relative to FILE's folder ('-': standard input, relative to the current folder). "
+                   "A glob that matches nothing is an error. Repeatable; the BAG arguments come first")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="evaluate on a Dask cluster instead of --jobs: tcp://HOST:8786 (a scheduler started with "
+                   "'dask scheduler', workers with 'dask worker tcp://HOST:8786'; every worker must see the inputs at "
+                   "the same paths) or local:N (N worker processes on this machine). Needs pip install "
+                   "'riann_ros[cluster]'")
+    s.add_argument("--resume", action="store_true",
+                   help="continue the run in --out (each finished input is kept in OUT/shards as it completes): "
+                   "evaluate only the inputs it has not finished, or that failed, then write the result files; "
+                   "refused, naming them, when settings differ from that run's")
 
 
 def _what_runs(p: argparse.ArgumentParser) -> None:

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.executors import Executor
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, EvalSettings, Progress, ResultRow
 from riann_ros.evaluation.run import evaluate_sources
@@ -100,7 +101,7 @@ def best_of(rows: Iterable[ResultRow], specs: list[EstimatorSpec], scenario: str
     return {"scenario": scenario, "best": table[0], "grid": table}
 
 
-def tune(text: str, sources: Sequence[str], scenario: str, seed: int, jobs: int = 1,
+def tune(text: str, sources: Sequence[str], scenario: str, seed: int, jobs: int | Executor = 1,
          progress: Progress | None = None, like: EvalSettings | None = None) -> tuple[dict[str, Any], EstimatorSpec]:
     """Grid-search the estimator of tuning spec ``text`` (``"madgwick"``, ``"mahony:kp=0.5/1:ki=0/0.3"``) for the
     lowest mean RMSE on ``sources`` in ``scenario``: (the grid's results, the best spec labelled ``… tuned``).

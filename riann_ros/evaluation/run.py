@@ -29,10 +29,12 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
+from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
 
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.executors import Executor, local_executor, unit_for
 from riann_ros.evaluation.first_pass import Summary, summarise
 from riann_ros.evaluation.health import StreamHealth
 from riann_ros.evaluation.input_hints import BROAD_SUFFIXES
@@ -224,56 +226,16 @@ def _evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, run
     return res
 
 
-def _init_worker() -> None:
-    import signal
-
-    # Ctrl-C reaches the whole process group: the parent handles it and stops the workers
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # one core per worker: ONNX Runtime and BLAS would otherwise fight over the cores
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = "1"
-
-
-def evaluate_sources(sources: Sequence[str], settings: EvalSettings, jobs: int = 1,
+def evaluate_sources(sources: Sequence[str], settings: EvalSettings, jobs: int | Executor = 1,
                      progress: Progress | None = None, runner: Runner | None = None) -> list[SequenceResult]:
-    """Evaluate inputs, in ``jobs`` worker processes when > 1 (offline only); results in input order."""
-    if jobs <= 1 or len(sources) <= 1 or (runner is not None and not runner.interleaved):
-        results = []
-        for i, src in enumerate(sources):
-            results.append(evaluate_source(src, settings, runner))
-            if progress:
-                progress(i + 1, len(sources), results[-1])
-        return results
-    return _evaluate_parallel(sources, settings, jobs, progress)
-
-
-def _evaluate_parallel(sources: Sequence[str], settings: EvalSettings, jobs: int,
-                       progress: Progress | None) -> list[SequenceResult]:
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
+    """Evaluate inputs, in ``jobs`` worker processes when > 1 (offline only) or on an executor (a Dask cluster,
+    :mod:`~riann_ros.evaluation.executors`); results in input order."""
+    executor = local_executor(jobs, len(sources), runner) if isinstance(jobs, int) else jobs
     results: list[SequenceResult | None] = [None] * len(sources)
-    ctx = mp.get_context("spawn" if os.name == "nt" else "forkserver")
-    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker)
-    try:
-        futures = {pool.submit(evaluate_source, src, settings): i for i, src in enumerate(sources)}
-        for done, fut in enumerate(as_completed(futures), 1):
-            i = futures[fut]
-            try:
-                results[i] = r = fut.result()
-            except Exception as exc:  # a worker died
-                results[i] = r = SequenceResult(source=str(sources[i]), error=f"{sources[i]}: worker failed: {exc}")
+    unit = unit_for(evaluate_source, executor, runner)
+    with closing(executor.map(unit, list(enumerate(sources)), settings)) as finished:
+        for done, (i, res) in enumerate(finished, 1):
+            results[i] = res
             if progress:
-                progress(done, len(sources), r)
-    except BaseException:
-        # Ctrl-C (or any error here): stop the workers now instead of waiting for their sequences
-        procs = list(getattr(pool, "_processes", {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for p in procs:
-            if p.is_alive():
-                p.terminate()
-        for p in procs:
-            p.join(5)
-        raise
-    pool.shutdown(wait=True)
+                progress(done, len(sources), res)
     return [r for r in results if r is not None]
