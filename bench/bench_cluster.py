@@ -48,12 +48,13 @@ BIN = Path(sys.executable).parent
 SAVE = Path(__file__).resolve().parents[1] / "docs" / "results" / "cluster.json"
 HELD_OUT = ["-e", "riann,madgwick,mahony,vqf", "-s", "paper", "--seed", "0", "--no-plots", "-q"]
 MODES = {"in-process": ["--jobs", "1"], "--jobs 2": ["--jobs", "2"], "--scheduler local:2": ["--scheduler", "local:2"]}
+# the client's own peak (VmHWM: ru_maxrss would carry the launching process's peak over fork and exec)
 CLIENT = """
-import resource, sys
+import re, sys
 from riann_ros.cli.evaluate import main
 code = main(sys.argv[2:])
-with open(sys.argv[1], "w") as f:
-    f.write(str(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+with open("/proc/self/status") as status, open(sys.argv[1], "w") as f:
+    f.write(re.search(r"VmHWM:\\s+(\\d+) kB", status.read()).group(1))
 sys.exit(code)
 """
 

@@ -21,14 +21,15 @@ from riann_ros.evaluation import executors, store
 pytest.importorskip("distributed")
 
 CLIENT_LIMIT_MB = 500
-# the CLI's main in a process of its own that reports its own peak resident set (RUSAGE_SELF: this process and its
-# threads, the local cluster's scheduler included; the worker processes are not the client)
+# the CLI's main in a process of its own that reports its own peak resident set (VmHWM of /proc/self/status: this
+# process and its threads, the local cluster's scheduler included; the worker processes are not the client). Not
+# RUSAGE_SELF's ru_maxrss: Linux carries it over fork and exec, so it would report the test process's own peak
 CLIENT = """
-import resource, sys
+import re, sys
 from riann_ros.cli.evaluate import main
 code = main(sys.argv[2:])
-with open(sys.argv[1], "w") as f:
-    f.write(str(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+with open("/proc/self/status") as status, open(sys.argv[1], "w") as f:
+    f.write(re.search(r"VmHWM:\\s+(\\d+) kB", status.read()).group(1))
 sys.exit(code)
 """
 
