@@ -120,9 +120,11 @@ def _run(args: argparse.Namespace) -> int:
             _err(f"{exc}; nothing written")
             return EXIT_FAILED
         print(f"wrote {args.out} (load it with the node parameter mag_calibration_file)")
-    for path, plot in zip(_figures(args), (plots.plot_sphere, plots.plot_heading), strict=True):
-        path.parent.mkdir(parents=True, exist_ok=True)
-        print(f"wrote {plot(rf, path, f'{args.bag.name}: ')}")
+    figures = _figures(args)
+    if figures:
+        figures[0].parent.mkdir(parents=True, exist_ok=True)
+        for path, plot in zip(figures, (plots.plot_sphere, plots.plot_heading), strict=True):
+            print(f"wrote {plot(rf, path, f'{args.bag.name}: ')}")
     if rf.fit.calibration.state != CALIBRATED:
         _err(f"warning: the calibration is {rf.fit.calibration.state}, not calibrated: too little rotation to bound "
              "the heading error it adds to the field's own 2.5° (turn the sensor through more headings, and tilt "
