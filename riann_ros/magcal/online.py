@@ -15,6 +15,10 @@ the current attitude and field, per sample (a cached 3×3 field covariance, refr
 :data:`REFRESH_ANGLE_RAD` of rotation); the state is *calibrated* once the largest such σ over all headings at the
 current tilt is at most :data:`CALIBRATED_SD_RAD`, *uncalibrated* while no window has been added, *converging*
 in between.
+
+The prior as a hypothesis (:mod:`.hypothesis`): while the windows are consistent with the configured (or saved)
+calibration, the readings are calibrated with it as it is and :meth:`heading_sd_rad` adds nothing (the heading is a
+calibrated sensor's); once they reject it (:attr:`trusted` False, for good), the estimate and its σ take over.
 """
 
 from __future__ import annotations
@@ -24,7 +28,8 @@ import math
 import numpy as np
 
 from riann_ros.mag import USABLE_MAX_T, USABLE_MIN_T
-from riann_ros.magcal.model import Array, CalModel, heading_sd_bound
+from riann_ros.magcal.hypothesis import PriorTest
+from riann_ros.magcal.model import Array, CalModel, heading_sd_bound, rotation_matrix
 from riann_ros.magcal.records import (
     CALIBRATED,
     CALIBRATED_SD_RAD,
@@ -58,6 +63,8 @@ class OnlineMagCalibrator:
         self.model = CalModel(soft_iron_model, np.asarray(prior.soft_iron).reshape(3, 3))
         self.lam0, self.theta0 = self.model.prior(prior)
         self.est = InfoEstimate(self.model, self.lam0, self.theta0)
+        self.test = PriorTest(self.model, self.theta0)  # does the prior still hold?
+        self.rejected_prior_after_s: float | None = None  # s after this run's first sample it was rejected
         self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
         self.switches = 0  # times a candidate replaced the estimate
         self.windower = Windower()
@@ -110,6 +117,8 @@ class OnlineMagCalibrator:
     def heading_sd_rad(self, q: Quat, field_world_t: Vec) -> float:
         """rad; the σ the calibration adds to the heading of this sample: ``q`` its attitude (sensor → world),
         ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical."""
+        if self.test.holds:
+            return 0.0
         fx, fy = field_world_t[0], field_world_t[1]
         fh = math.sqrt(fx * fx + fy * fy)
         if fh <= 0.0:
@@ -124,7 +133,9 @@ class OnlineMagCalibrator:
     def field_sd_t(self) -> float:
         """T; the calibrated field's σ in its worst direction for the current orientation: how far its norm and
         dip can be off through the calibration alone (a disturbance test against a learned reference should widen
-        its band by a few of these while the calibration converges)."""
+        its band by a few of these while the calibration converges); 0 while the prior holds."""
+        if self.test.holds:
+            return 0.0
         self._maybe_refresh()
         return self.field_sd_ut * UT
 
@@ -140,11 +151,29 @@ class OnlineMagCalibrator:
             est.add(j, r0, var, d2, k)
             self.windows += 1
             self.cand = None
+            self._test(w, j, r0, var)
         else:  # a disturbed field, or the magnetic situation changed: a candidate learns from the rejected windows
             self.rejected += 1
             self._candidate(j, r0, ws)
         self._cache()
         self._set_state()
+
+    def _test(self, w: Window, j: Array, r0: Array, var: float) -> None:
+        """The prior's test (:mod:`.hypothesis`) after a window the estimate took."""
+        if not self.test.holds:
+            return
+        a0 = self.model.soft_iron(self.theta0)
+        u = a0 @ np.asarray(w.m1_ut) - self.theta0[self.model.p:]
+        horizontal = (float(np.hypot(*(rotation_matrix(self.q) @ u)[:2])) if self.q is not None
+                      else 0.5 * float(np.linalg.norm(u)))  # no attitude: a mid-latitude dip (60°)
+        tol = self.test.tolerance(u, horizontal)
+        if not self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol):
+            self.rejected_prior_after_s = self.windower.t
+
+    @property
+    def trusted(self) -> bool:
+        """The prior still holds: the readings are calibrated with it as configured (module docstring)."""
+        return self.test.holds
 
     def _candidate(self, j: Array, r0: Array, ws: WindowSet) -> None:
         """A rejected window goes to the candidate (restarted from the prior when it does not fit the candidate
@@ -189,9 +218,10 @@ class OnlineMagCalibrator:
         return self.model.with_floor(self.est.cov * max(1.0, self.unit_weight))
 
     def _cache(self) -> None:
-        a = self.model.soft_iron(self.theta)
+        theta = self.theta0 if self.test.holds else self.theta  # the calibration the readings get
+        a = self.model.soft_iron(theta)
         self._a = tuple(float(v) for v in a.reshape(9))
-        self._c = tuple(float(v) for v in self.theta[self.model.p:])
+        self._c = tuple(float(v) for v in theta[self.model.p:])
         self.q_refresh = None  # refresh the field covariance at the next heading σ
 
     def _maybe_refresh(self) -> None:
@@ -240,4 +270,5 @@ class OnlineMagCalibrator:
         cal = self.calibration()
         return MagCalStatus(state=self.state, hard_iron_t=cal.hard_iron_t, hard_iron_sd_t=cal.hard_iron_sd_t,
                             heading_sd_bound_rad=self.bound, windows=self.windows, rejected=self.rejected,
-                            unit_weight=self.unit_weight, converged_after_s=self.converged_after_s)
+                            unit_weight=self.unit_weight, converged_after_s=self.converged_after_s,
+                            prior_holds=self.test.holds)

@@ -180,7 +180,8 @@ class MagCalibration:
 class MagCalStatus:
     """What the node's ``/diagnostics`` shows, once per window: the state, the estimate and its uncertainty, the
     bound of the heading error it can add at the current tilt (rad), the windows used and rejected as disturbed,
-    and the residual scale (the variance of unit weight; ≈ 1 when the noise model fits)."""
+    the residual scale (the variance of unit weight; ≈ 1 when the noise model fits), and whether the configured
+    (or saved) calibration still holds (:mod:`~riann_ros.magcal.hypothesis`: the field is then used as configured)."""
 
     state: CalState
     hard_iron_t: tuple[float, float, float]
@@ -190,3 +191,4 @@ class MagCalStatus:
     rejected: int
     unit_weight: float
     converged_after_s: float | None
+    prior_holds: bool = True

@@ -1,0 +1,80 @@
+"""The configured calibration as a hypothesis the gyro tests (numpy, ROS-free).
+
+A configured (or saved) calibration ``θ₀`` is either right — to within what a calibrated magnetometer's heading
+already carries, the field heading's own σ (:data:`~.records.FIELD_HEADING_SD_RAD`) — or it is not (a robot's
+motors, battery and frame add tens of µT nobody measured). The windows' gyro-aided constraint (:mod:`.model`) tells
+the two apart: under ``H₀`` ("``θ₀`` is right") each window's residual at ``θ₀`` is the window's noise plus what
+the tolerance allows; under ``H₁`` ("``θ`` is unknown, the prior's σ") the windows point to another ``θ``.
+
+While ``H₀`` holds the field is used as configured and the calibration adds nothing to the heading's σ (the
+heading is that of a calibrated sensor); once the windows reject it, the calibration's own estimate and σ take over
+for the rest of the robot's run (the decision is kept over a reset and a hole: the sensor is the same).
+
+The test (:meth:`PriorTest.add`) is the generalised likelihood ratio of ``H₀`` against ``H₁`` on the windows the
+estimate holds: ``D² = δᵀ Λ_d (I + C_tol Λ_d)⁻¹ δ`` with ``δ = θ̂ − θ₀``, ``Λ_d`` the windows' information and
+``C_tol`` the tolerance's covariance, divided by the variance of unit weight when it exceeds 1 (windows noisier than
+the noise model widen the test with the σ); ``H₀`` is rejected when ``D²`` exceeds the χ² quantile
+:data:`PRIOR_REJECT_P` for the directions the windows observe, and at least :data:`MIN_FAILED_WINDOWS` windows
+fail ``H₀`` on their own (a single magnetically disturbed window that the loose ``H₁`` prior still admits does not
+reject a calibration that every other window agrees with).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.stats import chi2
+
+from riann_ros.magcal.model import Array, CalModel
+from riann_ros.magcal.records import FIELD_HEADING_SD_RAD, GATE_CHI2
+from riann_ros.magcal.solver import InfoEstimate
+
+#: the test's false-rejection probability: a right calibration is rejected once in 1000 runs' tests.
+PRIOR_REJECT_P = 0.999
+#: windows that must fail ``H₀`` on their own (each at the gate's 99.9 %, :data:`~.records.GATE_CHI2`) before the
+#: test may reject it: three independent 1-in-1000 failures of a right calibration (1e-9) — a lone disturbed window
+#: is not evidence against it.
+MIN_FAILED_WINDOWS = 3
+_QUANTILE = tuple(float(chi2.ppf(PRIOR_REJECT_P, k)) for k in range(1, 13))
+_TAN_TOL = math.tan(FIELD_HEADING_SD_RAD)
+
+
+class PriorTest:
+    """Whether the prior ``θ₀`` still holds (module docstring); :meth:`add` once per window the estimate takes."""
+
+    def __init__(self, model: CalModel, theta0: Array) -> None:
+        self.model = model
+        self.theta0 = theta0
+        self.holds = True
+        self.failed = 0  # windows that failed H₀ on their own
+        self.d2 = 0.0  # the last test's D² (diagnostics)
+
+    def tolerance(self, u_ut: Array, horizontal_ut: float) -> Array:
+        """``C_tol`` (n, n) in θ: per axis of the hard iron the offset whose heading error, across a horizontal
+        field of ``horizontal_ut``, is :data:`~.records.FIELD_HEADING_SD_RAD`; per soft-iron direction the same
+        error at the field ``u_ut``'s strength."""
+        tol_h = _TAN_TOL * horizontal_ut
+        tol_s = tol_h / max(float(np.linalg.norm(u_ut)), 1e-9)
+        return np.diag(np.r_[np.full(self.model.p, tol_s * tol_s), np.full(3, tol_h * tol_h)])
+
+    def window_fails(self, j: Array, r0: Array, var: float, tol: Array) -> bool:
+        """Whether one window fails ``H₀`` on its own: its residual at θ₀ against its noise and the tolerance."""
+        r = r0 + j @ self.theta0
+        s = var * np.eye(3) + j @ tol @ j.T
+        return float(r @ np.linalg.solve(s, r)) > GATE_CHI2
+
+    def add(self, est: InfoEstimate, failed: bool, tol: Array) -> bool:
+        """The test after the estimate ``est`` took a window (``failed``: it failed ``H₀`` on its own); returns
+        whether ``H₀`` still holds (once rejected, never again)."""
+        if not self.holds:
+            return False
+        self.failed += int(failed)
+        delta = est.theta - self.theta0
+        lam = est.lam
+        m = lam @ np.linalg.inv(np.eye(self.model.n) + tol @ lam)
+        self.d2 = float(delta @ (0.5 * (m + m.T)) @ delta) / max(1.0, est.unit_weight)
+        dof = min(max(est.observed, 1), len(_QUANTILE))
+        if self.failed >= MIN_FAILED_WINDOWS and self.d2 > _QUANTILE[dof - 1]:
+            self.holds = False
+        return self.holds
