@@ -67,7 +67,7 @@ MAX_STEP_S = 0.2
 # ------------------------------------------------------------------------------------------------------------------
 #: T; the prior standard deviation of an unknown hard iron per axis: a robot's motors, battery, frame and board
 #: add "tens of µT" (Earth's field ≈ 50 µT).
-HARD_IRON_PRIOR_SD_T = 50.0 * UT
+HARD_IRON_PRIOR_SD_T = 50e-6  # (50 µT written in T: the exact float of config/riann.yaml's 5.0e-05)
 #: the prior standard deviation of the soft iron's symmetric part per entry (Frobenius-isotropic): soft-iron scale
 #: errors and cross-coupling of 5–15 %.
 SOFT_IRON_PRIOR_SD = 0.1
