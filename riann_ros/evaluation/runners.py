@@ -70,6 +70,8 @@ class _OfflineRun:
             stats.rejected = {k: int(v) for k, v in stream.gate.rejected.items()}
             stats.resets = {k: int(v) for k, v in stream.gate.resets.items()}
             stats.mag_samples = stream.mag.samples_with_field
+            cal = stream.estimator.mag_cal_status()
+            stats.mag_converged_after_s = None if cal is None else cal.converged_after_s
         return self.stats
 
 

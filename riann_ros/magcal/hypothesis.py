@@ -17,6 +17,14 @@ the noise model widen the test with the σ); ``H₀`` is rejected when ``D²`` e
 :data:`PRIOR_REJECT_P` for the directions the windows observe, and at least :data:`MIN_FAILED_WINDOWS` windows
 fail ``H₀`` on their own (a single magnetically disturbed window that the loose ``H₁`` prior still admits does not
 reject a calibration that every other window agrees with).
+
+Until the windows have decided, the heading must not claim a calibrated sensor's σ: :attr:`PriorTest.p_holds` is
+the posterior probability of ``H₀`` (Bayes factor of the two linear-Gaussian models on the same windows, each
+hypothesis a priori as likely as the other: nothing says whether a robot's magnetometer was calibrated), and the
+heading's σ while ``H₀`` is used includes ``(1 − p) (σ₁² + Δ²)``: ``σ₁`` the heading σ under ``H₁``'s estimate and
+``Δ`` the heading difference between the two calibrations (:meth:`~.online.OnlineMagCalibrator.heading_sd_rad`).
+Before any window (at rest) ``p`` is ½: the field is used, and said to be unverified; every window that agrees with
+``H₀`` multiplies its odds by the Occam factor of the directions it observes (tens per direction).
 """
 
 from __future__ import annotations
@@ -49,6 +57,7 @@ class PriorTest:
         self.holds = True
         self.failed = 0  # windows that failed H₀ on their own
         self.d2 = 0.0  # the last test's D² (diagnostics)
+        self.p_holds = 0.5  # the posterior probability of H₀ (module docstring)
 
     def tolerance(self, u_ut: Array, horizontal_ut: float) -> Array:
         """``C_tol`` (n, n) in θ: per axis of the hard iron the offset whose heading error, across a horizontal
@@ -70,6 +79,7 @@ class PriorTest:
         if not self.holds:
             return False
         self.failed += int(failed)
+        self.p_holds = self._posterior(est, tol)
         delta = est.theta - self.theta0
         lam = est.lam
         m = lam @ np.linalg.inv(np.eye(self.model.n) + tol @ lam)
@@ -78,3 +88,18 @@ class PriorTest:
         if self.failed >= MIN_FAILED_WINDOWS and self.d2 > _QUANTILE[dof - 1]:
             self.holds = False
         return self.holds
+
+    def _posterior(self, est: InfoEstimate, tol: Array) -> float:
+        """P(H₀ | windows): the Bayes factor of ``H₀`` (θ ~ N(θ₀, C_tol)) against ``H₁`` (θ ~ N(θ₀, Λ₀⁻¹)) on the
+        windows' information ``Λ`` and gradient ``g = η − Λ θ₀``, both scaled by the variance of unit weight;
+        ``log B₀₁ = ½ gᵀ[(C_tol⁻¹ + Λ)⁻¹ − (Λ₀ + Λ)⁻¹] g + ½ log det(I + Λ₀⁻¹Λ) − ½ log det(I + C_tol Λ)``."""
+        k = max(1.0, est.unit_weight)
+        lam = est.lam / k
+        g = (est.eta - est.lam @ self.theta0) / k
+        eye = np.eye(self.model.n)
+        a0 = tol @ np.linalg.inv(eye + lam @ tol)
+        c1 = np.linalg.inv(est.lam0)
+        a1 = np.linalg.inv(est.lam0 + lam)
+        log_b = 0.5 * float(g @ (a0 - a1) @ g)
+        log_b += 0.5 * (np.linalg.slogdet(eye + c1 @ lam)[1] - np.linalg.slogdet(eye + tol @ lam)[1])
+        return 1.0 / (1.0 + math.exp(min(-log_b, 700.0)))

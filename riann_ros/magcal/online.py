@@ -50,6 +50,9 @@ from riann_ros.magcal.windows import Window, Windower, WindowSet
 from riann_ros.rotations import Quat, Vec, rotate
 
 _COS_REFRESH = math.cos(0.5 * REFRESH_ANGLE_RAD)
+#: below this posterior probability that the configured calibration is wrong, its share of the heading σ is none (a
+#: millionth of even a 180° doubt is 0.2°: below the field heading's own σ, 2.5°, in quadrature: 0.006°)
+UNDOUBTED = 1e-6
 _MIN2_UT, _MAX2_UT = (USABLE_MIN_T / UT) ** 2, (USABLE_MAX_T / UT) ** 2  # µT²: riann_ros.mag's plausible norms
 
 
@@ -117,14 +120,36 @@ class OnlineMagCalibrator:
     def heading_sd_rad(self, q: Quat, field_world_t: Vec) -> float:
         """rad; the σ the calibration adds to the heading of this sample: ``q`` its attitude (sensor → world),
         ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical."""
-        if self.test.holds:
+        doubt = 1.0 - self.test.p_holds if self.test.holds else 1.0
+        if doubt < UNDOUBTED:
             return 0.0
         fx, fy = field_world_t[0], field_world_t[1]
         fh = math.sqrt(fx * fx + fy * fy)
         if fh <= 0.0:
             return math.pi
+        if self.test.holds:  # the field calibrated as configured: the mixture's share (riann_ros.magcal.hypothesis)
+            s1 = self._heading_sd(q, fx / fh, fy / fh, fh)
+            d = self._heading_gap(q, field_world_t)
+            return min(math.sqrt(doubt * (s1 * s1 + d * d)), math.pi)
+        return self._heading_sd(q, fx / fh, fy / fh, fh)
+
+    def _heading_gap(self, q: Quat, field_world_t: Vec) -> float:
+        """rad; the heading difference between the estimate's calibration of the last reading and ``field_world_t``
+        (the configured calibration's)."""
+        if self.m_last is None:
+            return 0.0
+        a, c = self._est_a, self._est_c
+        x, y, z = self.m_last
+        u = (a[0] * x + a[1] * y + a[2] * z - c[0], a[3] * x + a[4] * y + a[5] * z - c[1],
+             a[6] * x + a[7] * y + a[8] * z - c[2])
+        w = rotate(q, u)
+        f = field_world_t
+        return abs(math.atan2(w[0] * f[1] - w[1] * f[0], w[0] * f[0] + w[1] * f[1]))
+
+    def _heading_sd(self, q: Quat, ex: float, ey: float, fh: float) -> float:
+        """rad; the estimate's heading σ for the horizontal field direction (ex, ey) of strength ``fh`` (T)."""
         self._maybe_refresh()
-        wx, wy, wz = rotate((q[0], -q[1], -q[2], -q[3]), (fy / fh, -fx / fh, 0.0))  # across the field, sensor frame
+        wx, wy, wz = rotate((q[0], -q[1], -q[2], -q[3]), (ey, -ex, 0.0))  # across the field, sensor frame
         s = self.su
         var = (s[0] * wx * wx + s[3] * wy * wy + s[5] * wz * wz
                + 2.0 * (s[1] * wx * wy + s[2] * wx * wz + s[4] * wy * wz))
@@ -222,6 +247,9 @@ class OnlineMagCalibrator:
         a = self.model.soft_iron(theta)
         self._a = tuple(float(v) for v in a.reshape(9))
         self._c = tuple(float(v) for v in theta[self.model.p:])
+        est_a = self.model.soft_iron(self.theta)  # the estimate's own (the same once the prior is rejected)
+        self._est_a = tuple(float(v) for v in est_a.reshape(9))
+        self._est_c = tuple(float(v) for v in self.theta[self.model.p:])
         self.q_refresh = None  # refresh the field covariance at the next heading σ
 
     def _maybe_refresh(self) -> None:

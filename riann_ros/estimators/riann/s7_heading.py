@@ -63,13 +63,14 @@ class Heading:
         gain = [0.0] * len(qc)
         dip = [0.0] * len(qc)
         cal = [0.0] * len(qc)
-        self._cal_sd = cal  # filled where the magnetic heading runs
+        doubt = [0.0] * len(qc)
+        self._cal_sd, self._doubt_sd = cal, doubt  # filled where the magnetic heading runs
         if len(qc) <= SMALL_BLOCK:
             q = np.array([self._one(i, qc[i], delta[i], dt[i], None if mag is None else mag[i], bridges.get(i),
                                     tilt_sd[i], gain, dip) for i in range(len(qc))])
         else:
             q = self._vector(block, gain, dip)
-        return HeadingBlock(q, gain, dip, cal)
+        return HeadingBlock(q, gain, dip, cal, doubt)
 
     def _one(self, i: int, qc: Quat, delta: Quat, dt: float, mag: Vec | None, bridge: float | None, tilt_sd: float,
              gain: list[float], dip: list[float]) -> Quat:
@@ -86,7 +87,7 @@ class Heading:
             self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), math.tau)
             gain[i] = self.mag.gain
             dip[i] = self.mag.ref_dip
-            self._cal_sd[i] = self.mag.cal_sd
+            self._cal_sd[i], self._doubt_sd[i] = self.mag.cal_sd, self.mag.doubt_sd
         w, x, y, z = qmul(about_z(self.psi), qc)
         n = math.sqrt(w * w + x * x + y * y + z * z)
         if w < 0.0:  # sign convention: w >= 0
@@ -143,7 +144,7 @@ class Heading:
             psi += step(qo, delta[i], dt[i], None if mag is None else mag[i], tilt_sd[i])
             gain[first + i] = self.mag.gain
             dip[first + i] = self.mag.ref_dip
-            self._cal_sd[first + i] = self.mag.cal_sd
+            self._cal_sd[first + i], self._doubt_sd[first + i] = self.mag.cal_sd, self.mag.doubt_sd
             out[i] = psi
         return out
 

@@ -18,7 +18,10 @@ field (the one it has was set by a field calibrated wrongly), and each field hea
 calibration knows it: its weight is ``1/(σ_m² + σ_c²)`` (``σ_c`` the heading σ the calibration adds at this sample,
 ``σ_m`` the field heading's own, stage 8's MAG_SD): the gain is ``dt/tau_mag · σ_m²/(σ_m² + σ_c²)``, and the start's
 inverse-variance mean stays open while ``σ_c > σ_m``; the disturbance test widens its norm and dip bands by three
-of the calibrated field's σ. docs/magnetometer.md has the physics.
+of the calibrated field's σ. While the configured calibration is used its gains are today's: no other source of
+heading exists that the field could be weighed against (the gyro's heading came from the same field); the doubt
+the windows leave about it goes to stage 8's σ (:attr:`MagHeading.doubt_sd`). docs/magnetometer.md has the
+physics.
 """
 
 from __future__ import annotations
@@ -94,7 +97,8 @@ class MagHeading:
         self.gate = False  # the next field is tested against the bridge
         self.fresh = False  # the next field sets the heading anew (the configured calibration was rejected)
         self.wsum = 0.0  # Σ of the start's weights (relative to a calibrated field's: 1 each while trusted)
-        self.cal_sd = 0.0  # the heading σ the calibration added to the last field (rad)
+        self.cal_sd = 0.0  # the heading σ the calibration's estimate added to the last field (rad)
+        self.doubt_sd = 0.0  # while the configured calibration is used: the σ of the doubt that it holds (rad)
         self.latency.reset()
         if self.cal is not None:
             self.cal.restart()
@@ -189,9 +193,14 @@ class MagHeading:
 
     def _weight(self, q: Quat, mw: Vec) -> float:
         """This field heading's weight relative to a calibrated one's, ``σ_m²/(σ_m² + σ_c²)`` (1 while the
-        configured calibration holds, or without the online calibration)."""
-        if self.cal is None or self.trusted:
+        configured calibration holds, or without the online calibration; the σ its doubt leaves then goes to
+        :attr:`doubt_sd`)."""
+        if self.cal is None:
             return 1.0
+        if self.trusted:  # used as configured; the doubt the windows leave goes to the σ only (stage 8)
+            self.doubt_sd = self.cal.heading_sd_rad(q, mw)
+            return 1.0
+        self.doubt_sd = 0.0
         self.cal_sd = self.cal.heading_sd_rad(q, mw)
         return MAG_SD * MAG_SD / (MAG_SD * MAG_SD + self.cal_sd * self.cal_sd)
 

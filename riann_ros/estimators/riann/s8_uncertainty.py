@@ -31,7 +31,9 @@ heading carries beyond the field's, which follows the heading stage step by step
 - the online magnetometer calibration's share: a field whose heading the calibration knows to ``σ_c`` (stage 7a;
   0 while the configured calibration holds) moves a part ``x_c`` of the carried error the way it moves the
   heading, ``x_c ← (1 − k) x_c + k σ_c`` (the calibration's error is common to consecutive fields, so it does not
-  average out: the heading's share of it is the weighted mean of theirs); ``x`` is ``√(x² + x_c²)``.
+  average out: the heading's share of it is the weighted mean of theirs); while the configured calibration is used,
+  the doubt the gyro-aided test leaves about it, ``x_d`` (stage 7a: it concerns every field the heading took
+  alike, so the newest value counts, not a mean); ``x`` is ``√(x² + x_c² + x_d²)``.
 
 So after a long rejection, a gap or a badly bridged hole the σ stays wide until the field has pulled the heading in,
 at the heading stage's own pace.
@@ -103,7 +105,7 @@ class Uncertainty:
         self.started = False
         self.known = False  # a field has set the heading (since the reset or the last gap)
         if cause is Cause.RESET:
-            self.x_bridge = self.x_carried = self.since = self.x_cal = 0.0
+            self.x_bridge = self.x_carried = self.since = self.x_cal = self.x_doubt = 0.0
             self.last: tuple[float, float] | None = None  # the newest sample's σ (rad), for diagnostics
 
     def run(self, block: UncertaintyIn) -> Uncertainties:
@@ -127,6 +129,8 @@ class Uncertainty:
             h = (hand.blend_sd_deg[i] + hand.fresh_sd_deg[i]) * DEG  # never both non-zero
             frows.append((self.spread, self.rate_lp, h, bs))
             si = math.sqrt(inclination_var(self.spread, self.rate_lp, h, bs))
+            if heading.gain[i] > 0.0:
+                self.x_doubt = heading.doubt_sd_rad[i]
             y = self._yaw(heading.gain[i], s.step_s[i], heading.dip_rad[i], bs, hand.bridge_sd_deg.get(i),
                           heading.cal_sd_rad[i])
             yrows.append(y)
@@ -162,7 +166,7 @@ class Uncertainty:
 
     def _carried(self, x: float) -> float:
         """The carried error with the calibration's share (the module docstring)."""
-        return math.hypot(x, self.x_cal) if self.x_cal else x
+        return math.hypot(x, self.x_cal, self.x_doubt) if self.x_cal or self.x_doubt else x
 
     def diagnostics(self) -> dict[str, str]:
         if self.last is None:

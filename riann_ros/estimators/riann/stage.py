@@ -270,13 +270,16 @@ class HeadingIn(NamedTuple):
 
 class HeadingBlock(NamedTuple):
     """Stage 7's output: the output attitudes (n, 4), w >= 0, and per sample the heading's gain toward the field
-    (0: not corrected), the field reference's dip (0 before a field) and the σ the online magnetometer calibration
-    adds to the field's heading (0 while the configured calibration holds, or without the online calibration)."""
+    (0: not corrected), the field reference's dip (0 before a field), the σ the online magnetometer calibration's
+    estimate adds to the field's heading (0 while the configured calibration is used, or without the online
+    calibration), and while the configured calibration is used the σ of the doubt the gyro-aided test leaves
+    about it (0 otherwise)."""
 
     q: Array
     gain: list[float]
     dip_rad: list[float]
     cal_sd_rad: list[float]
+    doubt_sd_rad: list[float]
 
 
 class UncertaintyIn(NamedTuple):
