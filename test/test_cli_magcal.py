@@ -157,3 +157,32 @@ def test_broad_with_an_injected_offset(broad_dir, tmp_path, capsys):
     cal = load_calibration(out)
     assert np.linalg.norm(np.array(cal.hard_iron_t) / UT - offset) < 1.5  # the issue's acceptance
     assert math.isfinite(cal.hard_iron_sd_t[0])
+
+
+@pytest.mark.slow
+def test_a_foreign_bag_with_its_own_topics_and_a_slower_magnetometer(tmp_path, capsys):
+    """A driver's bag: IMU on /robot/imu at 200 Hz, the magnetometer on /robot/mag at 50 Hz."""
+    from test_bagio_topics import _header, _ts, imu_msg, write_bag
+
+    rec = generate(duration=60.0, rate=200, motion="rotation", seed=1)
+    raw = distort(rec.quat_ref, H_TRUE * UT, S_TRUE, noise_t=0.3e-6, seed=1)
+    v3 = _ts().types["geometry_msgs/msg/Vector3"]
+    mag_type = "sensor_msgs/msg/MagneticField"
+    mags = [(int(t), _ts().types[mag_type](header=_header(int(t), "imu"),
+                                           magnetic_field=v3(x=float(m[0]), y=float(m[1]), z=float(m[2])),
+                                           magnetic_field_covariance=np.zeros(9)))
+            for t, m in zip(rec.stamps_ns[::4], raw[::4], strict=True)]
+    imus = [(int(t), imu_msg(int(t), a, g)) for t, a, g in zip(rec.stamps_ns, rec.acc, rec.gyr, strict=True)]
+    bag = write_bag(tmp_path / "driver_bag", {"/robot/imu": ("sensor_msgs/msg/Imu", imus),
+                                              "/robot/mag": (mag_type, mags)})
+    out = tmp_path / "my_mag.yaml"
+    assert magcal.main([str(bag), "--imu-topic", "/robot/imu", "--out", str(out), "--no-plots"]) == 1
+    assert "another topic: --mag-topic" in capsys.readouterr().err
+    assert magcal.main([str(bag), "--imu-topic", "/robot/imu", "--mag-topic", "/robot/magnet", "--out",
+                        str(out), "--no-plots"]) == 1
+    assert "no /robot/magnet topic" in capsys.readouterr().err and not out.exists()
+    assert magcal.main([str(bag), "--imu-topic", "robot/imu", "--mag-topic", "robot/mag", "--out", str(out),
+                        "--no-plots"]) in (0, 3)
+    assert f"{len(mags)} magnetometer readings" in capsys.readouterr().out  # each reading once
+    cal = load_calibration(out)
+    assert np.linalg.norm(np.array(cal.hard_iron_t) / UT - H_TRUE) < 1.0

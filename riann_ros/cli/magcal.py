@@ -27,7 +27,7 @@ from riann_ros.cli.magcal_parser import (
     EXIT_USAGE,
     build_parser,
 )
-from riann_ros.magcal.bag_fit import NotCalibratable, RecordingFit
+from riann_ros.magcal.bag_fit import NoMagnetometer, NotCalibratable, RecordingFit
 from riann_ros.magcal.records import CALIBRATED, MAX_DELAY_S, UT, MagCalPrior
 
 
@@ -101,7 +101,8 @@ def _run(args: argparse.Namespace) -> int:
     from riann_ros.magcal.bag_fit import calibrate_recording
     from riann_ros.magcal.store import CalibrationFileError, save_calibration
 
-    topics = BagTopics() if args.imu_topic is None else BagTopics(imu="/" + args.imu_topic.strip().lstrip("/"))
+    topics = BagTopics(**{k: "/" + v.strip().lstrip("/") for k, v in (("imu", args.imu_topic),
+                                                                       ("mag", args.mag_topic)) if v})
     try:
         prior = _prior(args)
         rec = read_whole(args.bag, topics)
@@ -110,7 +111,8 @@ def _run(args: argparse.Namespace) -> int:
         _err(str(exc))
         return EXIT_FAILED
     except NotCalibratable as exc:
-        _err(f"{args.bag}: {exc}; nothing written")
+        hint = "; another topic: --mag-topic" if isinstance(exc, NoMagnetometer) else ""
+        _err(f"{args.bag}: {exc}{hint}; nothing written")
         return EXIT_FAILED
     print(format_fit(rf))
     if args.out is not None:

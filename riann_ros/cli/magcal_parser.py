@@ -30,8 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
         "(nothing written), 2 usage error, 130 interrupted",
     )
     p.add_argument("bag", type=Path, metavar="BAG",
-                   help="a bag (.mcap, .db3, bag directory) with sensor_msgs/Imu and sensor_msgs/MagneticField on "
-                   "/imu/mag, or a BROAD trial file (.hdf5/.mat)")
+                   help="a bag (.mcap, .db3, bag directory) with sensor_msgs/Imu and sensor_msgs/MagneticField "
+                   "(--imu-topic, --mag-topic), or a BROAD trial file (.hdf5/.mat)")
     p.add_argument("--out", "-o", type=Path, default=None, metavar="FILE",
                    help="the calibration file to write (YAML in the nodes' parameter names); without it nothing is "
                    "written. An existing calibration file is replaced only with --force; any other file never")
@@ -43,6 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plots", action="store_true", help="no figures")
     p.add_argument("--imu-topic", default=None, metavar="TOPIC",
                    help="the sensor_msgs/Imu topic (default /imu/data_raw, the converter's layout)")
+    p.add_argument("--mag-topic", default=None, metavar="TOPIC",
+                   help="the sensor_msgs/MagneticField topic (default /imu/mag, the converter's layout)")
     p.add_argument("--soft-iron-model", choices=SOFT_IRON_MODELS, default="full",
                    help="full (default: scale, skew and the magnetometer's misalignment to the gyro), symmetric, "
                    "or none (hard iron only)")

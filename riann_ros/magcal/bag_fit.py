@@ -42,6 +42,10 @@ class NotCalibratable(ValueError):
     """A recording that gives nothing to calibrate from (no magnetometer, no plausible reading, no rotation)."""
 
 
+class NoMagnetometer(NotCalibratable):
+    """A recording without a magnetometer."""
+
+
 @dataclass(frozen=True)
 class RecordingFit:
     """The fit of one recording and its checks: readings' times (s), raw and calibrated fields (µT, one row per
@@ -106,8 +110,8 @@ def calibrate_recording(rec: Recording, prior: MagCalPrior | None = None, soft_i
     from riann_ros.mag import plausible
 
     if rec.mag is None:
-        raise NotCalibratable("no magnetometer in the recording (in a bag: no sensor_msgs/msg/MagneticField on "
-                              f"{MAG_TOPIC})")
+        raise NoMagnetometer(f"no magnetometer in the recording (in a bag: no sensor_msgs/msg/MagneticField on "
+                             f"{MAG_TOPIC})")
     mag = np.where(fresh_readings(rec.mag)[:, None], rec.mag, np.nan)
     ok = plausible(mag)
     if not ok.any():
