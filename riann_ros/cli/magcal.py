@@ -48,8 +48,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
     """Refuse (ValueError, exit status 2) outputs that exist, before any work."""
     from riann_ros.magcal.store import CalibrationFileError, is_calibration_file
 
-    if not 0.0 <= args.mag_delay <= MAX_DELAY_S:
-        raise ValueError(f"--mag-delay must be 0 to {MAX_DELAY_S:g} s, got {args.mag_delay:g}")
+    _delay(args)
     if args.out is not None and args.out.exists():
         if args.out.is_dir() or not is_calibration_file(args.out):
             raise ValueError(str(CalibrationFileError(f"{args.out}: exists and is not a magnetometer calibration "
@@ -61,6 +60,19 @@ def _check_outputs(args: argparse.Namespace) -> None:
     old = [f for f in _figures(args) if f.exists()]
     if old and not args.force:
         raise ValueError(f"{old[0]}: exists; --force replaces it (or --no-plots)")
+
+
+def _delay(args: argparse.Namespace) -> float | None:
+    """--mag-delay in s (None: auto); ValueError for anything else."""
+    if args.mag_delay.strip().lower() == "auto":
+        return None
+    try:
+        d = float(args.mag_delay)
+    except ValueError:
+        d = math.nan
+    if not 0.0 <= d <= MAX_DELAY_S:
+        raise ValueError(f"--mag-delay must be auto or 0 to {MAX_DELAY_S:g} s, got {args.mag_delay!r}")
+    return d
 
 
 def _prior(args: argparse.Namespace) -> MagCalPrior | None:
@@ -77,6 +89,8 @@ def format_fit(rf: RecordingFit) -> str:
     s_sd = [math.sqrt(max(cal.covariance[i * 12 + i], 0.0)) for i in range(9)]
     lines = [f"recording: {rf.seconds:.1f} s, {rf.readings} magnetometer readings, {f.windows} windows of rotation "
              f"({f.outliers} left out or down-weighted as disturbed)",
+             f"magnetometer latency behind the gyro: {rf.delay_s * 1e3:.1f} ms "
+             f"({'estimated: the least residual' if rf.delay_estimated else 'given'})",
              "hard iron (µT): " + "  ".join(f"{a} {h / UT:+7.2f} ± {s / UT:.2f}"
                                            for a, h, s in zip("xyz", cal.hard_iron_t, sd, strict=True)),
              f"soft iron ({cal.soft_iron_model}; ± σ per entry):"]
@@ -106,7 +120,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         prior = _prior(args)
         rec = read_whole(args.bag, topics)
-        rf = calibrate_recording(rec, prior, args.soft_iron_model, args.mag_delay)
+        rf = calibrate_recording(rec, prior, args.soft_iron_model, _delay(args))
     except (EvalError, CalibrationFileError) as exc:
         _err(str(exc))
         return EXIT_FAILED

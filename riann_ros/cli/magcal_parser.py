@@ -48,9 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--soft-iron-model", choices=SOFT_IRON_MODELS, default="full",
                    help="full (default: scale, skew and the magnetometer's misalignment to the gyro), symmetric, "
                    "or none (hard iron only)")
-    p.add_argument("--mag-delay", type=float, default=0.0, metavar="SECONDS",
-                   help="the magnetometer's latency against the gyro (s, 0 to 0.1; default 0): a reading taken this "
-                   "long before its stamp says")
+    p.add_argument("--mag-delay", default="auto", metavar="SECONDS",
+                   help="the magnetometer's latency behind the gyro (s, 0 to 0.1: a reading taken this long before "
+                   "its stamp says), or auto (default): the latency that leaves the least residual")
     p.add_argument("--prior", type=Path, default=None, metavar="FILE",
                    help="start from a saved calibration file (its estimate and covariance) instead of the unknown "
                    "prior (hard iron 0 ± 50 µT, soft iron identity ± 0.1)")
