@@ -68,6 +68,7 @@ class OnlineMagCalibrator:
         self.est = InfoEstimate(self.model, self.lam0, self.theta0)
         self.test = PriorTest(self.model, self.theta0)  # does the prior still hold?
         self.rejected_prior_after_s: float | None = None  # s after this run's first sample it was rejected
+        self.agree = 0  # consecutive windows that agree with a rejected prior
         self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
         self.switches = 0  # times a candidate replaced the estimate
         self.windower = Windower()
@@ -180,6 +181,8 @@ class OnlineMagCalibrator:
         else:  # a disturbed field, or the magnetic situation changed: a candidate learns from the rejected windows
             self.rejected += 1
             self._candidate(j, r0, ws)
+        if not self.test.holds:
+            self._retest(w, j, r0, var)
         self._cache()
         self._set_state()
 
@@ -187,13 +190,30 @@ class OnlineMagCalibrator:
         """The prior's test (:mod:`.hypothesis`) after a window the estimate took."""
         if not self.test.holds:
             return
+        tol = self._tolerance(w)
+        if not self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol):
+            self.rejected_prior_after_s = self.windower.t
+
+    def _tolerance(self, w: Window) -> Array:
         a0 = self.model.soft_iron(self.theta0)
         u = a0 @ np.asarray(w.m1_ut) - self.theta0[self.model.p:]
         horizontal = (float(np.hypot(*(rotation_matrix(self.q) @ u)[:2])) if self.q is not None
                       else 0.5 * float(np.linalg.norm(u)))  # no attitude: a mid-latitude dip (60°)
-        tol = self.test.tolerance(u, horizontal)
-        if not self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol):
-            self.rejected_prior_after_s = self.windower.t
+        return self.test.tolerance(u, horizontal)
+
+    def _retest(self, w: Window, j: Array, r0: Array, var: float) -> None:
+        """After the prior was rejected: :data:`~.records.SWITCH_WINDOWS` consecutive windows that agree with it
+        restore it, as a changed magnetic situation replaces the estimate (a magnet attached for a while and taken
+        off again); the estimate and the test start anew from the prior."""
+        if self.test.window_fails(j, r0, var, self._tolerance(w)):
+            self.agree = 0
+            return
+        self.agree += 1
+        if self.agree >= SWITCH_WINDOWS:
+            self.est, self.cand = InfoEstimate(self.model, self.lam0, self.theta0), None
+            self.test = PriorTest(self.model, self.theta0)
+            self.windows, self.agree = 0, 0
+            self.rejected_prior_after_s = None
 
     @property
     def trusted(self) -> bool:

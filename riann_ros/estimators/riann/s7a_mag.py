@@ -209,8 +209,9 @@ class MagHeading:
         field or None. When its prior is rejected the next field sets the heading anew."""
         assert self.cal is not None
         out = self.cal.update(delta, dt, mag, self.delay, q)
-        if self.trusted and not self.cal.trusted:
-            self.trusted, self.fresh = False, True
+        if self.trusted != self.cal.trusted:  # rejected, or (a changed magnetic situation) restored
+            self.trusted = self.cal.trusted
+            self.fresh, self.cal_sd = not self.trusted, 0.0
         return out
 
     def _begin(self, norm: float, dip: float, scale: float) -> None:
