@@ -120,7 +120,10 @@ class OnlineMagCalibrator:
 
     def heading_sd_rad(self, q: Quat, field_world_t: Vec) -> float:
         """rad; the σ the calibration adds to the heading of this sample: ``q`` its attitude (sensor → world),
-        ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical."""
+        ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical, and
+        while the last window contradicted the estimate (the field disturbed, or the magnetic situation changed:
+        nothing is known of the calibration until a window agrees again or a new estimate replaces it). While the
+        prior holds: the share of the doubt about it (:mod:`.hypothesis`)."""
         doubt = 1.0 - self.test.p_holds if self.test.holds else 1.0
         if doubt < UNDOUBTED:
             return 0.0
@@ -132,6 +135,8 @@ class OnlineMagCalibrator:
             s1 = self._heading_sd(q, fx / fh, fy / fh, fh)
             d = self._heading_gap(q, field_world_t)
             return min(math.sqrt(doubt * (s1 * s1 + d * d)), math.pi)
+        if self.cand is not None:  # the last window contradicted the estimate: disturbed, or the situation changed
+            return math.pi
         return self._heading_sd(q, fx / fh, fy / fh, fh)
 
     def _heading_gap(self, q: Quat, field_world_t: Vec) -> float:

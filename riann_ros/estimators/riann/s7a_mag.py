@@ -32,6 +32,7 @@ from riann_ros.constants import DEG
 from riann_ros.defaults import MAG_HEADING_SD_DEG
 from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
+from riann_ros.magcal.records import GYRO_BIAS_RESIDUAL_SD_RAD_S
 from riann_ros.rotations import IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
 
 # VQF's defaults (vqf 2.1.2 VQFParams): magnetic disturbance rejection
@@ -210,9 +211,22 @@ class MagHeading:
         assert self.cal is not None
         out = self.cal.update(delta, dt, mag, self.delay, q)
         if self.trusted != self.cal.trusted:  # rejected, or (a changed magnetic situation) restored
-            self.trusted = self.cal.trusted
-            self.fresh, self.cal_sd = not self.trusted, 0.0
+            self.trusted, self.cal_sd = self.cal.trusted, 0.0
+            self._switched()
         return out
+
+    def _switched(self) -> None:
+        """The configured calibration was just rejected, or restored. While the field was being rejected as
+        disturbed, the magnetic situation changed under a heading the gyro held (a magnet attached, or taken off):
+        that heading bridges to the newly calibrated fields, its σ the field heading's at the last accepted field
+        plus the residual gyro bias over the time rejected. Otherwise a rejected calibration's heading came from
+        fields calibrated wrongly: the next field sets it anew (a restored one's needs nothing)."""
+        if not (self.started and self.disturbed):
+            self.fresh = not self.trusted
+            return
+        bridge_deg = math.hypot(MAG_HEADING_SD_DEG, GYRO_BIAS_RESIDUAL_SD_RAD_S / DEG * self.reject_t)
+        self.t, self.reacq, self.gate = 0.0, True, True
+        self.weight = 1.0 / (bridge_deg * bridge_deg)
 
     def _begin(self, norm: float, dip: float, scale: float) -> None:
         """The first field (since a reset, or since the configured calibration was rejected) sets the heading and
@@ -227,7 +241,7 @@ class MagHeading:
         """The weight of this field's heading (error ``err``, rad; world-frame field ``mw``) in the mean since the
         hole; the first field after a hole also tests the bridge (module docstring)."""
         tan_dip = abs(mw[2]) / math.sqrt(mw[0] * mw[0] + mw[1] * mw[1])
-        var = REACQUIRE_FIELD_SD_DEG * REACQUIRE_FIELD_SD_DEG + (tan_dip * tilt_sd) ** 2
+        var = REACQUIRE_FIELD_SD_DEG * REACQUIRE_FIELD_SD_DEG + (tan_dip * tilt_sd) ** 2 + (self.cal_sd / DEG) ** 2
         if self.gate:  # the first field after the hole: is the bridge consistent with it?
             self.gate = False
             if (err / DEG) ** 2 > BRIDGE_GATE * BRIDGE_GATE * (1.0 / self.weight + var):
