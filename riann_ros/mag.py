@@ -30,7 +30,7 @@ from typing import TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from riann_ros.magcal.records import HARD_IRON_PRIOR_SD_T, SOFT_IRON_MODELS, MagCalPrior
+from riann_ros.magcal.records import SOFT_IRON_MODELS, MagCalPrior
 from riann_ros.params import ParamSpec, defaults
 
 F = TypeVar("F", float, NDArray[np.float64])  # one field's component (float) or a column of fields (array)
@@ -71,8 +71,9 @@ MAG_CAL_PARAMS: tuple[ParamSpec, ...] = (
               "they are while the gyro-aided test finds the field consistent with them; once it does not, the "
               "heading trusts the field only as far as the calibration knows it. false = the field is calibrated "
               "with mag_hard_iron and mag_soft_iron only."),
-    ParamSpec("mag_hard_iron_sd", HARD_IRON_PRIOR_SD_T, "T; per axis, how far the hard iron may be from mag_hard_iron "
-              "once the data rejects it (the calibration's prior standard deviation).", min=1e-9, max=1e-3),
+    ParamSpec("mag_hard_iron_sd", 5e-5, "T; per axis, how far the hard iron may be from mag_hard_iron "
+              "once the data rejects it (the calibration's prior standard deviation; a robot's motors, battery and "
+              "frame add tens of µT).", min=1e-9, max=1e-3),
     ParamSpec("mag_soft_iron_model", "full", "Soft iron the online calibration estimates: full (3x3, with the "
               "magnetometer's misalignment to the gyro), symmetric, none (hard iron only).", choices=SOFT_IRON_MODELS),
 )

@@ -14,7 +14,9 @@ The test (:meth:`PriorTest.add`) is the generalised likelihood ratio of ``H₀``
 estimate holds: ``D² = δᵀ Λ_d (I + C_tol Λ_d)⁻¹ δ`` with ``δ = θ̂ − θ₀``, ``Λ_d`` the windows' information and
 ``C_tol`` the tolerance's covariance, divided by the variance of unit weight when it exceeds 1 (windows noisier than
 the noise model widen the test with the σ); ``H₀`` is rejected when ``D²`` exceeds the χ² quantile
-:data:`PRIOR_REJECT_P` for the directions the windows observe, and at least :data:`MIN_FAILED_WINDOWS` windows
+:data:`PRIOR_REJECT_P` for the directions the windows observe, ``H₁`` is the more probable hypothesis
+(:attr:`PriorTest.p_holds` below ½: a large ``D²`` spread over many observed directions is still ``H₀``'s when
+the prior of ``H₁`` would have allowed far larger ones), and at least :data:`MIN_FAILED_WINDOWS` windows
 fail ``H₀`` on their own (a single magnetically disturbed window that the loose ``H₁`` prior still admits does not
 reject a calibration that every other window agrees with).
 
@@ -85,7 +87,7 @@ class PriorTest:
         m = lam @ np.linalg.inv(np.eye(self.model.n) + tol @ lam)
         self.d2 = float(delta @ (0.5 * (m + m.T)) @ delta) / max(1.0, est.unit_weight)
         dof = min(max(est.observed, 1), len(_QUANTILE))
-        if self.failed >= MIN_FAILED_WINDOWS and self.d2 > _QUANTILE[dof - 1]:
+        if self.failed >= MIN_FAILED_WINDOWS and self.d2 > _QUANTILE[dof - 1] and self.p_holds < 0.5:
             self.holds = False
         return self.holds
 

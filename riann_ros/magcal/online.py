@@ -68,6 +68,7 @@ class OnlineMagCalibrator:
         self.est = InfoEstimate(self.model, self.lam0, self.theta0)
         self.test = PriorTest(self.model, self.theta0)  # does the prior still hold?
         self.rejected_prior_after_s: float | None = None  # s after this run's first sample it was rejected
+        self.agree = 0  # consecutive windows that agree with a rejected prior
         self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
         self.switches = 0  # times a candidate replaced the estimate
         self.windower = Windower()
@@ -119,7 +120,10 @@ class OnlineMagCalibrator:
 
     def heading_sd_rad(self, q: Quat, field_world_t: Vec) -> float:
         """rad; the σ the calibration adds to the heading of this sample: ``q`` its attitude (sensor → world),
-        ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical."""
+        ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical, and
+        while the last window contradicted the estimate (the field disturbed, or the magnetic situation changed:
+        nothing is known of the calibration until a window agrees again or a new estimate replaces it). While the
+        prior holds: the share of the doubt about it (:mod:`.hypothesis`)."""
         doubt = 1.0 - self.test.p_holds if self.test.holds else 1.0
         if doubt < UNDOUBTED:
             return 0.0
@@ -131,6 +135,8 @@ class OnlineMagCalibrator:
             s1 = self._heading_sd(q, fx / fh, fy / fh, fh)
             d = self._heading_gap(q, field_world_t)
             return min(math.sqrt(doubt * (s1 * s1 + d * d)), math.pi)
+        if self.cand is not None:  # the last window contradicted the estimate: disturbed, or the situation changed
+            return math.pi
         return self._heading_sd(q, fx / fh, fy / fh, fh)
 
     def _heading_gap(self, q: Quat, field_world_t: Vec) -> float:
@@ -180,6 +186,8 @@ class OnlineMagCalibrator:
         else:  # a disturbed field, or the magnetic situation changed: a candidate learns from the rejected windows
             self.rejected += 1
             self._candidate(j, r0, ws)
+        if not self.test.holds:
+            self._retest(w, j, r0, var)
         self._cache()
         self._set_state()
 
@@ -187,13 +195,30 @@ class OnlineMagCalibrator:
         """The prior's test (:mod:`.hypothesis`) after a window the estimate took."""
         if not self.test.holds:
             return
+        tol = self._tolerance(w)
+        if not self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol):
+            self.rejected_prior_after_s = self.windower.t
+
+    def _tolerance(self, w: Window) -> Array:
         a0 = self.model.soft_iron(self.theta0)
         u = a0 @ np.asarray(w.m1_ut) - self.theta0[self.model.p:]
         horizontal = (float(np.hypot(*(rotation_matrix(self.q) @ u)[:2])) if self.q is not None
                       else 0.5 * float(np.linalg.norm(u)))  # no attitude: a mid-latitude dip (60°)
-        tol = self.test.tolerance(u, horizontal)
-        if not self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol):
-            self.rejected_prior_after_s = self.windower.t
+        return self.test.tolerance(u, horizontal)
+
+    def _retest(self, w: Window, j: Array, r0: Array, var: float) -> None:
+        """After the prior was rejected: :data:`~.records.SWITCH_WINDOWS` consecutive windows that agree with it
+        restore it, as a changed magnetic situation replaces the estimate (a magnet attached for a while and taken
+        off again); the estimate and the test start anew from the prior."""
+        if self.test.window_fails(j, r0, var, self._tolerance(w)):
+            self.agree = 0
+            return
+        self.agree += 1
+        if self.agree >= SWITCH_WINDOWS:
+            self.est, self.cand = InfoEstimate(self.model, self.lam0, self.theta0), None
+            self.test = PriorTest(self.model, self.theta0)
+            self.windows, self.agree = 0, 0
+            self.rejected_prior_after_s = None
 
     @property
     def trusted(self) -> bool:

@@ -32,6 +32,7 @@ from riann_ros.constants import DEG
 from riann_ros.defaults import MAG_HEADING_SD_DEG
 from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
+from riann_ros.magcal.records import GYRO_BIAS_RESIDUAL_SD_RAD_S
 from riann_ros.rotations import IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
 
 # VQF's defaults (vqf 2.1.2 VQFParams): magnetic disturbance rejection
@@ -95,7 +96,7 @@ class MagHeading:
         self.reacq = False  # re-acquiring the heading after a hole (start phase without reference learning)
         self.weight = 0.0  # while re-acquiring: Σ of the weights (1/deg²) of the bridge and the fields since the hole
         self.gate = False  # the next field is tested against the bridge
-        self.fresh = False  # the next field sets the heading anew (the configured calibration was rejected)
+        self.switch = False  # the configured calibration was rejected or restored since the last field
         self.wsum = 0.0  # Σ of the start's weights (relative to a calibrated field's: 1 each while trusted)
         self.cal_sd = 0.0  # the heading σ the calibration's estimate added to the last field (rad)
         self.doubt_sd = 0.0  # while the configured calibration is used: the σ of the doubt that it holds (rad)
@@ -159,7 +160,7 @@ class MagHeading:
         err = math.atan2(mw[0], mw[1])
         dip = -math.asin(max(-1.0, min(1.0, mw[2] / mn)))
         scale = self._weight(q, mw)
-        if not self.started or self.fresh:
+        if not self.started or (self.switch and self._switched(mn, dip)):
             self._begin(mn, dip, scale)
             return err
         self.t += dt
@@ -209,14 +210,30 @@ class MagHeading:
         field or None. When its prior is rejected the next field sets the heading anew."""
         assert self.cal is not None
         out = self.cal.update(delta, dt, mag, self.delay, q)
-        if self.trusted and not self.cal.trusted:
-            self.trusted, self.fresh = False, True
+        if self.trusted != self.cal.trusted:  # rejected, or (a changed magnetic situation) restored
+            self.trusted, self.cal_sd, self.switch = self.cal.trusted, 0.0, True
         return out
+
+    def _switched(self, norm: float, dip: float) -> bool:
+        """The configured calibration was just rejected, or restored; ``norm``, ``dip``: the first field calibrated
+        anew. If the field was being rejected as disturbed and the newly calibrated one fits the field reference
+        again, the magnetic situation changed under a heading the gyro held (a magnet attached, or taken off): that
+        heading bridges to the new fields, its σ the field heading's at the last accepted field plus the residual
+        gyro bias over the time rejected (returns False: carry on). Otherwise, after a rejection, the heading and the
+        reference came from fields calibrated wrongly: this field sets both anew (returns True)."""
+        self.switch = False  # (the bands as for a calibrated field: the new calibration is one, or nothing fits)
+        fits = abs(norm - self.ref_norm) < NORM_TH * self.ref_norm and abs(dip - self.ref_dip) < DIP_TH
+        if not (self.started and self.disturbed and fits):
+            return not self.trusted
+        bridge_deg = math.hypot(MAG_HEADING_SD_DEG, GYRO_BIAS_RESIDUAL_SD_RAD_S / DEG * self.reject_t)
+        self.t, self.reacq, self.gate = 0.0, True, True
+        self.weight = 1.0 / (bridge_deg * bridge_deg)
+        return False
 
     def _begin(self, norm: float, dip: float, scale: float) -> None:
         """The first field (since a reset, or since the configured calibration was rejected) sets the heading and
         the field reference; ``scale`` its weight in the start's mean."""
-        self.started, self.fresh = True, False
+        self.started = True
         self.t, self.n, self.wsum, self.reacq = 0.0, 1, scale, False
         self.norm_lp = self.ref_norm = self.cand_norm = norm
         self.dip_lp = self.ref_dip = self.cand_dip = dip
@@ -226,7 +243,7 @@ class MagHeading:
         """The weight of this field's heading (error ``err``, rad; world-frame field ``mw``) in the mean since the
         hole; the first field after a hole also tests the bridge (module docstring)."""
         tan_dip = abs(mw[2]) / math.sqrt(mw[0] * mw[0] + mw[1] * mw[1])
-        var = REACQUIRE_FIELD_SD_DEG * REACQUIRE_FIELD_SD_DEG + (tan_dip * tilt_sd) ** 2
+        var = REACQUIRE_FIELD_SD_DEG * REACQUIRE_FIELD_SD_DEG + (tan_dip * tilt_sd) ** 2 + (self.cal_sd / DEG) ** 2
         if self.gate:  # the first field after the hole: is the bridge consistent with it?
             self.gate = False
             if (err / DEG) ** 2 > BRIDGE_GATE * BRIDGE_GATE * (1.0 / self.weight + var):
