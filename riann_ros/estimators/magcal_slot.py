@@ -58,8 +58,10 @@ class MagCalSlot:
 
     def calibrate(self, acc: list, gyr: list, dt: list, mag: list) -> list:
         """The classical filters' front end: ``acc``, ``gyr`` (bias-corrected where the filter corrects it), ``dt``
-        and the raw ``mag`` rows (a zero row or None: no field) → the calibrated rows (None: no field); the heading σ
-        the calibration adds per sample into :attr:`sd_rad`."""
+        and the raw ``mag`` rows (a zero row or None: no field) → the calibrated rows (None: no field, and none
+        while the calibration says the field's heading is unknown: the filter's gyro holds it); the heading σ the
+        calibration adds per sample (the doubt about the configured calibration while it is used) into
+        :attr:`sd_rad`."""
         cal = self.cal
         assert cal is not None
         out: list = []
@@ -68,8 +70,11 @@ class MagCalSlot:
             q = _tilt(ax, ay, az)
             field = None if m is None or not (m[0] or m[1] or m[2]) else (m[0], m[1], m[2])
             u = cal.update(from_rotvec(gx * h, gy * h, gz * h), h, field, 0.0, q)
+            s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
+            if s >= math.pi:  # the field's heading is unknown (the last window contradicted the estimate)
+                u, s = None, 0.0
             out.append(u)
-            sd.append(0.0 if u is None or q is None or cal.trusted else cal.heading_sd_rad(q, rotate(q, u)))
+            sd.append(s)
         self.sd_rad = np.asarray(sd, dtype=float)
         return out
 
