@@ -67,7 +67,6 @@ class OnlineMagCalibrator:
         self.lam0, self.theta0 = self.model.prior(prior)
         self.est = InfoEstimate(self.model, self.lam0, self.theta0)
         self.test = PriorTest(self.model, self.theta0)  # does the prior still hold?
-        self.rejected_prior_after_s: float | None = None  # s after this run's first sample it was rejected
         self.agree = 0  # consecutive windows that agree with a rejected prior
         self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
         self.switches = 0  # times a candidate replaced the estimate
@@ -196,8 +195,7 @@ class OnlineMagCalibrator:
         if not self.test.holds:
             return
         tol = self._tolerance(w)
-        if not self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol):
-            self.rejected_prior_after_s = self.windower.t
+        self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol)
 
     def _tolerance(self, w: Window) -> Array:
         a0 = self.model.soft_iron(self.theta0)
@@ -218,7 +216,6 @@ class OnlineMagCalibrator:
             self.est, self.cand = InfoEstimate(self.model, self.lam0, self.theta0), None
             self.test = PriorTest(self.model, self.theta0)
             self.windows, self.agree = 0, 0
-            self.rejected_prior_after_s = None
 
     @property
     def trusted(self) -> bool:
