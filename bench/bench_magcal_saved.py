@@ -28,7 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def heading_rmse(rec, q) -> float:
     from riann_ros import quaternion as quat
 
-    ok = np.asarray(rec.score_mask, dtype=bool) & np.isfinite(q).all(axis=1)
+    ok = (np.asarray(rec.score_mask, dtype=bool) & np.isfinite(q).all(axis=1)
+          & np.isfinite(rec.quat_ref).all(axis=1))
     return float(np.sqrt(np.mean(np.degrees(quat.heading_error(rec.quat_ref[ok], q[ok])) ** 2)))
 
 
