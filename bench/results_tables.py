@@ -398,7 +398,7 @@ def magcal_saved() -> str:
     body = [[r["trial"], f"{r['first']:.2f}", f"{r['second']:.2f}", f"{r['recorded']:.2f}",
              f"{r['second'] - r['recorded']:+.2f}"] for r in data["rows"]]
     d = [abs(r["second"] - r["recorded"]) for r in data["rows"]]
-    body.append(["mean / worst |difference|", "", "", "", f"{sum(d) / len(d):.2f} / {max(d):.2f}"])
+    body.append(["mean / worst of the absolute difference", "", "", "", f"{sum(d) / len(d):.2f} / {max(d):.2f}"])
     return _table(["trial", "first run (offset, calibrating)", "second run (its saved calibration)",
                    "recorded field", "second − recorded"], body)
 
