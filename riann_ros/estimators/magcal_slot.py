@@ -8,7 +8,9 @@ hole or a gap.
 RIANN's heading stage (:mod:`~riann_ros.estimators.riann.s7a_mag`) calls the calibrator per sample itself (it has
 the attitude and the magnetometer's latency). Madgwick, Mahony and VQF get it as a front end
 (:meth:`MagCalSlot.calibrate`), like the gyro-bias front end (:mod:`.bias`): per sample the gyro increment goes to
-the calibrator, the filter gets the calibrated field, and :attr:`MagCalSlot.sd_rad` holds the σ the calibration
+the calibrator (with the field's latency behind the gyro estimated as RIANN's stage 7b does, for the windows'
+ends; the filters themselves use the field as it comes), the filter gets the calibrated field, and
+:attr:`MagCalSlot.sd_rad` holds the σ the calibration
 adds to each sample's heading (0 while the configured calibration holds), which their yaw σ includes.
 """
 
@@ -21,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from riann_ros.magcal.latency import LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.magcal.records import MagCalibration, MagCalPrior, MagCalStatus
 from riann_ros.rotations import Quat, from_rotvec, rotate
@@ -34,6 +37,7 @@ class MagCalSlot:
         self.model = params["mag_soft_iron_model"]
         self.hard_iron_sd_t = float(params["mag_hard_iron_sd"])
         self.cal: OnlineMagCalibrator | None = None
+        self.latency = LatencyEstimator()  # the windows' ends need the field's latency behind the gyro (stage 7b's fit)
         # per sample of the last calibrate(): the heading σ the calibration adds (rad)
         self.sd_rad: NDArray[np.float64] = np.zeros(0)
         self.set_prior(MagCalPrior())
@@ -58,18 +62,27 @@ class MagCalSlot:
 
     def calibrate(self, acc: list, gyr: list, dt: list, mag: list) -> list:
         """The classical filters' front end: ``acc``, ``gyr`` (bias-corrected where the filter corrects it), ``dt``
-        and the raw ``mag`` rows (a zero row or None: no field) → the calibrated rows (None: no field); the heading σ
-        the calibration adds per sample into :attr:`sd_rad`."""
+        and the raw ``mag`` rows (a zero row or None: no field) → the calibrated rows (None: no field, and none
+        while the calibration says the field's heading is unknown: the filter's gyro holds it); the heading σ the
+        calibration adds per sample (the doubt about the configured calibration while it is used) into
+        :attr:`sd_rad`."""
         cal = self.cal
         assert cal is not None
         out: list = []
         sd = []
+        lat = self.latency
         for (ax, ay, az), (gx, gy, gz), h, m in zip(acc, gyr, dt, mag, strict=True):
             q = _tilt(ax, ay, az)
             field = None if m is None or not (m[0] or m[1] or m[2]) else (m[0], m[1], m[2])
-            u = cal.update(from_rotvec(gx * h, gy * h, gz * h), h, field, 0.0, q)
+            rv = (gx * h, gy * h, gz * h)
+            delta = from_rotvec(*rv)
+            u = cal.update(delta, h, field, lat.delay(0.0), q)
+            lat.add(delta, rv, h, u)
+            s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
+            if s >= math.pi:  # the field's heading is unknown (the last window contradicted the estimate)
+                u, s = None, 0.0
             out.append(u)
-            sd.append(0.0 if u is None or q is None or cal.trusted else cal.heading_sd_rad(q, rotate(q, u)))
+            sd.append(s)
         self.sd_rad = np.asarray(sd, dtype=float)
         return out
 

@@ -36,7 +36,7 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from riann_ros.magcal.model import Array, CalModel
+from riann_ros.magcal.model import Array, CalModel, rotation_matrix
 from riann_ros.magcal.records import FIELD_HEADING_SD_RAD, GATE_CHI2
 from riann_ros.magcal.solver import InfoEstimate
 
@@ -68,6 +68,14 @@ class PriorTest:
         tol_h = _TAN_TOL * horizontal_ut
         tol_s = tol_h / max(float(np.linalg.norm(u_ut)), 1e-9)
         return np.diag(np.r_[np.full(self.model.p, tol_s * tol_s), np.full(3, tol_h * tol_h)])
+
+    def tolerance_at(self, m_ut: Array, q: tuple[float, float, float, float] | None) -> Array:
+        """:meth:`tolerance` for the raw reading ``m_ut`` calibrated with θ₀, its horizontal part at the attitude
+        ``q`` (sensor → world; None: a mid-latitude dip of 60°)."""
+        u = self.model.soft_iron(self.theta0) @ m_ut - self.theta0[self.model.p:]
+        horizontal = (float(np.hypot(*(rotation_matrix(q) @ u)[:2])) if q is not None
+                      else 0.5 * float(np.linalg.norm(u)))
+        return self.tolerance(u, horizontal)
 
     def window_fails(self, j: Array, r0: Array, var: float, tol: Array) -> bool:
         """Whether one window fails ``H₀`` on its own: its residual at θ₀ against its noise and the tolerance."""

@@ -29,7 +29,7 @@ import numpy as np
 
 from riann_ros.mag import USABLE_MAX_T, USABLE_MIN_T
 from riann_ros.magcal.hypothesis import PriorTest
-from riann_ros.magcal.model import Array, CalModel, heading_sd_bound, rotation_matrix
+from riann_ros.magcal.model import Array, CalModel, heading_sd_bound
 from riann_ros.magcal.records import (
     CALIBRATED,
     CALIBRATED_SD_RAD,
@@ -67,7 +67,6 @@ class OnlineMagCalibrator:
         self.lam0, self.theta0 = self.model.prior(prior)
         self.est = InfoEstimate(self.model, self.lam0, self.theta0)
         self.test = PriorTest(self.model, self.theta0)  # does the prior still hold?
-        self.rejected_prior_after_s: float | None = None  # s after this run's first sample it was rejected
         self.agree = 0  # consecutive windows that agree with a rejected prior
         self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
         self.switches = 0  # times a candidate replaced the estimate
@@ -133,24 +132,11 @@ class OnlineMagCalibrator:
             return math.pi
         if self.test.holds:  # the field calibrated as configured: the mixture's share (riann_ros.magcal.hypothesis)
             s1 = self._heading_sd(q, fx / fh, fy / fh, fh)
-            d = self._heading_gap(q, field_world_t)
+            d = 0.0 if self.m_last is None else heading_gap(self._est_a, self._est_c, self.m_last, q, field_world_t)
             return min(math.sqrt(doubt * (s1 * s1 + d * d)), math.pi)
         if self.cand is not None:  # the last window contradicted the estimate: disturbed, or the situation changed
             return math.pi
         return self._heading_sd(q, fx / fh, fy / fh, fh)
-
-    def _heading_gap(self, q: Quat, field_world_t: Vec) -> float:
-        """rad; the heading difference between the estimate's calibration of the last reading and ``field_world_t``
-        (the configured calibration's)."""
-        if self.m_last is None:
-            return 0.0
-        a, c = self._est_a, self._est_c
-        x, y, z = self.m_last
-        u = (a[0] * x + a[1] * y + a[2] * z - c[0], a[3] * x + a[4] * y + a[5] * z - c[1],
-             a[6] * x + a[7] * y + a[8] * z - c[2])
-        w = rotate(q, u)
-        f = field_world_t
-        return abs(math.atan2(w[0] * f[1] - w[1] * f[0], w[0] * f[0] + w[1] * f[1]))
 
     def _heading_sd(self, q: Quat, ex: float, ey: float, fh: float) -> float:
         """rad; the estimate's heading σ for the horizontal field direction (ex, ey) of strength ``fh`` (T)."""
@@ -196,15 +182,10 @@ class OnlineMagCalibrator:
         if not self.test.holds:
             return
         tol = self._tolerance(w)
-        if not self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol):
-            self.rejected_prior_after_s = self.windower.t
+        self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol)
 
     def _tolerance(self, w: Window) -> Array:
-        a0 = self.model.soft_iron(self.theta0)
-        u = a0 @ np.asarray(w.m1_ut) - self.theta0[self.model.p:]
-        horizontal = (float(np.hypot(*(rotation_matrix(self.q) @ u)[:2])) if self.q is not None
-                      else 0.5 * float(np.linalg.norm(u)))  # no attitude: a mid-latitude dip (60°)
-        return self.test.tolerance(u, horizontal)
+        return self.test.tolerance_at(np.asarray(w.m1_ut), self.q)
 
     def _retest(self, w: Window, j: Array, r0: Array, var: float) -> None:
         """After the prior was rejected: :data:`~.records.SWITCH_WINDOWS` consecutive windows that agree with it
@@ -218,7 +199,6 @@ class OnlineMagCalibrator:
             self.est, self.cand = InfoEstimate(self.model, self.lam0, self.theta0), None
             self.test = PriorTest(self.model, self.theta0)
             self.windows, self.agree = 0, 0
-            self.rejected_prior_after_s = None
 
     @property
     def trusted(self) -> bool:
@@ -325,3 +305,14 @@ class OnlineMagCalibrator:
                             heading_sd_bound_rad=self.bound, windows=self.windows, rejected=self.rejected,
                             unit_weight=self.unit_weight, converged_after_s=self.converged_after_s,
                             prior_holds=self.test.holds)
+
+
+def heading_gap(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat, field_world_t: Vec) -> float:
+    """rad; the heading difference between the calibration ``(a, c)`` (row-major soft iron, ``c`` in µT) of the
+    raw reading ``m`` (µT) and ``field_world_t`` (another calibration's, world frame), at the attitude ``q``."""
+    x, y, z = m
+    u = (a[0] * x + a[1] * y + a[2] * z - c[0], a[3] * x + a[4] * y + a[5] * z - c[1],
+         a[6] * x + a[7] * y + a[8] * z - c[2])
+    w = rotate(q, u)
+    f = field_world_t
+    return abs(math.atan2(w[0] * f[1] - w[1] * f[0], w[0] * f[0] + w[1] * f[1]))
