@@ -16,9 +16,9 @@ export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 # test processes in parallel (pytest-xdist; each worker in a DDS domain of its own, test/conftest.py)
 JOBS ?= 2
 
-.PHONY: setup demo test test-fast check lint bench clean
+.PHONY: setup demo test test-scale test-fast check lint bench clean
 
-$(BIN)/.installed: requirements.txt requirements-dev.txt setup.py package.xml
+$(BIN)/.installed: requirements.txt requirements-dev.txt requirements-cluster.txt setup.py package.xml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -r requirements-dev.txt

@@ -15,6 +15,8 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.py")),
     ],
     install_requires=["setuptools"],
+    # riann-bag-eval --scheduler (a Dask cluster); the full pinned set: requirements-cluster.txt
+    extras_require={"cluster": ["dask==2026.8.0", "distributed==2026.8.0", "bokeh==3.9.2"]},
     zip_safe=True,
     maintainer="riann_ros developers",
     maintainer_email="riann-ros@example.org",

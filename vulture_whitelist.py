@@ -30,6 +30,9 @@ total_median_deg
 total_std_deg
 total_min_deg
 total_max_deg
+heading_drift_mean_deg
+heading_drift_median_deg
+heading_drift_std_deg
 
 # pytest and launch, in the tests: the module's test marks; a launch substitution's hook; ROS request fields
 pytestmark

@@ -41,11 +41,11 @@ def outputs(trial: str, use_mag: str, conditions: tuple[str, ...] = CONDITIONS,
             rates: str = RATES) -> dict[str, np.ndarray]:
     """key ``scenario|condition|rate`` -> (N, 4) RIANN outputs of one trial, in the evaluator's pipeline."""
     from riann_ros import evaluation as ev
-    from riann_ros.evaluation import run as run_mod
+    from riann_ros.evaluation import scenario_run as run_mod
 
     got: dict[str, list[np.ndarray]] = {}
     rate_now: list[str] = ["native"]
-    orig = run_mod._ScenarioRun.feed
+    orig = run_mod.ScenarioRun.feed
 
     def feed(self: Any, chunk: Any, offset: int) -> None:
         inner = self.run
@@ -66,7 +66,7 @@ def outputs(trial: str, use_mag: str, conditions: tuple[str, ...] = CONDITIONS,
         finally:
             self.run = inner
 
-    run_mod._ScenarioRun.feed = feed  # type: ignore[method-assign]
+    run_mod.ScenarioRun.feed = feed  # type: ignore[method-assign]
     try:
         base = dict(estimators=ev.parse_estimators("riann"), seed=0, use_mag=use_mag)
         perturbed = ev.EvalSettings(scenarios=["as-recorded", "realistic"],
@@ -80,7 +80,7 @@ def outputs(trial: str, use_mag: str, conditions: tuple[str, ...] = CONDITIONS,
             if res.error:
                 raise RuntimeError(res.error)
     finally:
-        run_mod._ScenarioRun.feed = orig  # type: ignore[method-assign]
+        run_mod.ScenarioRun.feed = orig  # type: ignore[method-assign]
     return {k: np.concatenate(v) for k, v in got.items()}
 
 

@@ -31,7 +31,7 @@ from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results"
-PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md", "bags/README.md")
+PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md", "bags/README.md", "docs/evaluation.md")
 FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_deg", "heading_rmse_deg",
           "total_rmse_deg", "best_t_offset_s", "mag_converged_after_s")
 #: the uncertainty scores a file keeps when trimmed with ``--uncertainty`` (riann_ros/evaluation/uncertainty.py)
@@ -518,6 +518,76 @@ def realistic_rates_figures() -> str:
     return f"{min(means):.2f}–{max(means):.2f}° (native 285.7 Hz: {native:.2f}°)"
 
 
+# ---------------------------------------------------------------------------------------------------
+# executors (bench/bench_cluster.py --save: docs/results/cluster.json)
+# ---------------------------------------------------------------------------------------------------
+CLUSTER_MODES = ("in-process", "--jobs 2", "--scheduler local:2")
+FLEET_BAGS, FLEET_HOURS, FLEET_CORES = 10_000, 1.0, 64  # the extrapolated corpus: bags, hours each, worker cores
+
+
+def _cluster() -> dict:
+    return json.loads((RESULTS / "cluster.json").read_text())
+
+
+def _ratios() -> list[float]:
+    walls = _cluster()["held_out"]["walls_s"]
+    return [c / j for c, j in zip(walls["--scheduler local:2"], walls["--jobs 2"], strict=True)]
+
+
+def cluster_held_out() -> str:
+    c = _cluster()
+    h = c["held_out"]
+    body = []
+    for m in CLUSTER_MODES:
+        walls, loads = h["walls_s"][m], h["loads"][m]
+        cpus = ", ".join(f"{x:.0f}" for x in h["cpu_s"][m]) if m == "in-process" else "–"  # workers not accounted
+        body.append([f"`{m}`" if m != "in-process" else m, ", ".join(f"{w:.1f}" for w in walls),
+                     f"**{statistics.median(walls):.1f}**", cpus,
+                     ", ".join(f"{a:.1f} / {b:.1f}" for a, b in loads)])
+    r = _ratios()
+    note = (f"`{c['command']}` ({c['machine']}): {h['trials']} trials, {h['recorded_s'] / 60:.0f} min of recording, "
+            f"`{c['held_out_args']}`, {h['rows']} rows; the modes in turn, round by round; every mode's RMSEs "
+            + (f"within {h['max_rmse_diff_deg']:.0e}° of" if h["max_rmse_diff_deg"] else "equal to")
+            + f" the in-process ones. **`--scheduler local:2` / "
+            f"`--jobs 2`, round by round: {', '.join(f'{x:.2f}' for x in r)}** (median {statistics.median(r):.2f}).")
+    return _table(["mode", "wall s, per round", "median s", "CPU s", "1-min load before / after"],
+                  body) + "\n\n" + note
+
+
+def cluster_many() -> str:
+    c = _cluster()
+    body = [[f"`{r['mode']}`", str(r["inputs"]), f"{r['wall_s']:.1f}", f"{1000 * r['wall_s'] / r['inputs']:.0f}",
+             f"{r['client_peak_rss_mb']:.0f}", f"{r['shards_bytes_per_input'] / 1024:.1f}",
+             f"{r['results_json_bytes_per_input'] / 1024:.1f}", f"{r['load'][0]:.1f} / {r['load'][1]:.1f}"]
+            for r in c["many"]]
+    return _table(["mode", "inputs", "wall s", "ms per input", "client peak RSS MB", "shards kB per input",
+                   "results.json kB per input", "1-min load before / after"], body)
+
+
+def cluster_ratio() -> str:
+    r = _ratios()
+    return f"{statistics.median(r):.2f} ({', '.join(f'{x:.2f}' for x in r)} round by round)"
+
+
+def cluster_fleet() -> str:
+    """What a fleet of FLEET_BAGS bags of FLEET_HOURS each costs, from the measured CPU per recorded second."""
+    c = _cluster()
+    h = c["held_out"]
+    per_rec = statistics.median(h["cpu_s"]["in-process"]) / h["recorded_s"]
+    core_h = FLEET_BAGS * FLEET_HOURS * 3600 * per_rec / 3600
+    short = next(r for r in c["many"] if r["mode"] == "--scheduler local:2")
+    overhead = 2 * short["wall_s"] / short["inputs"]  # worker-seconds per short input on 2 workers, work included
+    return (f"{per_rec:.3f} CPU s per recorded second (median in-process CPU of the held-out-sized run, "
+            f"{h['recorded_s'] / 60:.0f} min of BROAD, 4 estimators × 3 scenarios), so {FLEET_BAGS:,} bags of "
+            f"{FLEET_HOURS:.0f} h each are about **{core_h:,.0f} core-hours**: **{core_h / FLEET_CORES:.0f} h on "
+            f"{FLEET_CORES} worker cores**, if the work spreads evenly over workers (measured here on 2 only); "
+            f"each input costs at most {overhead:.2f} worker-seconds more whatever its length ({short['inputs']} "
+            f"short inputs on local:2, their work included: {FLEET_BAGS * overhead / 60:.0f} worker-minutes for "
+            f"{FLEET_BAGS:,}); the shards take {FLEET_BAGS * short['shards_bytes_per_input'] / 1e6:.0f} MB, "
+            f"results.json {FLEET_BAGS * short['results_json_bytes_per_input'] / 1e6:.0f} MB, and the client "
+            f"peaked at {short['client_peak_rss_mb']:.0f} MB for {short['inputs']} inputs")
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "readme-broad": readme_table,
     "readme-demo-real": demo_real,
@@ -550,6 +620,10 @@ TABLES: dict[str, Callable[[], str]] = {
     "magcal": magcal_table,
     "magcal-uncertainty": magcal_uncertainty,
     "magcal-saved": magcal_saved,
+    "cluster-held-out": cluster_held_out,
+    "cluster-many": cluster_many,
+    "cluster-ratio": cluster_ratio,
+    "cluster-fleet": cluster_fleet,
 }
 
 

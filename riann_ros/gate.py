@@ -243,6 +243,39 @@ class InputGate:
         self._dt_max = max(self._dt_max, float(dt.max()))
         return dt
 
+    def check_batch(
+        self, stamps: NDArray[np.int64], acc: NDArray[np.float64], gyr: NDArray[np.float64]
+    ) -> tuple[NDArray[np.bool_], NDArray[np.float64], dict[int, str]]:
+        """:meth:`check` over a sequence without receive times: (accepted mask, dts (s), {index where the
+        estimator restarts: cause}); clean stretches at once (:meth:`check_clean_prefix`), anything else per
+        sample."""
+        n = len(stamps)
+        accepted = np.zeros(n, dtype=bool)
+        dts = np.zeros(n)
+        starts: dict[int, str] = {}
+        i = 0
+        while i < n:
+            j = min(n, i + CLEAN_CHUNK)
+            clean = self.check_clean_prefix(stamps[i:j], acc[i:j], gyr[i:j])
+            if len(clean):
+                accepted[i : i + len(clean)] = True
+                dts[i : i + len(clean)] = clean
+                i += len(clean)
+                continue
+            r = self.check(int(stamps[i]), acc[i], gyr[i])
+            if r.accepted:
+                accepted[i] = True
+                dts[i] = r.dt
+                if r.reset is not None:
+                    starts[i] = r.reset
+            i += 1
+        return accepted, dts, starts
+
+    @property
+    def warned(self) -> tuple[str, ...]:
+        """The one-shot warnings raised so far (:data:`WARNING_TEXT` keys, sorted)."""
+        return tuple(sorted(self._warned))
+
     def pop_dt_stats(self) -> dict[str, float]:
         """dt statistics (s) since the last call: count, min, mean, max, std; then forget them."""
         n = self._dt_n

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riann_ros.estimators.base import AttitudeEstimator
-from riann_ros.gate import CLEAN_CHUNK, ESTIMATOR_FAULT, GAP, GateConfig, GateResult, InputGate
+from riann_ros.gate import ESTIMATOR_FAULT, GAP, GateConfig, GateResult, InputGate
 from riann_ros.mag import MagConfig, MagInput
 from riann_ros.magcal.records import MagCalPrior
 
@@ -112,7 +112,7 @@ class EstimatorStream:
         out = np.full((len(stamps), 4), np.nan)
         self.batch_sigma = np.full((len(stamps), 2), np.nan)
         self.batch_state = np.full(len(stamps), np.nan)
-        accepted, dts, starts = self._gate_batch(stamps, acc, gyr)
+        accepted, dts, starts = self.gate.check_batch(stamps, acc, gyr)
         idx = np.flatnonzero(accepted)
         if len(idx) == 0:
             return out, accepted
@@ -126,34 +126,6 @@ class EstimatorStream:
             self._run_segment(seg, acc, gyr, dts, out, accepted)
         self.mag.state = state
         return out, accepted
-
-    def _gate_batch(
-        self, stamps: NDArray[np.int64], acc: NDArray[np.float64], gyr: NDArray[np.float64]
-    ) -> tuple[NDArray[np.bool_], NDArray[np.float64], dict[int, str]]:
-        """The gate over a sequence: (accepted mask, dts, {index where the estimator restarts: cause})."""
-        n = len(stamps)
-        accepted = np.zeros(n, dtype=bool)
-        dts = np.zeros(n)
-        starts: dict[int, str] = {}
-        gate = self.gate
-        i = 0
-        while i < n:
-            # the clean stretches (the common case offline) at once, anything else per sample
-            j = min(n, i + CLEAN_CHUNK)
-            clean = gate.check_clean_prefix(stamps[i:j], acc[i:j], gyr[i:j])
-            if len(clean):
-                accepted[i : i + len(clean)] = True
-                dts[i : i + len(clean)] = clean
-                i += len(clean)
-                continue
-            r = gate.check(int(stamps[i]), acc[i], gyr[i])
-            if r.accepted:
-                accepted[i] = True
-                dts[i] = r.dt
-                if r.reset is not None:
-                    starts[i] = r.reset
-            i += 1
-        return accepted, dts, starts
 
     def _run_segment(self, seg: NDArray[np.intp], acc: NDArray[np.float64], gyr: NDArray[np.float64],
                      dts: NDArray[np.float64], out: NDArray[np.float64], accepted: NDArray[np.bool_]) -> None:

@@ -1,5 +1,6 @@
-"""Faults the way users cause them on the installed CLIs: riann-bag-convert and riann-bag-eval interrupted half-way
-(Ctrl-C) leave nothing behind and a rerun succeeds; corrupt bags are named and the good ones still evaluated."""
+"""Faults the way users cause them on the installed CLIs: riann-bag-convert interrupted half-way (Ctrl-C) leaves
+nothing behind and a rerun succeeds; riann-bag-eval interrupted leaves no result files, keeps the inputs it finished
+and --resume completes the run; corrupt bags are named and the good ones still evaluated."""
 
 from __future__ import annotations
 
@@ -64,7 +65,7 @@ RESULT_FILES = ("results.csv", "results.json", "report.md")
 
 @pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
-def test_evaluator_interrupted_half_way_writes_nothing_and_rerun_succeeds(long_bags, tmp_path, jobs):
+def test_evaluator_interrupted_half_way_writes_no_result_files_and_resume_completes(long_bags, tmp_path, jobs):
     out = tmp_path / "eval_out"
     cmd = [str(executable("riann-bag-eval")), *map(str, long_bags), "--estimators", "riann",
            "--scenarios", "realistic", "--jobs", str(jobs), "--out", str(out)]
@@ -84,9 +85,14 @@ def test_evaluator_interrupted_half_way_writes_nothing_and_rerun_succeeds(long_b
     assert p.returncode != 0
     for f in RESULT_FILES:
         assert not (out / f).exists(), f"{f} left after an interrupted run"
-    assert "interrupted" in text, text
-    r2 = subprocess.run([*cmd, "-q", "--no-plots"], capture_output=True, text=True, timeout=300)
+    assert "interrupted" in text and "--resume" in text, text
+    kept = len(list((out / "shards").glob("*.pkl")))  # the inputs finished before Ctrl-C
+    assert kept >= 1
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 2 and "--resume" in again.stderr  # the same command would mix or lose that run
+    r2 = subprocess.run([*cmd, "--resume"], capture_output=True, text=True, timeout=300)
     assert r2.returncode == 0, r2.stderr
+    assert f"{kept} of 3 input(s) finished earlier" in r2.stderr
     assert all((out / f).stat().st_size > 0 for f in RESULT_FILES)
 
 

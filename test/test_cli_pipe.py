@@ -1,5 +1,5 @@
-"""stdout that goes quiet when its reader leaves (riann_ros.cli.pipe): ``riann-bag-eval … | head`` still writes its
-result files and exits 0, with no traceback."""
+"""stdout and stderr that go quiet when their reader leaves (riann_ros.cli.pipe): ``riann-bag-eval … | head`` still
+writes its result files and exits 0, with no traceback."""
 
 from __future__ import annotations
 
@@ -36,3 +36,23 @@ def test_a_reader_that_leaves_early_costs_no_results(bag, tmp_path):
     assert proc.wait(timeout=120) == 0, err
     assert "Traceback" not in err and "BrokenPipe" not in err
     assert (out / "results.json").is_file() and (out / "report.md").is_file()
+
+
+def test_a_reader_of_both_streams_that_leaves_early_costs_no_files(bag, tmp_path):
+    """``riann-bag-eval … 2>&1 | head``: stderr's reader is gone too when the written files are reported there; the
+    bag copy, the trajectory files and the result files are all still written."""
+    import os
+    import subprocess
+    import sys
+
+    out, est = tmp_path / "piped", tmp_path / "est"
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "riann_ros.cli.evaluate", str(bag), "-e", "madgwick", "-s",
+                             "as-recorded", "--no-plots", "--out", str(out), "--write-estimates", str(est), "-q"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=tmp_path, env=env)
+    assert proc.stdout is not None
+    proc.stdout.close()
+    assert proc.wait(timeout=120) == 0
+    assert (est / "seq.mcap").is_file() and (est / "seq.as-recorded.madgwick.tum").is_file()
+    assert (est / "seq.as-recorded.reference.tum").is_file() and (out / "results.json").is_file()

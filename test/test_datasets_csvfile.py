@@ -10,7 +10,8 @@ import pytest
 
 from riann_ros import bagio
 from riann_ros.datasets import detect_format
-from riann_ros.datasets.csvfile import InputError, read_csv
+from riann_ros.datasets.csvfile import InputError, read_csv, read_table
+from riann_ros.datasets.euroc import read_ground_truth
 
 GOOD = "t,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z,qw,qx,qy,qz,scored\n"
 
@@ -135,3 +136,17 @@ def test_detect_format(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError):
         detect_format(tmp_path / "nothing.csv")
 
+
+
+def test_a_hash_line_is_a_header_only_where_the_rows_share_its_delimiter(tmp_path: Path) -> None:
+    """ASL's ``#timestamp,…`` header is a header; a ``#`` comment holding ``,`` or ``;`` over blank-separated rows (a
+    TUM file's, e.g. one another tool wrote) is a comment, so the TUM file reads."""
+    asl = tmp_path / "asl.csv"
+    asl.write_text("#timestamp [ns],q_RS_w,q_RS_x,q_RS_y,q_RS_z\n1000,1,0,0,0\n2000,1,0,0,0\n")
+    assert read_table(asl)[0] == ["timestamp [ns]", "q_RS_w", "q_RS_x", "q_RS_y", "q_RS_z"]
+    tum = tmp_path / "est.tum"
+    tum.write_text("# t x y z qx qy qz qw (my filter; v2, position not estimated)\n# second comment, too\n"
+                   "1.0 0 0 0 0 0 0 1\n1.5 0 0 0 0 0 0.7071067811865476 0.7071067811865476\n")
+    stamps, q = read_ground_truth(tum)
+    assert stamps.tolist() == [1_000_000_000, 1_500_000_000]
+    assert np.allclose(q, [[1, 0, 0, 0], [0.7071067811865476, 0, 0, 0.7071067811865476]])

@@ -24,7 +24,8 @@ executable only records its arguments. Each command is then checked by the first
 layout, every command that is cheap and has its inputs: ``riann-bag-eval`` and ``riann-bag-convert`` on the bundled
 synthetic bags, on BROAD single trials, on what earlier commands made, and the nodes' ``--help``. Checked by parsing
 only, with the reason in :func:`run_or_why_not`: ``--live`` (a real-time replay over DDS), ``--tune`` and ``--rates``
-(long), the real trial in ``bags/`` and all BROAD trials at once (long; make demo runs the former), files named
+(long), ``--scheduler tcp://…`` (a cluster of your own), the real trial in ``bags/`` and all BROAD trials at once
+(long; make demo runs the former), files named
 ``my_…``, and what needs running nodes (``riann-topic``, node command lines, ``ros2``).
 """
 
@@ -167,7 +168,8 @@ def files(cmd: Command, ns) -> tuple[list[str], list[str]]:
     if ns is None:
         return [], []
     if tool == "riann-bag-eval":
-        reads = [*map(str, ns.inputs), *(_file_of(s) for s in ns.estimate_file), *map(str, ns.compare or [])]
+        reads = [*map(str, ns.inputs), *(_file_of(s) for s in ns.estimate_file), *map(str, ns.compare or []),
+                 *ns.inputs_from]
         writes = [str(p) for p in (ns.out, ns.write_estimates) if p is not None]
     elif tool == "riann-bag-convert":
         reads = [*map(str, ns.inputs), *([str(ns.ground_truth)] if ns.ground_truth else [])]
@@ -320,6 +322,8 @@ def run_or_why_not(cmd: Command, how: str, reads: list[str], ran: set[str], made
         return "starts a node, or needs running nodes (DDS)"
     if "--live" in cmd.argv:
         return "--live: a real-time replay over DDS"
+    if any(a.startswith("tcp://") for a in cmd.argv):
+        return "a Dask cluster of your own (dask scheduler, dask worker)"
     if "--tune" in cmd.argv or "--rates" in cmd.argv:
         return "long: a tuning grid or several rates"
     for path in reads:

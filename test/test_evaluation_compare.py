@@ -161,6 +161,40 @@ def test_compare_selection_errors_and_old_files(params_runs, tmp_path, capsys):
     assert "an older results.json" in capsys.readouterr().err
 
 
+@pytest.mark.slow
+def test_compare_an_old_results_json_with_a_new_one_holding_an_input_without_reference(three, tmp_path, capsys):
+    """The columns added for inputs without a reference, the heading drift, the reference's turn and the bias
+    estimates are additive: an older results.json (without them) compares with a new run whose list also holds a bag
+    without a reference; that bag's unscored rows are left out of the pairing."""
+    from test_evaluation import synthetic
+
+    from riann_ros import bagio
+
+    rec = synthetic(name="noref", t0_ns=1_700_000_000_000_000_000)
+    rec.quat_ref = None
+    noref = bagio.write_recording(tmp_path / "noref.mcap", rec)
+    new, old = tmp_path / "new", tmp_path / "old"
+    assert main([str(three[0]), str(noref), "-e", "vqf", "-s", "as-recorded", "--heading", "--out", str(new),
+                 "--no-plots", "-q"]) == 0
+    capsys.readouterr()
+    data = json.loads((new / "results.json").read_text())
+    added = ("has_reference", "heading_drift_", "gyro_bias_", "t_offset_ref_turn_dps")
+    data["results"] = [{k: v for k, v in r.items() if not k.startswith(added)} for r in data["results"]
+                       if r["has_reference"]]
+    for seq in data["sequences"]:
+        for k in ("has_reference", "health", "agreement"):
+            seq.pop(k, None)
+    old.mkdir()
+    (old / "results.json").write_text(json.dumps(data))
+    assert main(["--compare", str(old), str(new)]) == 0
+    text = capsys.readouterr().out
+    assert "+0.00" in text and "only in" not in text and "noref/" not in text
+    assert main(["--compare", str(new), str(new), "--metric", "heading_drift_rmse"]) == 0
+    assert "heading drift RMSE" in capsys.readouterr().out
+    assert main(["--compare", str(old), str(new), "--metric", "heading_drift_rmse"]) == 1
+    assert "an older results.json" in capsys.readouterr().err
+
+
 # -- plots: every perturbation condition, fixed colours ---------------------------------------------------
 
 

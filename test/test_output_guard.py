@@ -3,7 +3,8 @@ not alter): offline through the evaluator's pipeline within 1e-6, and riann_node
 runs sample by sample, the recording in blocks: float32 round-off of the network's state).
 
 The recording is derived from BROAD and is not in the repository: set ``RIANN_OUTPUT_GUARD`` to its folder (and
-``RIANN_BROAD_DIR`` if BROAD is elsewhere); without them these tests skip. ``bench/output_guard.py check DIR`` runs
+``RIANN_BROAD_DIR`` if BROAD is elsewhere); without them these tests skip, except the one that checks the guard still
+taps the evaluator (a bundled bag). ``bench/output_guard.py check DIR`` runs
 the whole comparison (every trial and condition, about 20 min of CPU).
 """
 
@@ -20,8 +21,6 @@ import pytest
 from conftest import ROOT
 
 sys.path.insert(0, str(ROOT / "bench"))
-
-pytestmark = [pytest.mark.broad, pytest.mark.slow]
 
 TRIAL = "07"  # fast rotation: every stage busy
 CONDITIONS = ("none", "jitter:10/20/30ms", "latency:0-10ms", "fifo:20ms", "dropout:0.1-0.6s@10s", "bias:3,3,0")
@@ -41,6 +40,8 @@ def _trial_file(broad_dir: Path, number: str) -> Path:
     return next(p for p in broad_files(broad_dir) if p.name.startswith(number + "_"))
 
 
+@pytest.mark.broad
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["6d", "9d"])
 def test_offline_outputs_equal_the_recording(guard_dir, broad_dir, mode):
     import output_guard
@@ -57,6 +58,8 @@ def test_offline_outputs_equal_the_recording(guard_dir, broad_dir, mode):
         assert np.nanmax(diff) < 1e-6, (key, float(np.nanmax(diff)))
 
 
+@pytest.mark.broad
+@pytest.mark.slow
 @pytest.mark.ros
 def test_node_outputs_equal_the_recording(guard_dir, broad_trial, ros, start_node):
     from geometry_msgs.msg import QuaternionStamped
@@ -84,3 +87,20 @@ def test_node_outputs_equal_the_recording(guard_dir, broad_trial, ros, start_nod
     assert q.shape == ref.shape
     assert np.abs(q - ref).max() < 1e-4
     ros.destroy(pub, att)
+
+
+def test_the_guard_taps_every_run_of_the_evaluator():
+    """The guard reads RIANN's outputs at the evaluator's scenario run (no recording needed): a rename there must fail
+    here, not in an hours-long check."""
+    import output_guard
+
+    from riann_ros.bagio import read_recording
+
+    bag = ROOT / "bags" / "synthetic_rotation_100hz.mcap"
+    got = output_guard.outputs(str(bag), "false", conditions=("none", "bias:3,3,0"), rates="50")
+    assert set(got) == {f"{s}|{c}|native" for s in ("as-recorded", "realistic") for c in ("none", "bias:3,3,0")} | {
+        "as-recorded|none|50"}
+    n = len(read_recording(bag))
+    assert len(got["as-recorded|none|native"]) == n
+    for q in got.values():
+        assert np.all(np.isfinite(q)) and np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-5)

@@ -24,14 +24,16 @@ import shlex
 import sys
 import time
 from contextlib import AbstractContextManager, nullcontext
-from pathlib import Path
 
 from riann_ros import evaluation as ev
-from riann_ros.cli import eval_inputs
-from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, build_parser
+from riann_ros.cli import eval_inputs, input_lists
+from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, SETTING_OPTIONS, build_parser
 from riann_ros.cli.pipe import quiet_when_reader_leaves
-from riann_ros.evaluation import outdir, perturb, report, seq_tables, session
+from riann_ros.cli.progress import Progress
+from riann_ros.evaluation import executors, free_report, outdir, perturb, report, seq_tables, session, store
 from riann_ros.evaluation.estimate_bags import write_estimate_bags
+from riann_ros.evaluation.estimate_files import parse_formats, write_estimate_files
+from riann_ros.evaluation.fleet import Scale
 from riann_ros.evaluation.runners import Runner
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
 
@@ -57,21 +59,23 @@ def _err(msg: str) -> None:
 
 def _settings(args: argparse.Namespace) -> ev.EvalSettings:
     """The evaluation settings of the command line (ValueError / ImportError on bad usage)."""
-    if args.live and (args.tune or args.jobs > 1 or args.write_estimates):
-        raise ValueError("--live runs one replay at a time: it does not combine with --tune, --jobs or "
-                         "--write-estimates")
+    if args.live and (args.tune or args.jobs > 1):
+        raise ValueError("--live runs one replay at a time: it does not combine with --tune or --jobs")
+    parse_formats(args.write_format)
     if args.tune_scenario not in ev.SCENARIOS:
         raise ValueError(f"unknown --tune-scenario {args.tune_scenario!r}; known: {', '.join(ev.SCENARIOS)}")
     for t in args.tune:
         ev.parse_grid(t)
     if args.jobs < 1:
         raise ValueError("--jobs must be at least 1")
+    _check_scaling(args)
     if not 0 <= args.offset_steps <= 50:
         raise ValueError("--offset-steps must be 0 (no search) to 50")
     have = ev.available_estimators()
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
     only_recorded = spec_text.strip().lower() == "none"
-    topics = eval_inputs.topics(args)
+    input_warnings: list[str] = []
+    topics = eval_inputs.topics(args, input_warnings)
     if only_recorded and not (topics.estimates or topics.files):
         raise ValueError("--estimators none needs at least one --estimate-topic or --estimate-file")
     settings = ev.EvalSettings(
@@ -90,9 +94,28 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         offset_steps=args.offset_steps,
         salvage=args.salvage,
         score_from_s=args.score_from,
+        input_warnings=input_warnings,
     )
     eval_inputs.check_recorded(settings)
     return settings
+
+
+def _check_scaling(args: argparse.Namespace) -> None:
+    """--scheduler and --resume with the options they go with (ValueError otherwise)."""
+    if args.resume and not args.out:
+        raise ValueError("--resume continues the run kept in an --out folder: give --out")
+    if args.resume and (args.force or args.write_estimates):
+        raise ValueError("--resume does not combine with --force (which starts over) or --write-estimates (the "
+                         "estimates of the inputs finished earlier are not kept)")
+    if args.scheduler is not None:
+        if args.live or args.jobs > 1:
+            raise ValueError("--scheduler runs the inputs on a Dask cluster's workers: it does not combine with "
+                             "--jobs (the cluster's workers are the parallelism) or --live")
+        executors.parse_scheduler(args.scheduler)
+        try:
+            executors.require_dask()
+        except ev.EvalError as exc:
+            raise ValueError(str(exc)) from exc
 
 
 def _plotted(args: argparse.Namespace) -> tuple[str, ...] | None:
@@ -132,19 +155,46 @@ def _hooks(args: argparse.Namespace, n_sources: int) -> session.Hooks:
         _err(f"tuned {best['estimator']} on {args.tune_scenario}: {b['label']} mean {b['mean']:.2f}° "
              f"max {b['max']:.2f}°")
 
-    return session.Hooks(tuning=tuning, tuned=tuned, progress=lambda n: report.Progress(n, enabled=not args.quiet))
+    def note(text: str) -> None:
+        if not args.quiet:
+            _err(text)
+
+    return session.Hooks(tuning=tuning, tuned=tuned, progress=lambda n: Progress(n, enabled=not args.quiet),
+                         note=note)
 
 
-def _write_estimates(results: list[ev.SequenceResult], out_dir: Path, force: bool) -> list[str]:
-    """--write-estimates: the bags written (stdout is for tables: stderr), and the problems."""
+def _write_estimates(results: list[ev.SequenceResult], args: argparse.Namespace) -> list[str]:
+    """--write-estimates: the bag copies and trajectory files written (stdout is for tables: stderr), and the
+    problems."""
+    out_dir, force = args.write_estimates, args.force
     done = write_estimate_bags(results, out_dir, force)
     for dst, topics in done.written:
         print(f"wrote {dst} ({', '.join(topics)})", file=sys.stderr)
-    return done.problems
+    for src in done.not_bags:
+        print(f"{src}: a dataset file, no bag copy (its estimates are in the trajectory files)", file=sys.stderr)
+    files = write_estimate_files(results, out_dir, parse_formats(args.write_format), force)
+    if files.written:
+        names = [p.name for p in files.written]
+        print(f"wrote {len(names)} trajectory file(s) in {out_dir}: {', '.join(names)}", file=sys.stderr)
+    return done.problems + files.problems
+
+
+def _print_free(rep: report.Report) -> None:
+    """The inputs without a reference: which they are, the estimators' agreement, their bias, the stream's health."""
+    which = free_report.which_is_which(rep.results)
+    if not which:
+        return
+    print(f"\ninputs {which}")
+    for table in (free_report.format_agreement(rep.results), free_report.format_bias(rep.results, rep.rows),
+                  free_report.format_health(rep.results)):
+        if table:
+            print("\n" + table)
 
 
 def _print_summary(rep: report.Report, live: bool) -> None:
-    print(report.format_table(rep.summary))
+    if rep.summary or all(r.has_reference for r in rep.results):
+        print(report.format_table(rep.summary))
+    _print_free(rep)
     nine = seq_tables.format_heading_table(rep.rows)
     if nine:
         print("\n" + nine)
@@ -167,7 +217,9 @@ def _print_summary(rep: report.Report, live: bool) -> None:
             v[1] += live_stats.get("published", 0)
         print("live: messages lost / published: " + ", ".join(f"{k} {a} / {b}" for k, (a, b) in lost.items()))
     n_fail = len(rep.failures)
+    n_free = sum(1 for r in rep.results if not r.error and not r.has_reference)
     print(f"\n{len(rep.results) - n_fail} of {len(rep.results)} input(s) evaluated in {rep.elapsed_s:.1f} s"
+          + (f" ({n_free} without a reference: not scored)" if n_free else "")
           + (f"; {n_fail} failed" if n_fail else ""))
 
 
@@ -178,21 +230,31 @@ def main(argv: list[str] | None = None) -> int:
         with quiet_when_reader_leaves():
             return _main(argv)
     except KeyboardInterrupt:
-        _err("interrupted; no results written")
+        _err("interrupted; no result files written")
         return 130
 
 
-def _check_out(args: argparse.Namespace) -> None:
-    """Refuse (ValueError, exit status 2) an --out folder holding an earlier run's results, before any work."""
-    old = outdir.previous_results(args.out) if args.out and not args.force else []
+def _mode(args: argparse.Namespace) -> str:
+    return store.RESUME if args.resume else store.REPLACE if args.force else store.NEW
+
+
+def _check_out(args: argparse.Namespace, run: session.EvalRun | None = None) -> None:
+    """Refuse (ValueError, exit status 2) an --out folder holding an earlier run's results, or another run's kept
+    inputs (``run``: this run, whose settings a resumed run must share), before any work."""
+    old = outdir.previous_results(args.out) if args.out and not (args.force or args.resume) else []
     if old:
         raise ValueError(str(outdir.OutputExists(args.out, old)))
+    if args.out and run is not None:
+        store.check(args.out, store.fingerprint(run.settings, run.tune, run.tune_scenario), _mode(args),
+                    SETTING_OPTIONS)
 
 
 def _print_messages(rep: report.Report) -> None:
     """Warnings and failures on stderr, then the summary table on stdout."""
     if rep.settings.series_for not in (None, "*", "all") and not any(r.series for r in rep.results):
         _err(f"--plot-sequence {rep.settings.series_for!r} matches no evaluated sequence")
+    for w in rep.settings.input_warnings:
+        _err(f"warning: {w}")
     for res in rep.results:
         for w in res.warnings if not res.error else []:
             _err(f"warning: {w}")
@@ -203,7 +265,7 @@ def _print_messages(rep: report.Report) -> None:
 def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
     """The result files in --out; False when they could not be written."""
     try:
-        figures = report.write_results(args.out, rep, plots=not args.no_plots, replace=args.force)
+        figures = report.write_results(args.out, rep, plots=not args.no_plots, replace=args.force or args.resume)
     except outdir.OutputExists as exc:  # written meanwhile by someone else
         _err(str(exc))
         return False
@@ -218,6 +280,7 @@ def _compare(args: argparse.Namespace) -> int:
     from riann_ros.evaluation import compare_text
 
     try:
+        _check_out(args)
         both = cp.parse_selection(args.select)
         sel_a = cp.Selection(both.items + cp.parse_selection(args.select_a).items)
         sel_b = cp.Selection(both.items + cp.parse_selection(args.select_b).items)
@@ -241,42 +304,53 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _evaluate(args: argparse.Namespace, run: session.EvalRun) -> report.Report | None:
+    """The run (None: it could not go on, said on stderr). Interrupted: what the --out folder keeps, then
+    KeyboardInterrupt."""
+    started = time.perf_counter()  # the run's time includes the start of the --live nodes
+    try:
+        with _runner(args) as runner:
+            return session.evaluate(run, runner, _hooks(args, len(run.sources)), started)
+    except ev.EvalError as exc:
+        _err(str(exc))
+    except KeyboardInterrupt:
+        if args.out and (args.out / store.SHARDS).is_dir():
+            _err(f"the inputs finished so far are kept in {args.out / store.SHARDS}: add --resume to continue")
+        raise
+    return None
+
+
 def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     argv_list = sys.argv[1:] if argv is None else list(argv)
     if args.compare is not None:
-        if args.inputs:
+        if args.inputs or args.inputs_from:
             parser.error("--compare A B takes no inputs: it compares two saved runs")
-        try:
-            _check_out(args)
-        except ValueError as exc:
-            _err(str(exc))
-            return 2
         return _compare(args)
-    if not args.inputs:
-        parser.error("no input given (bags or BROAD files; or --compare A B)")
+    try:
+        args.inputs = inputs = [*map(str, args.inputs), *input_lists.inputs_from(args.inputs_from)]
+    except ValueError as exc:
+        _err(str(exc))
+        return 2
+    if not inputs:
+        parser.error("no input given (bags or BROAD files, --inputs-from FILE; or --compare A B)")
     if args.select or args.select_a or args.select_b or args.metric != "rmse":
         parser.error("--select, --select-a, --select-b and --metric belong to --compare A B")
     try:
-        settings = _settings(args)
-        _check_out(args)
+        run = session.EvalRun(tuple(inputs), _settings(args), args.jobs, tuple(args.tune), args.tune_scenario,
+                              "riann-bag-eval " + shlex.join(argv_list), Scale(args.scheduler, args.out, _mode(args)))
+        _check_out(args, run)
     except (ValueError, ImportError) as exc:
         _err(str(exc))
         return 2
-    run = session.EvalRun(tuple(str(s) for s in args.inputs), settings, args.jobs, tuple(args.tune),
-                          args.tune_scenario, "riann-bag-eval " + shlex.join(argv_list))
-    started = time.perf_counter()  # the run's time includes the start of the --live nodes
-    try:
-        with _runner(args) as runner:
-            rep = session.evaluate(run, runner, _hooks(args, len(run.sources)), started)
-    except ev.EvalError as exc:
-        _err(str(exc))
+    rep = _evaluate(args, run)
+    if rep is None:
         return 1
     results = rep.results
     _print_messages(rep)
     _print_summary(rep, args.live)
-    problems = _write_estimates(results, args.write_estimates, args.force) if args.write_estimates else []
+    problems = _write_estimates(results, args) if args.write_estimates else []
     for p in problems:
         _err(p)
     if args.out and not _write_out(args, rep):

@@ -14,6 +14,15 @@ from riann_ros.evaluation import perturb
 from riann_ros.mag import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
+#: the options behind each evaluation setting, named when a resumed run asks for other settings (--resume)
+SETTING_OPTIONS = {
+    "estimators": "--estimators", "scenarios": "--scenarios", "seed": "--seed", "rates": "--rates",
+    "conditions": "--perturb", "with_heading": "--heading", "use_mag": "--use-mag",
+    "series_for": "--plot-sequence, --no-plots", "series_conditions": "--plot-perturb",
+    "keep_estimates": "--write-estimates", "rest": "--rest", "offset_steps": "--offset-steps", "salvage": "--salvage",
+    "topics": "--imu-topic, --ground-truth-topic, --estimate-topic, --estimate-file, --t-offset, --max-gap",
+    "tune": "--tune", "tune_scenario": "--tune-scenario",
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -22,7 +31,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Attitude RMSE (e_α, heading ignored) of RIANN, Madgwick, Mahony and VQF on dataset bags, "
         "in the paper's restrictive / partially-restrictive / realistic scenarios and as recorded; also of "
         "estimates your own filter recorded in a bag (--estimate-topic), on any rosbag2 bag (--imu-topic, "
-        "--ground-truth-topic); --compare of two saved runs. Full reference: docs/evaluation.md.",
+        "--ground-truth-topic); --compare of two saved runs. A bag without a reference orientation (your own robot's) "
+        "is run as recorded by every estimator and not scored: what it shows is whether the estimators agree (their "
+        "inclination difference, where they part most), the gyro bias each settled on beside the gyro at the "
+        "stream's rests, and the stream's health (rate, jitter, holes, rejected samples, unit warnings, restarts), "
+        "with a figure of roll, pitch and heading of every estimator; what it cannot show is which estimator is right "
+        "where they differ, or an error they share. Full reference: docs/evaluation.md.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="estimator specs: NAME[:PARAM=VALUE[:PARAM=VALUE...]], comma-separated, e.g.\n"
         "  riann,madgwick:beta=0.033,madgwick:beta=0.1,mahony:kp=1:ki=0.3,vqf:tau_acc=3\n"
@@ -30,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
         "exit status: 0 ok, 1 some input failed, 2 usage error, 130 interrupted",
     )
     _inputs_and_compare(p)
+    _scaling(p)
     _what_runs(p)
     _recorded_estimates(p)
     _conditions(p)
@@ -61,6 +76,25 @@ def _inputs_and_compare(p: argparse.ArgumentParser) -> None:
                    "of e_α; heading_rmse, heading_mean, …, total_rmse, … where scored")
 
 
+def _scaling(p: argparse.ArgumentParser) -> None:
+    """Many inputs and machines: an input list, a Dask cluster, a resumable --out."""
+    s = p.add_argument_group("many inputs and machines (docs/evaluation.md#scaling-out)")
+    s.add_argument("--inputs-from", action="append", default=[], metavar="FILE",
+                   help="more inputs, read from FILE: one path or glob (*, ?, [...], ** for any depth) per line, in "
+                   "that order (a glob's matches sorted); blank lines and lines starting with # are skipped; a "
+                   "relative path is relative to FILE's folder ('-': standard input, relative to the current folder). "
+                   "A glob that matches nothing is an error. Repeatable; the BAG arguments come first")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="evaluate on a Dask cluster instead of --jobs: tcp://HOST:8786 (a scheduler started with "
+                   "'dask scheduler', workers with 'dask worker tcp://HOST:8786'; every worker must see the inputs at "
+                   "the same paths) or local:N (N worker processes on this machine). Needs pip install "
+                   "'riann_ros[cluster]'")
+    s.add_argument("--resume", action="store_true",
+                   help="continue the run in --out (each finished input is kept in OUT/shards as it completes): "
+                   "evaluate only the inputs it has not finished, or that failed, then write the result files; "
+                   "refused, naming them, when settings differ from that run's")
+
+
 def _what_runs(p: argparse.ArgumentParser) -> None:
     """The estimators and the scenarios."""
     p.add_argument("--estimators", "-e", default=None,
@@ -85,8 +119,13 @@ def _recorded_estimates(p: argparse.ArgumentParser) -> None:
                    "a TUM file (t tx ty tz qx qy qz qw, t in seconds, no header) or a CSV with a header: a time "
                    "column (timestamp, time or t; its unit in the name, e.g. time[s], else ns) and qw, qx, qy, qz "
                    "(the IMU frame's orientation in a z-up world, as the reference). Labelled LABEL (default: the "
-                   "file name). With several inputs a file belongs to the input whose name starts its name "
-                   "(run1.mcap: run1_vins.tum). Repeatable")
+                   "file name). FILE may be a glob ('runs/*.tum', quoted) or a folder (its .tum, .csv and .txt files): "
+                   "one label for many files, each scored as that estimator on its own input, one row per input and "
+                   "one summary row. A file belongs to the input whose file name without suffix (its stem) equals the "
+                   "file's stem or starts it followed by a character other than a letter or digit (run1.mcap: "
+                   "run1.tum, run1_vins.tum; not run10.tum), the longest such stem; a single file with a single "
+                   "input belongs to it whatever its name. Inputs without a file and files without an input are "
+                   "warned about. Repeatable")
     b.add_argument("--estimate-cols", default=None, metavar="TIME,QW,QX,QY,QZ",
                    help="the --estimate-file columns, for a CSV in another layout")
     b.add_argument("--estimate-time-unit", default=None, choices=("s", "ms", "us", "ns"),
@@ -138,7 +177,10 @@ def _results(p: argparse.ArgumentParser) -> None:
                    help="write results.csv, results.json, report.md and plots (PNG+SVG) here (a folder already holding "
                    "results needs --force)")
     p.add_argument("--heading", action="store_true",
-                   help="also score heading and total error of 6D runs (heading drift; 9D runs always have them)")
+                   help="also score heading and total error of 6D runs (unaligned, as evo_ape without alignment: they "
+                   "include the start heading) and the heading drift (heading_drift_*: the heading error after "
+                   "aligning the estimate's heading with the reference's at the first scored sample), which the "
+                   "tables show for 6D runs; 9D runs always have heading and total error")
     p.add_argument("--use-mag", choices=USE_MAG_CHOICES, default="auto",
                    help="the magnetometer (/imu/mag), as the nodes' use_mag: auto (default) = every estimator runs 9D "
                    "where the recording has a field, with heading and total error in the results; false = 6D only")
@@ -158,8 +200,14 @@ def _results(p: argparse.ArgumentParser) -> None:
                    "the best one to the comparison (repeatable)")
     p.add_argument("--tune-scenario", default=ev.REALISTIC, help="scenario the tuning minimises (default realistic)")
     p.add_argument("--write-estimates", type=Path, default=None, metavar="DIR",
-                   help="write a copy of every input bag into DIR with each estimator's output as "
-                   "geometry_msgs/QuaternionStamped topics /eval/<scenario>/<estimator> (first scenario)")
+                   help="write into DIR a copy of every input bag with each estimator's output as "
+                   "geometry_msgs/QuaternionStamped topics /eval/<scenario>/<estimator> (first scenario), and per "
+                   "input and estimator a trajectory file <sequence>.<scenario>.<label>.tum (TUM: t x y z qx qy qz "
+                   "qw, position 0 0 0; evo_ape / evo_traj read it), plus <sequence>.<scenario>.reference.tum with "
+                   "the reference at the scored samples where the input has one")
+    p.add_argument("--write-format", default="tum", metavar="tum|csv|tum,csv",
+                   help="the trajectory files of --write-estimates: tum (default), csv (a header time[s],qw,qx,qy,qz: "
+                   "what --estimate-file reads) or both")
     p.add_argument("--force", action="store_true",
                    help="replace an earlier run's result files in --out (results.csv/json, report.md, compare.csv and "
                    "the plots; nothing else in the folder) and existing --write-estimates bags; without it an --out "

@@ -1,5 +1,5 @@
-"""stdout that goes quiet when its reader has gone (``riann-bag-eval … | head``): the run goes on and still writes
-its result files, with no traceback (ROS-free)."""
+"""stdout and stderr that go quiet when their reader has gone (``riann-bag-eval … | head``, ``… 2>&1 | head``): the
+run goes on and still writes its result files, with no traceback (ROS-free)."""
 
 from __future__ import annotations
 
@@ -43,17 +43,20 @@ class QuietPipe(io.TextIOBase):
 
 @contextlib.contextmanager
 def quiet_when_reader_leaves() -> Iterator[None]:
-    """``sys.stdout`` as a :class:`QuietPipe` inside the block (unchanged where stdout is no file, e.g. captured)."""
-    try:
-        sys.stdout.fileno()
-    except (AttributeError, OSError, ValueError):
-        yield
-        return
-    real = sys.stdout
-    quiet = QuietPipe(real)
-    sys.stdout = quiet
+    """``sys.stdout`` and ``sys.stderr`` as :class:`QuietPipe` inside the block (each unchanged where it is no file,
+    e.g. captured)."""
+    saved = {}
+    for name in ("stdout", "stderr"):
+        stream = getattr(sys, name)
+        try:
+            stream.fileno()
+        except (AttributeError, OSError, ValueError):
+            continue
+        saved[name] = stream
+        setattr(sys, name, QuietPipe(stream))
     try:
         yield
     finally:
-        quiet.flush()  # what is still buffered: a reader gone by now must not make the exit's flush fail
-        sys.stdout = real
+        for name, real in saved.items():
+            getattr(sys, name).flush()  # what is still buffered: a reader gone by now must not fail the exit's flush
+            setattr(sys, name, real)

@@ -1,8 +1,9 @@
 """Generic CSV IMU files → :class:`Recording`.
 
 Format: one header row with column names, then one row per sample. Before the header, blank lines
-and ``#`` comment lines without a delimiter are skipped; a ``#`` line that contains ``,``, ``;`` or a tab
-is the header, with the ``#`` stripped (as in EuRoC's ``#timestamp [ns],...``). After the header, blank
+and ``#`` comment lines are skipped; a ``#`` line that contains ``,``, ``;`` or a tab which the first data row
+contains too is the header, with the ``#`` stripped (as in EuRoC's ``#timestamp [ns],...``), while a ``#``
+line over blank-separated rows is a comment whatever it holds (a TUM file's). After the header, blank
 and ``#`` lines are skipped. The delimiter is detected from the header (``,``, ``;``, tab, or blanks).
 
 Columns (names and units by option; defaults in brackets):
@@ -25,6 +26,7 @@ they are required. IMU cells must be finite numbers. Errors name the file and li
 from __future__ import annotations
 
 import difflib
+import itertools
 import os
 import re
 from collections.abc import Sequence
@@ -91,6 +93,20 @@ def check_stamps(stamps: np.ndarray, where: str, lines: Sequence[int] | None = N
         raise InputError(f"{loc}: {what} time stamp {int(stamps[i])} ns after {int(stamps[i - 1])} ns")
 
 
+_DELIMITERS = (",", ";", "\t")
+
+
+def _comment_line(lines: list[str], k: int) -> bool:
+    """Whether line ``k`` is a ``#`` comment rather than a ``#`` header (ASL's ``#timestamp, …``): a header has a
+    delimiter that the first data line after it has too; a ``#`` line over a blank-separated table (a TUM file's
+    ``# t x y z … (…, …)``) is a comment whatever punctuation it holds."""
+    line = lines[k].lstrip()
+    if not line.startswith("#"):
+        return False
+    data = next((x for x in itertools.islice(lines, k + 1, None) if x.strip() and not x.lstrip().startswith("#")), "")
+    return not any(d in line and d in data for d in _DELIMITERS)
+
+
 def read_table(path: Path, delimiter: str | None = None) -> tuple[list[str], list[list[str]], list[int]]:
     """Header names, rows of cell strings and their 1-based line numbers."""
     try:
@@ -99,16 +115,13 @@ def read_table(path: Path, delimiter: str | None = None) -> tuple[list[str], lis
         raise InputError(f"{path}: not a text file ({e})") from None
     lines = text.splitlines()
     k = 0
-    while k < len(lines) and (
-        not lines[k].strip()
-        or (lines[k].lstrip().startswith("#") and "," not in lines[k] and ";" not in lines[k] and "\t" not in lines[k])
-    ):
+    while k < len(lines) and (not lines[k].strip() or _comment_line(lines, k)):
         k += 1
     if k >= len(lines):
         raise InputError(f"{path}: empty file (no header row)")
     header_line = lines[k].strip().lstrip("#").strip()
     if delimiter is None:
-        delimiter = next((d for d in (",", ";", "\t") if d in header_line), None)
+        delimiter = next((d for d in _DELIMITERS if d in header_line), None)
     split = (lambda s: s.split()) if delimiter is None else (lambda s: [c.strip() for c in s.split(delimiter)])
     header = [h.strip() for h in split(header_line)]
     rows, numbers = [], []

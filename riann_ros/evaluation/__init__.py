@@ -10,7 +10,10 @@ chunks (:mod:`~riann_ros.evaluation.scenarios`) → a runner gives the estimates
 statistics across sequences and tuning: :mod:`~riann_ros.evaluation.aggregate`; tables and files:
 :mod:`~riann_ros.evaluation.report`; figures: :mod:`~riann_ros.evaluation.plots`; the ``--out`` folder policy:
 :mod:`~riann_ros.evaluation.outdir`; two saved runs side by side: :mod:`~riann_ros.evaluation.compare` (report and
-compare use plots and outdir; neither plots nor outdir imports them).
+compare use plots and outdir; neither plots nor outdir imports them). Where the inputs run (this process, ``--jobs``,
+a Dask cluster): :mod:`~riann_ros.evaluation.executors`; each finished input kept for ``--resume``:
+:mod:`~riann_ros.evaluation.store`; the pass over the inputs with both: :mod:`~riann_ros.evaluation.fleet`; its
+progress bar: :mod:`riann_ros.cli.progress`.
 Reference: docs/evaluation.md.
 """
 

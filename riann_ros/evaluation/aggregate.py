@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.executors import Executor
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, EvalSettings, Progress, ResultRow
 from riann_ros.evaluation.run import evaluate_sources
@@ -56,8 +57,8 @@ def scenario_order(scenarios: Iterable[str]) -> list[str]:
 def aggregate(rows: Iterable[ResultRow], metric: str = "rmse_deg") -> list[Group]:
     """Per estimator × scenario × perturbation × dataset × rate: n, mean, median, max, min of the per-sequence
     ``metric`` (BROAD's group averaging: RMSE per trial, then the plain mean). With several datasets an ``all``
-    group over every sequence is added."""
-    rows = [r for r in rows if getattr(r.score, metric) is not None]
+    group over every sequence is added. Rows of inputs without a reference (no scores) are left out."""
+    rows = [r for r in rows if r.has_reference and getattr(r.score, metric) is not None]
     groups: dict[tuple[str, str, str, str, str | float], list[float]] = {}
     datasets = sorted({r.dataset for r in rows})
     for r in rows:
@@ -87,7 +88,7 @@ def best_of(rows: Iterable[ResultRow], specs: list[EstimatorSpec], scenario: str
     pooled)."""
     by_label: dict[str, list[float]] = {}
     for r in rows:
-        if r.scenario == scenario:
+        if r.scenario == scenario and r.has_reference:
             by_label.setdefault(r.estimator, []).append(r.rmse_deg)
     table: list[dict[str, Any]] = []
     for s in specs:
@@ -100,7 +101,7 @@ def best_of(rows: Iterable[ResultRow], specs: list[EstimatorSpec], scenario: str
     return {"scenario": scenario, "best": table[0], "grid": table}
 
 
-def tune(text: str, sources: Sequence[str], scenario: str, seed: int, jobs: int = 1,
+def tune(text: str, sources: Sequence[str], scenario: str, seed: int, jobs: int | Executor = 1,
          progress: Progress | None = None, like: EvalSettings | None = None) -> tuple[dict[str, Any], EstimatorSpec]:
     """Grid-search the estimator of tuning spec ``text`` (``"madgwick"``, ``"mahony:kp=0.5/1:ki=0/0.3"``) for the
     lowest mean RMSE on ``sources`` in ``scenario``: (the grid's results, the best spec labelled ``… tuned``).

@@ -126,7 +126,8 @@ def run_label(path: Path) -> str:
 
 
 def load(path: str | Path) -> Saved:
-    """The rows of a results.json written by riann-bag-eval (EvalError naming the file otherwise)."""
+    """The scored rows of a results.json written by riann-bag-eval (EvalError naming the file otherwise); rows of
+    inputs without a reference carry no scores and are left out."""
     p = Path(path)
     if p.is_dir():
         p = p / "results.json"
@@ -139,7 +140,7 @@ def load(path: str | Path) -> Saved:
     if not isinstance(data, dict) or not isinstance(data.get("results"), list):
         raise EvalError(f"{p}: not a results.json of riann-bag-eval (no 'results' list)")
     try:
-        rows = [ResultRow.from_dict(d) for d in data["results"]]
+        rows = [row for row in (ResultRow.from_dict(d) for d in data["results"]) if row.has_reference]
     except (KeyError, TypeError, ValueError) as exc:
         raise EvalError(f"{p}: a result row lacks or garbles {exc}") from exc
     return Saved(p, run_label(p), str((data.get("settings") or {}).get("command", "")), rows)
@@ -290,7 +291,8 @@ def compare(a: Saved, b: Saved, sel_a: Selection = Selection(), sel_b: Selection
 
 def metric_text(metric: tuple[str, str]) -> str:
     err, st = metric
-    return {"inclination": "attitude (inclination e_α)", "heading": "heading", "total": "total angle"}[err] + (
+    return {"inclination": "attitude (inclination e_α)", "heading": "heading", "total": "total angle",
+            "heading_drift": "heading drift"}[err] + (
         " RMSE" if st == "rmse" else f" {st} error")
 
 

@@ -1,6 +1,7 @@
 """The estimates of a run written into copies of its input bags (``--write-estimates``, ROS-free): each
 estimator's output of the first scenario as a ``geometry_msgs/QuaternionStamped`` topic
-``/eval/<scenario>/<estimator>`` beside the input's own topics."""
+``/eval/<scenario>/<estimator>`` beside the input's own topics. Dataset files (BROAD) get no bag copy; their
+estimates are in the trajectory files (:mod:`~riann_ros.evaluation.estimate_files`)."""
 
 from __future__ import annotations
 
@@ -20,16 +21,18 @@ def topic_for(scenario: str, label: str) -> str:
 
 @dataclass
 class EstimateBags:
-    """What :func:`write_estimate_bags` did: the bags written with their topics, and why others were not."""
+    """What :func:`write_estimate_bags` did: the bags written with their topics, why others were not, and the
+    inputs that are no bags (no copy: not a problem)."""
 
     written: list[tuple[Path, list[str]]] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    not_bags: list[Path] = field(default_factory=list)
 
 
 def write_estimate_bags(results: list[SequenceResult], out_dir: Path, force: bool) -> EstimateBags:
     """A copy of every evaluated input bag in ``out_dir`` with its estimates (``SequenceResult.estimates``, kept with
-    ``EvalSettings.keep_estimates``); ``force`` replaces existing copies. Dataset files and unwritable copies are
-    problems, not errors: the other inputs are still written."""
+    ``EvalSettings.keep_estimates``); ``force`` replaces existing copies. Unwritable copies are problems, not
+    errors: the other inputs are still written; dataset files are skipped (``not_bags``)."""
     from riann_ros import bagio
 
     done = EstimateBags()
@@ -39,7 +42,7 @@ def write_estimate_bags(results: list[SequenceResult], out_dir: Path, force: boo
             continue
         src = Path(res.source)
         if src.suffix.lower() in BROAD_SUFFIXES:
-            done.problems.append(f"{src}: --write-estimates needs a bag input, not a dataset file")
+            done.not_bags.append(src)
             continue
         est = res.estimates
         topics = {topic_for(est["scenario"], lbl): (est["stamps"], q) for lbl, q in est["quats"].items()}

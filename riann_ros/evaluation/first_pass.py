@@ -1,5 +1,6 @@
-"""The first pass over a source (ROS-free): :func:`summarise` checks the input (samples, reference, scored samples),
-finds the motion onset (first scored sample) and the rates (1 / median stamp step) of the whole sequence and of
+"""The first pass over a source (ROS-free): :func:`summarise` checks the input (samples; where it has a reference,
+scored samples with one: an input without a reference orientation is evaluated without scores), finds the motion
+onset (first scored sample) and the rates (1 / median stamp step) of the whole sequence and of
 the sequence from the motion onset; then, over the samples before the motion onset only, the rest whose mean gyro
 is the turn-on bias (:mod:`~riann_ros.evaluation.rest`: detected from the signals, or given by hand)."""
 
@@ -58,6 +59,7 @@ class Summary:
     rate_all: float  # 1 / median stamp step of the whole sequence
     rate_from_i0: float  # … of the sequence from i0 on
     rest: Rest = field(default_factory=Rest)  # the rest whose mean gyro is the turn-on bias (maybe none)
+    has_reference: bool = True  # False: no reference orientation at any sample (nothing to score against)
 
 
 class _Pass:
@@ -97,14 +99,18 @@ class _Pass:
         self.last = int(c.stamps_ns[-1])
         self.n += m
 
-    def summary(self, p: Path) -> Summary:
+    def summary(self, p: Path, reference_required: bool = False) -> Summary:
+        """The summary; EvalError for an input that cannot be evaluated. Without a reference orientation at any
+        sample the input is reference-free (``has_reference`` False), unless ``reference_required`` (a reference
+        topic was named)."""
         if self.n < 2:
             raise EvalError(f"{p}: fewer than 2 IMU samples")
-        if not self.has_ref or not self.ref_any:
-            raise EvalError(f"{p}: no reference orientation (nothing to score against)")
-        if not self.scored_any:
+        has_reference = self.has_ref and self.ref_any
+        if not has_reference and reference_required:
+            raise EvalError(f"{p}: no reference orientation on the --ground-truth-topic (nothing to score against)")
+        if has_reference and not self.scored_any:
             raise EvalError(f"{p}: no scored samples (score mask is empty)")
-        if not self.scored_ref:
+        if has_reference and not self.scored_ref:
             raise EvalError(f"{p}: no scored samples with a reference")
         name, dataset, citation, frame_id = self.meta
         if not name or name == "sequence":
@@ -116,10 +122,11 @@ class _Pass:
             frame_id=frame_id,
             n=self.n,
             first_stamp=self.first_stamp,
-            i0=self.i0,
+            i0=max(self.i0, 0),
             stamp_i0=self.stamp_i0,
             rate_all=median_rate(self.hist_all),
             rate_from_i0=median_rate(self.hist_i0),
+            has_reference=has_reference,
         )
 
 
@@ -131,8 +138,8 @@ def summarise(src: Source, rest: tuple[float, float] | Rest | None = None) -> Su
     state = _Pass()
     for c in src.chunks():
         state.add(c)
-    summary = state.summary(src.path)
-    summary.rest = find_rest(src, summary, rest)
+    summary = state.summary(src.path, src.topics.reference is not None)
+    summary.rest = find_rest(src, summary, rest) if summary.has_reference else Rest()
     return summary
 
 

@@ -13,7 +13,13 @@ The search runs chunk by chunk with a carry of a few samples, so memory does not
 
 Why: for a regular stream the sample-time convention (point samples at their stamps, or the means over the
 interval before each stamp) cannot be seen from the IMU, and read wrongly it shifts an estimate by half a step;
-a reference that is not synchronised with the IMU shifts every estimator alike. :func:`timing_notes` says which.
+a reference that is not synchronised with the IMU shifts every estimator alike.
+
+An offset shows only where the reference moves: on a still sensor every offset fits alike, and the best one is
+noise. The search therefore also measures how fast the reference's gravity direction turns (RMS over the scored
+samples, each against the reference :data:`TURN_SPAN_S` earlier), and :func:`timing_notes` claims an offset only
+when that is above the rest detector's threshold and the offset lowers the RMSE clearly. Each note is about one
+estimator and reads the same whatever other estimators run.
 """
 
 from __future__ import annotations
@@ -21,11 +27,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.constants import NS_PER_S
+from riann_ros.evaluation.rest import REST_GYR_DEV_DPS, REST_TAU_S
 
 STEPS = 3  # the search spans ± this many input steps
 GRID = 4  # candidate offsets per step (a parabola through the best three refines the best)
@@ -33,6 +41,12 @@ GAP_STEPS = 2.5  # the reference is not interpolated across a gap longer than th
 HALF_STEP_BAND = (0.3, 0.7)  # |offset| / step in this band: "near half a step"
 MIN_GAIN = 0.9  # a note only when the RMSE at the best offset is below this fraction of the RMSE at 0
 BLOCK = 4096  # samples scored at a time (memory: a few BLOCK × candidates arrays)
+#: s, the span over which the reference's turn is measured: the rest detector's time constant, long enough that a
+#: reference's noise (a few hundredths of a degree per sample) is far below the rest threshold's turn over it
+TURN_SPAN_S = REST_TAU_S
+#: °/s, the RMS turn rate of the reference's gravity direction below which no offset is claimed: the rest
+#: detector's gyro threshold (VQF's restThGyr), below which a sensor counts as not rotating
+TURN_MIN_DPS = REST_GYR_DEV_DPS
 
 
 def gravity(q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -84,6 +98,7 @@ class Offset:
     offset_s: float
     rmse_deg: float
     step_s: float
+    ref_turn_dps: float = math.nan  # RMS turn rate of the reference's gravity direction (°/s, TURN_SPAN_S apart)
 
     @property
     def steps(self) -> float:
@@ -110,6 +125,7 @@ class OffsetSearch:
         self.pend_t = np.zeros(0, np.int64)
         self.pend_ok = np.zeros(0, bool)
         self.pend_g = [np.zeros((0, 3)) for _ in range(n_est)]
+        self.turn = _Turn()
 
     def add(self, stamps: NDArray[np.int64], quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_],
             qs: Sequence[NDArray[np.float64]]) -> None:
@@ -119,6 +135,7 @@ class OffsetSearch:
             return
         ref_ok = np.isfinite(quat_ref).all(axis=1)
         g_ref = gravity(quat_ref)
+        self.turn.add(stamps[ref_ok], g_ref[ref_ok], mask[ref_ok])
         self.ref_t = np.concatenate([self.ref_t, stamps[ref_ok]])
         self.ref_g = np.concatenate([self.ref_g, g_ref[ref_ok]])
         self.pend_t = np.concatenate([self.pend_t, stamps])
@@ -172,7 +189,37 @@ class OffsetSearch:
                 fk = float(f[k] - 0.25 * (f[k - 1] - f[k + 1]) * dk)
         d_tau = self.taus[1] - self.taus[0]
         return Offset(offset_s=float(self.taus[k] + dk * d_tau) * 1e-9, rmse_deg=math.sqrt(max(fk, 0.0) / self.n[j]),
-                      step_s=self.step_ns * 1e-9)
+                      step_s=self.step_ns * 1e-9, ref_turn_dps=self.turn.rms_dps)
+
+
+class _Turn:
+    """The RMS rate (°/s) at which the reference's gravity direction turns at the scored samples, each against the
+    reference :data:`TURN_SPAN_S` earlier (the latest sample at or before then, if within a quarter span of it),
+    fed chunk by chunk with a carry of one span."""
+
+    def __init__(self) -> None:
+        self.t = np.zeros(0, np.int64)
+        self.g = np.zeros((0, 3))
+        self.n = 0
+        self.sq = 0.0
+
+    def add(self, t: NDArray[np.int64], g: NDArray[np.float64], scored: NDArray[np.bool_]) -> None:
+        span = round(TURN_SPAN_S * NS_PER_S)
+        all_t, all_g = np.concatenate([self.t, t]), np.concatenate([self.g, g])
+        k = len(self.t) + np.flatnonzero(scored)
+        j = np.searchsorted(all_t, all_t[k] - span, side="right") - 1
+        ok = (j >= 0) & (all_t[np.maximum(j, 0)] >= all_t[k] - span - span // 4)
+        if ok.any():
+            dot = np.einsum("ij,ij->i", all_g[k[ok]], all_g[j[ok]])
+            rate = np.degrees(np.arccos(np.clip(dot, -1.0, 1.0))) / TURN_SPAN_S
+            self.n += len(rate)
+            self.sq += float(np.sum(rate**2))
+        keep = np.searchsorted(all_t, all_t[-1] - span - span // 4, side="left") if len(all_t) else 0
+        self.t, self.g = all_t[keep:], all_g[keep:]
+
+    @property
+    def rms_dps(self) -> float:
+        return math.sqrt(self.sq / self.n) if self.n else math.nan
 
 
 def search(stamps: NDArray[np.int64], quat_ref: NDArray[np.float64], mask: NDArray[np.bool_],
@@ -191,51 +238,49 @@ def _ms(s: float) -> str:
     return f"{s * 1e3:+.1f} ms"
 
 
-def _group_notes(where: str, grp: Sequence, steps: int, riann_name: str) -> list[str]:
-    """The notes of one sequence × scenario × perturbation × rate (see :func:`timing_notes`)."""
-    step = float(grp[0].score.t_offset_step_s)
-    offsets = {r.estimator: float(r.score.best_t_offset_s) for r in grp}
-    notes = []
-    for r in grp:
-        rel_edge = abs(offsets[r.estimator]) / step
-        if rel_edge >= steps - 0.5 / GRID:
-            notes.append(f"{where}: {r.estimator}'s error is smallest at the edge of the searched offsets "
-                         f"({_ms(offsets[r.estimator])}, ±{steps} steps): the offset may be larger (--offset-steps)")
-        if r.estimator_name != riann_name:
-            continue
-        others = [v for k, v in offsets.items() if k != r.estimator]
-        base = float(np.median(others)) if others else 0.0
-        rel = (offsets[r.estimator] - base) / step
-        if is_half_step(rel) and r.score.best_t_offset_rmse_deg < MIN_GAIN * r.rmse_deg:
-            against = f"the other estimators' ({_ms(base)})" if others else "0 ms"
-            notes.append(
-                f"{where}: {r.estimator} fits the reference best with its estimate moved by "
-                f"{_ms(offsets[r.estimator])}, {rel:+.2f} steps of {step * 1e3:.3g} ms from {against}: e_α RMSE "
-                f"{r.score.best_t_offset_rmse_deg:.2f}° instead of {r.rmse_deg:.2f}°. A shift near half a step is "
-                "what the driver's sample-time convention gives when it is read the other way (point samples at "
-                "their stamps, or means over the interval before each stamp): RIANN reads a regular stream below about "
-                "180 Hz a quarter step before its stamps (sample_delay), between the two, unless its input_model "
-                "parameter names the convention (input_model=points or means; docs/riann.md, stage 1)")
-    filters = {r.estimator_name for r in grp} - {"recorded"}
-    if len(filters) > 1 and all(abs(v) / step >= 0.25 for v in offsets.values()):
-        if max(offsets.values()) - min(offsets.values()) <= 0.25 * step:
-            notes.append(f"{where}: every estimator fits the reference best moved by about "
-                         f"{_ms(float(np.median(list(offsets.values()))))}: the reference and the IMU stamps may be "
-                         "that far apart (not synchronised), which every score here includes")
-    return notes
+def shows_offset(score: Any) -> bool:
+    """Whether a row's offset search can show an offset: the reference turns (RMS at least :data:`TURN_MIN_DPS`)
+    and the best offset's RMSE is below :data:`MIN_GAIN` of the RMSE at its stamps."""
+    turn, best = score.t_offset_ref_turn_dps, score.best_t_offset_rmse_deg
+    return (turn is not None and math.isfinite(turn) and turn >= TURN_MIN_DPS and best is not None
+            and best < MIN_GAIN * score.rmse_deg)
+
+
+def _note(where: str, r: Any, steps: int, riann_name: str) -> str | None:
+    """The note on one row's best offset (None: nothing to claim); its words depend on that row only."""
+    sc = r.score
+    off, step = float(sc.best_t_offset_s), float(sc.t_offset_step_s)
+    rel = off / step
+    if not shows_offset(sc) or abs(rel) < 0.25:
+        return None
+    head = (f"{where}: {r.estimator} fits the reference best with its estimate moved by {_ms(off)} ({rel:+.2f} steps "
+            f"of {step * 1e3:.3g} ms): e_α RMSE {sc.best_t_offset_rmse_deg:.2f}° instead of {r.rmse_deg:.2f}°")
+    if abs(rel) >= steps - 0.5 / GRID:
+        return head + f", at the edge of the searched offsets (±{steps} steps): it may be larger (--offset-steps)"
+    if is_half_step(rel):
+        text = (head + ". A shift near half a step is what the driver's sample-time convention gives when it is read "
+                "the other way (point samples at their stamps, or means over the interval before each stamp)")
+        if r.estimator_name == riann_name:
+            text += (": RIANN reads a regular stream below about 180 Hz a quarter step before its stamps "
+                     "(sample_delay), between the two, unless its input_model parameter names the convention "
+                     "(input_model=points or means; docs/riann.md, stage 1)")
+        return text
+    return (head + ". An offset that every estimator shows is the reference's and the IMU's stamps being that far "
+            "apart (not synchronised), which every score includes; one of this estimator's own is its lag")
 
 
 def timing_notes(rows: Sequence, steps: int = STEPS, riann_name: str = "riann") -> list[str]:
-    """Notes on the best offsets of result rows (:class:`~riann_ros.evaluation.results.ResultRow`), per sequence ×
-    scenario × perturbation × rate: RIANN's best offset differing from the other estimators' (their median; 0 when
-    it runs alone) by about half a step, with a clearly lower RMSE there, points at the sample-time convention (its
-    ``input_model``); all estimators agreeing on an offset of at least a quarter step points at the reference's or
-    the IMU's stamps; a best offset at the edge of the ±``steps`` searched."""
-    groups: dict[tuple, list] = {}
-    for r in rows:
-        if r.score.best_t_offset_s is not None and r.score.t_offset_step_s:
-            groups.setdefault((r.sequence, r.scenario, r.perturbation, r.rate), []).append(r)
+    """Notes on the best offsets of result rows (:class:`~riann_ros.evaluation.results.ResultRow`), one per row
+    whose search shows an offset of at least a quarter step (:func:`shows_offset`): near half a step it points at
+    the sample-time convention (RIANN: its ``input_model``), otherwise at unsynchronised stamps or a lag; at the
+    edge of the ±``steps`` searched it says the offset may be larger. A note's words depend on its own row only,
+    never on which other estimators ran."""
     notes = []
-    for (seq, scn, prt, _rate), grp in groups.items():
-        notes += _group_notes(f"{seq}, {scn}" + ("" if prt == "none" else f", {prt}"), grp, steps, riann_name)
+    for r in rows:
+        if r.score.best_t_offset_s is None or not r.score.t_offset_step_s:
+            continue
+        where = f"{r.sequence}, {r.scenario}" + ("" if r.perturbation == "none" else f", {r.perturbation}")
+        note = _note(where, r, steps, riann_name)
+        if note is not None:
+            notes.append(note)
     return notes

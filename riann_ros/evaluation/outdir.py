@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 PLOT_STEMS = ("rmse_boxplots", "error_over_time", "rmse_vs_rate", "compare_rmse", "error_vs_sigma")
-PLOT_PATTERNS = ("roll_pitch_*",)  # one figure per sequence
+PLOT_PATTERNS = ("roll_pitch_*", "attitude_*")  # one figure per sequence
 RESULT_FILES = ("results.csv", "results.json", "report.md", "compare.csv")
 PLOT_EXTS = ("png", "svg")
 
@@ -16,7 +16,7 @@ PLOT_EXTS = ("png", "svg")
 def previous_results(out: Path) -> list[Path]:
     """The result files of an earlier run in ``out``: results.csv/json, report.md, compare.csv and every plot
     riann-bag-eval writes (``rmse_boxplots``, ``error_over_time``, ``rmse_vs_rate``, ``compare_rmse``,
-    ``error_vs_sigma``, ``roll_pitch_*``; .png and .svg). Nothing else in ``out`` is a result file."""
+    ``error_vs_sigma``, ``roll_pitch_*``, ``attitude_*``; .png and .svg). Nothing else in ``out`` is a result file."""
     if not out.is_dir():
         return []
     found = [out / f for f in RESULT_FILES] + [out / f"{s}.{e}" for s in PLOT_STEMS for e in PLOT_EXTS]

@@ -295,12 +295,15 @@ def _breaks(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def file_safe(text: str) -> str:
+    """``text`` for a file name: runs of other characters than letters, digits, ``_``, ``.``, ``-`` → ``_``."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_")
+
+
 def attitude_stem(sequence: str, condition: str = NONE) -> str:
     """``roll_pitch_<sequence>``, with ``_<condition>`` for a perturbation condition (file-name safe)."""
-    def safe(text: str) -> str:
-        return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_")
-
-    return "roll_pitch_" + (safe(sequence) or "sequence") + ("" if condition == NONE else "_" + safe(condition))
+    return ("roll_pitch_" + (file_safe(sequence) or "sequence")
+            + ("" if condition == NONE else "_" + file_safe(condition)))
 
 
 def plot_attitude(series: dict[str, Any], out_dir: Path, scenario: str | None = None,

@@ -10,25 +10,30 @@ import csv
 import json
 import math
 import platform
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
+from riann_ros.evaluation import free_report as fr
 from riann_ros.evaluation import plots as pl
-from riann_ros.evaluation.aggregate import Group, aggregate, rate_label, rate_order, scenario_order
+from riann_ros.evaluation.aggregate import Group, aggregate, rate_label
 from riann_ros.evaluation.offsets import timing_notes
 from riann_ros.evaluation.outdir import prepare_out, previous_results
 from riann_ros.evaluation.perturb import DEFINITIONS as PERTURB_DEFINITIONS
-from riann_ros.evaluation.perturb import NONE
+from riann_ros.evaluation.plots_free import plot_attitude_overlay
 from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
-from riann_ros.evaluation.results import NATIVE, EvalSettings, ResultRow, SequenceResult
+from riann_ros.evaluation.results import BIAS_KEYS, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
-from riann_ros.evaluation.scoring import ERRORS
-from riann_ros.evaluation.seq_tables import ERROR_TITLES, format_heading_table, format_stats_table
+from riann_ros.evaluation.scoring import ERRORS, STATS, stat_field
+from riann_ros.evaluation.seq_tables import (
+    ERROR_TITLES,
+    format_heading_table,
+    format_stats_table,
+    per_sequence_markdown,
+)
 from riann_ros.evaluation.uncertainty import KEYS as UNCERTAINTY_KEYS
 from riann_ros.evaluation.uncertainty_report import NOTE as UNCERTAINTY_NOTE
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_table, plot_error_vs_sigma
@@ -73,45 +78,29 @@ CSV_FIELDS = (
     "lost",
     "source",
     *UNCERTAINTY_KEYS,
+    "has_reference",
+    *(stat_field("heading_drift", st) for st in STATS),
+    "t_offset_ref_turn_dps",
+    *BIAS_KEYS,
 )
 METRIC = (
     "RMSE of e_alpha = 2 acos(sqrt(w^2+z^2)) of q_ref * conj(q_est), deg, over score mask & reference present & "
     "estimate present; per sequence also the mean, median (log-spaced histogram, within 0.1 %), std (population), "
     "min and max of e_alpha (heading and total error likewise where scored); best_t_offset_s: the time added to the "
     "estimate stamps that minimises the e_alpha RMSE within +-offset_steps steps of the stream "
-    "(best_t_offset_rmse_deg: the RMSE there), searched in the as-recorded scenario (else the first)"
+    "(best_t_offset_rmse_deg: the RMSE there), searched in the as-recorded scenario (else the first); "
+    "t_offset_ref_turn_dps: the RMS rate at which the reference's gravity direction turns there (0.5 s apart); "
+    "heading_drift_*: 6D runs with --heading, the heading error after rotating the estimate about the vertical by the "
+    "heading offset at the first scored sample (heading_* and total_* are unaligned, as evo_ape without alignment); "
+    "inputs without a reference (has_reference false) get no scores: sequences[].agreement holds the pairwise "
+    "inclination difference of the estimators (RMS, mean, max, time of the max, the 1 s windows of largest RMS)"
 )
 PRINT_ROWS = 48  # per-sequence tables longer than this are not printed (they are in report.md and results.csv)
 
 
 # ---------------------------------------------------------------------------------------------------
-# terminal
+# the summary table
 # ---------------------------------------------------------------------------------------------------
-class Progress:
-    """A one-line progress bar on stderr (plain lines when stderr is not a terminal)."""
-
-    def __init__(self, total: int, stream: TextIO | None = None, width: int = 30, enabled: bool = True) -> None:
-        self.total = max(total, 1)
-        self.stream = stream or sys.stderr
-        self.width = width
-        self.enabled = enabled
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-
-    def __call__(self, done: int, total: int, result: SequenceResult | None = None) -> None:
-        if not self.enabled:
-            return
-        name = (result.name or Path(result.source).name) if result else ""
-        status = "FAILED" if result is not None and result.error else f"{result.seconds if result else 0.0:.1f}s"
-        filled = int(self.width * done / self.total)
-        bar = "#" * filled + "-" * (self.width - filled)
-        line = f"[{bar}] {done}/{total} {name} ({status})"
-        if self.tty:
-            self.stream.write("\r\033[K" + line + ("\n" if done >= total else ""))
-        else:
-            self.stream.write(line + "\n")
-        self.stream.flush()
-
-
 def _cells(agg: Sequence[Group]) -> tuple[list[str], list[list[str]]]:
     """Headers and cells of the summary table: perturbation and rate columns only when they vary."""
     prt = len({a.perturbation for a in agg}) > 1
@@ -211,6 +200,7 @@ class Report:
             "score_from_s": s.score_from_s,
             "perturbation_definition": PERTURB_DEFINITIONS,
             "metric": METRIC,
+            "input_warnings": s.input_warnings,
         }
 
     def payload(self) -> dict[str, Any]:
@@ -223,7 +213,9 @@ class Report:
             "sequences": [
                 {"source": r.source, "name": r.name, "dataset": r.dataset, "seconds": r.seconds,
                  "cpu_seconds": r.cpu_seconds, "scenarios": r.scenarios, "perturbations": r.perturbations,
-                 "warnings": r.warnings, **({"salvaged": r.salvaged} if r.salvaged else {})}
+                 "warnings": r.warnings, **({"salvaged": r.salvaged} if r.salvaged else {}),
+                 "has_reference": r.has_reference, **({"recorded_name": r.recorded_name} if r.recorded_name else {}),
+                 "health": r.health, **({} if r.has_reference else {"agreement": r.agreement})}
                 for r in self.results
                 if not r.error
             ],
@@ -290,33 +282,27 @@ def write_json(path: Path, payload: dict[str, Any]) -> None:
         f.write("\n")
 
 
-def _per_sequence(rows: Sequence[ResultRow]) -> list[str]:
-    lines: list[str] = []
-    ests = list(dict.fromkeys(r.estimator for r in rows))
-    rmse = {(r.sequence, r.scenario, r.perturbation, r.estimator, r.rate): r.rmse_deg for r in rows}
-    tables = dict.fromkeys((r.scenario, r.perturbation, r.rate) for r in rows)
-    order = scenario_order(r.scenario for r in rows)
-    for scn, prt, rate in sorted(tables, key=lambda k: (order.index(k[0]), rate_order(k[2]))):
-        unit = "" if rate == NATIVE else " Hz"
-        title = f"### {scn}, {rate_label(rate)}{unit}" + ("" if prt == NONE else f", {prt}")
-        lines += [title, "", "| sequence | " + " | ".join(ests) + " |", "|---|" + "---:|" * len(ests)]
-        for seq in dict.fromkeys(r.sequence for r in rows if (r.scenario, r.perturbation, r.rate) == (scn, prt, rate)):
-            cells = [rmse.get((seq, scn, prt, e, rate)) for e in ests]
-            lines.append(f"| {seq} | " + " | ".join("–" if v is None else f"{v:.2f}" for v in cells) + " |")
-        lines.append("")
-    return lines
-
-
 def _timing_and_statistics(report: Report) -> list[str]:
     """report.md's timing notes, per-sequence RMSE tables and per-sequence error statistics."""
     notes = report.timing_notes
     lines = ["## Timing", ""] + [f"- {n}" for n in notes] + [""] if notes else []
-    lines += ["## Per sequence", "", *_per_sequence(report.rows)]
+    lines += ["## Per sequence", "", *per_sequence_markdown(report.rows)]
     for err in ERRORS:
         table = format_stats_table(report.rows, err, markdown_table=True)
         if table:
             lines += [f"### Error statistics: {ERROR_TITLES[err]}", "", table, ""]
     return lines
+
+
+def _free_sections(report: Report) -> list[str]:
+    """report.md's sections on the inputs without a reference (agreement, bias) and every input's stream health."""
+    lines = []
+    agreement = fr.format_agreement(report.results, markdown_table=True)
+    if agreement:
+        bias = fr.format_bias(report.results, report.rows, markdown_table=True)
+        lines += ["## Without a reference", "", fr.NOTE, "", agreement, "", *([bias, ""] if bias else [])]
+    health = fr.format_health(report.results, markdown_table=True, every=True)
+    return lines + (["## Stream health", "", health, ""] if health else [])
 
 
 def markdown(report: Report, plots: Sequence[Path]) -> str:
@@ -331,7 +317,10 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
     citations = sorted({r.citation for r in report.results if r.citation and not r.error})
     if citations:
         lines += ["", "Data: " + "; ".join(citations)]
-    lines += ["", "## Summary", "", format_markdown_table(report.summary), ""]
+    which = fr.which_is_which(report.results)
+    lines += ["", *([f"Inputs {which}.", ""] if which else []), "## Summary", "", format_markdown_table(report.summary),
+              ""]
+    lines += _free_sections(report)
     nine = format_heading_table(report.rows, markdown_table=True)
     if nine:
         lines += ["## Heading (9D runs: estimators that used the magnetometer)", "",
@@ -348,7 +337,7 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
                 f"- {t['estimator']} ({t['scenario']}): best {b['label']} — mean {b['mean']:.2f}°, max {b['max']:.2f}°"
             )
         lines.append("")
-    warnings = [w for r in report.results if not r.error for w in r.warnings]
+    warnings = [*report.settings.input_warnings, *(w for r in report.results if not r.error for w in r.warnings)]
     if warnings:
         lines += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
     lines += _timing_and_statistics(report)
@@ -361,9 +350,11 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
 
 def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
     """The figures: boxplots, error over time (the first sequence with series), roll/pitch per sequence (that one,
-    or every sequence with ``--plot-sequence all``) and perturbation condition, RMSE vs rate; every condition, or
-    those of ``--plot-perturb``."""
+    or every sequence with ``--plot-sequence all``) and perturbation condition, the overlay of every input without a
+    reference, RMSE vs rate; every condition, or those of ``--plot-perturb``."""
     chosen = report.settings.series_conditions
+    free = [r.attitude_series for r in report.results if r.attitude_series and not r.error]
+    rows = [r for r in rows if r.has_reference]
     figures = pl.plot_boxes(rows, out, conditions=chosen)
     with_series = [r.series for r in report.results if r.series and not r.error]
     if with_series:
@@ -371,6 +362,9 @@ def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
     for series in with_series if report.settings.series_for == "all" else with_series[:1]:
         for cond in pl.series_conditions(series, chosen):
             figures += pl.plot_attitude(series, out, condition=cond)
+    for series in free:
+        for cond in pl.series_conditions(series, chosen):
+            figures += plot_attitude_overlay(series, out, condition=cond)
     return figures + pl.plot_rmse_vs_rate(rows, out, conditions=chosen) + plot_error_vs_sigma(rows, out)
 
 

@@ -162,6 +162,7 @@ class RestDetector:
         self.zi: NDArray[np.float64] | None = None  # (2, 6) filter state of gyr and acc
         self.run: _Stretch | None = None  # the stretch still open at the end of the last chunk
         self.best: _Stretch | None = None
+        self.segments: list[Rest] = []  # every rest of at least REST_MIN_S, in order (their gyro means)
         self.n = 0  # samples seen
         self.last_stamp = first_stamp
 
@@ -224,7 +225,10 @@ class RestDetector:
 
     def _close(self) -> None:
         run, self.run = self.run, None
-        if run is not None and run.seconds >= REST_MIN_S and (self.best is None or run.seconds >= self.best.seconds):
+        if run is None or run.seconds < REST_MIN_S:
+            return
+        self.segments.append(self._rest(run, DETECTED))
+        if self.best is None or run.seconds >= self.best.seconds:
             self.best = run
 
     def result(self) -> Rest:

@@ -22,6 +22,7 @@ RECORDED = "recorded"  # estimator name and mode of estimates recorded in a bag
 SERIES_POINTS = 6000  # points per curve kept for the error-over-time and roll/pitch plots
 REFERENCE = "reference"  # key of the reference's roll/pitch in a series
 _SCORE_REQUIRED = ("n_samples", "n_scored", "n_unestimated", "rmse_deg", "max_err_deg")
+BIAS_KEYS = ("gyro_bias_x_dps", "gyro_bias_y_dps", "gyro_bias_z_dps")  # RunStats.gyro_bias_dps columns
 
 
 @dataclass
@@ -43,6 +44,7 @@ class EvalSettings:
     offset_steps: int = OFFSET_STEPS  # search the e_α-minimising time offset within ± this many steps (0: not)
     salvage: bool = False  # score the readable part of a bag cut off by a crash (a repaired copy, bagio.repair)
     score_from_s: float = 0.0  # score every metric only from this long after the sequence's first sample (s)
+    input_warnings: list[str] = field(default_factory=list)  # found while matching the inputs (estimate files)
 
     @property
     def recorded(self) -> list[EstimatorSpec]:
@@ -69,6 +71,7 @@ class RunStats:
     # s after the run's first sample its online magnetometer calibration was first called calibrated (None: never,
     # or it calibrates none; NaN in results.csv)
     mag_converged_after_s: float | None = None
+    gyro_bias_dps: list[float] | None = None  # the estimator's gyro-bias estimate at the end (None: it reports none)
 
 
 @dataclass
@@ -89,6 +92,7 @@ class ResultRow:
     sensors: str = "6D"  # 9D: the estimator used the magnetometer (its heading is scored as absolute)
     perturbation: str = NONE  # the condition's label
     stats: RunStats = field(default_factory=RunStats)
+    has_reference: bool = True  # False: the input has no reference (no scores; see SequenceResult.agreement)
 
     @property
     def rmse_deg(self) -> float:
@@ -110,6 +114,9 @@ class ResultRow:
         d["cpu_seconds"] = self.stats.cpu_seconds
         if self.sensors == "9D":
             d["mag_converged_after_s"] = self.stats.mag_converged_after_s
+        d["has_reference"] = self.has_reference
+        if self.stats.gyro_bias_dps is not None:
+            d.update(zip(BIAS_KEYS, self.stats.gyro_bias_dps, strict=True))
         return d
 
     @classmethod
@@ -132,14 +139,16 @@ class ResultRow:
         stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
                          rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},
                          resets={k[len("reset_"):]: int(v) for k, v in d.items() if k.startswith("reset_")},
-                         live=live or None)
+                         live=live or None,
+                         gyro_bias_dps=[float(d[k]) for k in BIAS_KEYS] if all(d.get(k) is not None for k in BIAS_KEYS)
+                         else None)
         rate = d["rate"]
         return cls(sequence=str(d["sequence"]), dataset=str(d["dataset"]), source=str(d.get("source", "")),
                    scenario=str(d["scenario"]), rate=rate if rate == NATIVE else float(rate),
                    rate_hz=num(d["rate_hz"]), resampled=bool(d["resampled"]), estimator=str(d["estimator"]),
                    estimator_name=str(d.get("estimator_name", d["estimator"])), mode=str(d.get("mode", "")),
                    score=score, perturbation=str(d.get("perturbation", NONE)), stats=stats,
-                   sensors=str(d.get("sensors", "6D")))
+                   sensors=str(d.get("sensors", "6D")), has_reference=bool(d.get("has_reference", True)))
 
 
 @dataclass
@@ -152,12 +161,20 @@ class SequenceResult:
     scenarios: dict[str, Any] = field(default_factory=dict)  # scenario → ScenarioInfo dict
     perturbations: dict[str, Any] = field(default_factory=dict)  # condition → scenario → what each part did
     series: dict[str, Any] | None = None
-    estimates: dict[str, Any] | None = None  # first scenario: {"scenario", "stamps", "quats": {label: (N, 4)}}
+    # first scenario: {"scenario", "stamps", "quats": {label: (N, 4)}, "reference": (N, 4) or None, "scored": (N,)}
+    estimates: dict[str, Any] | None = None
     seconds: float = 0.0
     cpu_seconds: float = 0.0  # reading + scenarios + runs + scoring, in the worker
     citation: str = ""
     warnings: list[str] = field(default_factory=list)  # "<sequence>: <what>", for stderr and results.json
     salvaged: dict[str, Any] | None = None  # a cut-off bag scored as far as readable (--salvage): what was read
+    has_reference: bool = True  # False: no reference orientation; its rows carry no scores, agreement instead
+    recorded_name: str = ""  # the name the recording gives itself, when the result is named otherwise (names.py)
+    health: dict[str, Any] | None = None  # the stream's own health (health.StreamHealth), native rate
+    # reference-free inputs: pairwise agreement per scenario × condition × rate (agreement.Agreement rows with
+    # "scenario", "perturbation", "rate"), and the roll/pitch/heading series per condition for the overlay figure
+    agreement: list[dict[str, Any]] = field(default_factory=list)
+    attitude_series: dict[str, Any] | None = None
 
 
 def recorded_spec(topic: str) -> EstimatorSpec:

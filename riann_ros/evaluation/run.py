@@ -29,199 +29,47 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
+from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-from numpy.typing import NDArray
-
 from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.executors import Executor, local_executor, unit_for
 from riann_ros.evaluation.first_pass import Summary, summarise
+from riann_ros.evaluation.health import StreamHealth
 from riann_ros.evaluation.input_hints import BROAD_SUFFIXES
-from riann_ros.evaluation.offsets import OffsetSearch
-from riann_ros.evaluation.perturb import Condition, Transform
 from riann_ros.evaluation.rest import NO_REST_WARNING, Rest
-from riann_ros.evaluation.results import (
-    NATIVE,
-    RECORDED,
-    REFERENCE,
-    SERIES_POINTS,
-    EvalSettings,
-    Progress,
-    ResultRow,
-    RunStats,
-    SequenceResult,
-)
-from riann_ros.evaluation.runners import Joined, OfflineRunner, RecordedRunner, Run, Runner, run_sigmas
-from riann_ros.evaluation.scenarios import AS_RECORDED, ScenarioPlan, sequence_seed
-from riann_ros.evaluation.scoring import Accumulator, Score, error_deg, roll_pitch_deg
+from riann_ros.evaluation.results import EvalSettings, Progress, SequenceResult
+from riann_ros.evaluation.runners import OfflineRunner, Runner
+from riann_ros.evaluation.scenario_run import ScenarioRun
+from riann_ros.evaluation.scenarios import AS_RECORDED, ScenarioPlan
 from riann_ros.evaluation.sources import Source, open_source, read_whole
 from riann_ros.evaluation.specs import EstimatorSpec
-from riann_ros.gate import GateConfig
 from riann_ros.recording import Recording
 
 
-class _ScenarioRun:
-    """One condition × scenario of one sequence at one rate: the scenario plan, the condition's transforms, the
-    runner's run and one accumulator per estimator."""
-
-    def __init__(self, plan: ScenarioPlan, condition: Condition, slot: int, settings: EvalSettings, name: str,
-                 series: bool, estimates: bool, recorded: list[EstimatorSpec] | None = None,
-                 offsets: bool = False) -> None:
-        self.plan = plan
-        self.condition = condition
-        self.slot = slot
-        self.own = settings.estimators  # run by the runner
-        self.recorded = recorded or []  # served from the bag
-        self.specs = [*self.own, *self.recorded]
-        rngs = [np.random.default_rng(sequence_seed(settings.seed, f"{name}:{condition.label}:{k}"))
-                for k in range(len(condition.parts))]
-        self.transforms: list[Transform] = condition.start(rngs)
-        rate = plan.gate.nominal_rate
-        self.gate = GateConfig.for_rate(condition.nominal_rate(rate)) if condition.parts else plan.gate
-        self.acc = [Accumulator(settings.with_heading) for _ in self.specs]
-        self.score_from_ns = plan.first_stamp + round(settings.score_from_s * 1e9)  # scored from this stamp on
-        # the time offset that minimises e_α (one scenario per sequence × condition × rate: see _plan_runs)
-        self.offsets = (OffsetSearch(len(self.specs), 1.0 / self.gate.nominal_rate, settings.offset_steps)
-                        if offsets and settings.offset_steps > 0 else None)
-        self.run: Run | None = None
-        self.fed = 0  # samples fed so far
-        length = plan.length * (condition.nominal_rate(rate) / rate if condition.parts else 1.0)
-        self.step = settings.series_step if settings.series_step > 0 else max(1, -(-int(length) // SERIES_POINTS))
-        self.series = series
-        self.curves: list[list[NDArray[np.float32]]] = [[] for _ in self.specs]
-        self.att: list[list[NDArray[np.float32]]] = [[] for _ in self.specs]
-        self.att_ref: list[NDArray[np.float32]] = []
-        self.t: list[NDArray[np.float32]] = []
-        self.scored: list[NDArray[np.bool_]] = []
-        self.estimates: list[tuple[NDArray[np.int64], list[NDArray[np.float64]]]] | None = [] if estimates else None
-
-    def begin(self, runner: Runner) -> None:
-        runs = [runner.start(self.own, self.gate, self.slot)] if self.own else []
-        runs += [RecordedRunner().start(self.recorded, self.gate, self.slot)] if self.recorded else []
-        self.run = runs[0] if len(runs) == 1 else Joined(runs)
-
-    def feed(self, chunk: Recording, offset: int) -> None:
-        rec = self.plan.apply(chunk, offset)
-        for tr in self.transforms:
-            if rec is None or not len(rec):
-                return
-            rec = tr(rec)
-        if rec is None or not len(rec) or self.run is None:
-            return
-        qs = self.run.feed(rec)
-        run = self.run
-        sigmas = (run.sigmas([len(self.own), len(self.recorded)]) if isinstance(run, Joined)
-                  else run_sigmas(run, len(self.specs)))
-        mask = rec.score_mask & (rec.stamps_ns >= self.score_from_ns)  # --score-from
-        for acc, q, sig in zip(self.acc, qs, sigmas, strict=True):
-            acc.add(rec.quat_ref, mask, q, sig)
-        if self.offsets is not None:
-            self.offsets.add(rec.stamps_ns, rec.quat_ref, mask, qs)
-        if self.series and rec.quat_ref is not None:
-            self._add_series(rec, qs)
-        if self.estimates is not None:
-            self.estimates.append((rec.stamps_ns - self.plan.shift, qs))
-        self.fed += len(rec)
-
-    def _add_series(self, rec: Recording, qs: list[NDArray[np.float64]]) -> None:
-        """Every ``step``-th sample (counted over the whole sequence): e_α, roll and pitch of each estimator, the
-        reference's roll and pitch, time and score mask."""
-        assert rec.quat_ref is not None
-        pick = slice((-self.fed) % self.step, None, self.step)
-        for curve, att, q in zip(self.curves, self.att, qs, strict=True):
-            curve.append(error_deg(rec.quat_ref[pick], q[pick]).astype(np.float32))
-            att.append(roll_pitch_deg(q[pick]).astype(np.float32))
-        self.att_ref.append(roll_pitch_deg(rec.quat_ref[pick]).astype(np.float32))
-        self.t.append(((rec.stamps_ns[pick] - self.plan.first_stamp) * 1e-9).astype(np.float32))
-        self.scored.append(rec.score_mask[pick])
-
-    def rows(self, res: SequenceResult, rate: float | None, rate_hz: float, mode: str) -> list[ResultRow]:
-        stats = self.run.finish() if self.run is not None else [RunStats() for _ in self.specs]
-        label = self.condition.label
-        if self.transforms:
-            res.perturbations.setdefault(label, {})[self.plan.scenario] = [
-                {"perturbation": p.text(), **tr.info()} for p, tr in zip(self.condition.parts, self.transforms,
-                                                                         strict=True)
-            ]
-        return [
-            ResultRow(sequence=res.name, dataset=res.dataset, source=res.source, scenario=self.plan.scenario,
-                      rate=NATIVE if rate is None else float(rate), rate_hz=rate_hz, resampled=rate is not None,
-                      estimator=spec.label, estimator_name=spec.name, mode=RECORDED if spec.name == RECORDED else mode,
-                      score=self._score(j, spec, acc, st.mag_samples > 0), stats=st, perturbation=label,
-                      sensors="9D" if st.mag_samples > 0 else "6D")
-            for j, (spec, acc, st) in enumerate(zip(self.specs, self.acc, stats, strict=True))
-        ]
-
-    def _score(self, j: int, spec: EstimatorSpec, acc: Accumulator, nine_d: bool) -> Score:
-        try:
-            score = acc.result(acc.with_heading or nine_d)
-            off = self.offsets.result(j) if self.offsets is not None else None
-            if off is not None:
-                score.best_t_offset_s, score.best_t_offset_rmse_deg = off.offset_s, off.rmse_deg
-                score.t_offset_step_s = off.step_s
-            return score
-        except EvalError as exc:
-            if spec.name != RECORDED or acc.n_scored:
-                raise
-            what = (f"estimate file {dict(spec.params)['file']} ({spec.label})" if "file" in dict(spec.params) else
-                    f"recorded estimate {spec.label}")
-            raise EvalError(f"{what}: no estimate near any scored sample (within half the --max-gap, or between two "
-                            "estimates at most --max-gap apart); compare its stamps with the IMU's (--t-offset adds "
-                            "seconds to the estimate stamps; a file's time unit: --estimate-time-unit)") from exc
-
-    def keep_series(self, res: SequenceResult) -> None:
-        """The plot series of this run in ``res.series["conditions"][condition]`` (``curves``, ``t``, ``scored``,
-        ``attitude``, each per scenario); the first condition's are also ``res.series``'s own."""
-        if res.series is None:
-            res.series = {"sequence": res.name, "conditions": {}}
-        cond = res.series["conditions"].setdefault(self.condition.label, {})
-        scn = self.plan.scenario
-        cond.setdefault("curves", {})[scn] = {
-            spec.label: np.concatenate(c) if c else np.zeros(0, np.float32)
-            for spec, c in zip(self.specs, self.curves, strict=True)
-        }
-        cond.setdefault("t", {})[scn] = np.concatenate(self.t) if self.t else np.zeros(0, np.float32)
-        cond.setdefault("scored", {})[scn] = np.concatenate(self.scored) if self.scored else np.zeros(0, bool)
-
-        def cat(parts: list[NDArray[np.float32]]) -> NDArray[np.float32]:
-            return np.concatenate(parts) if parts else np.zeros((0, 2), np.float32)
-
-        # roll and pitch (°, (n, 2)) of the reference and of every estimator: the evo_traj-style plot
-        cond.setdefault("attitude", {})[scn] = {
-            REFERENCE: cat(self.att_ref), **{spec.label: cat(a) for spec, a in zip(self.specs, self.att, strict=True)}
-        }
-        first = next(iter(res.series["conditions"].values()))
-        res.series.update(first)
-
-    def keep_estimates(self, res: SequenceResult) -> None:
-        parts = self.estimates or []
-        stamps = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
-        quats = {  # the runner's (recorded ones are in the bag already)
-            spec.label: np.concatenate([p[1][j] for p in parts]) if parts else np.zeros((0, 4))
-            for j, spec in enumerate(self.own)
-        }
-        res.estimates = {"scenario": self.plan.scenario, "stamps": stamps, "quats": quats}
-
-
 def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool,
-               recorded: list[EstimatorSpec]) -> list[_ScenarioRun]:
+               recorded: list[EstimatorSpec]) -> list[ScenarioRun]:
     """One run per condition × scenario (series for the conditions to plot, estimates for the very first run). The
     time offset is searched in one scenario per condition: as-recorded when evaluated (the stamps as they are),
-    else the first (the paper's scenarios do not change the stamps)."""
-    want_series = native and settings.series_for is not None and settings.series_for in ("*", "all", name)
+    else the first (the paper's scenarios do not change the stamps). An input without a reference runs as recorded
+    only (the paper's scenarios start and de-bias by the reference's score mask), with series whenever plots are
+    asked for (its overlay figure)."""
+    free = not summary.has_reference
+    scenarios = [AS_RECORDED] if free else settings.scenarios
+    want_series = native and settings.series_for is not None and (free or settings.series_for in ("*", "all", name))
     plotted = settings.series_conditions
-    offset_scenario = AS_RECORDED if AS_RECORDED in settings.scenarios else settings.scenarios[0]
+    offset_scenario = AS_RECORDED if AS_RECORDED in scenarios else scenarios[0]
     runs = []
     for c, condition in enumerate(settings.conditions):
-        for s, scn in enumerate(settings.scenarios):
-            slot = c * len(settings.scenarios) + s
+        for s, scn in enumerate(scenarios):
+            slot = c * len(scenarios) + s
             # recorded estimates exist for the recording as it is only: as-recorded, unperturbed, own rate
             served = recorded if native and scn == AS_RECORDED and not condition.parts else []
-            runs.append(_ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, name,
-                                     want_series and (plotted is None or condition.label in plotted),
-                                     native and settings.keep_estimates and slot == 0,
-                                     served, offsets=scn == offset_scenario))
+            runs.append(ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, name,
+                                    want_series and (plotted is None or condition.label in plotted),
+                                    native and settings.keep_estimates and slot == 0,
+                                    served, offsets=scn == offset_scenario, free=free))
     return [r for r in runs if r.specs]
 
 
@@ -232,6 +80,12 @@ def _summarise(src: Source, rate: float | None, settings: EvalSettings, res: Seq
     summary = summarise(src, settings.rest if settings.rest is not None or rate is None else native_rest)
     if not res.name:
         res.name, res.dataset, res.citation = summary.name, summary.dataset, summary.citation
+    res.has_reference = summary.has_reference
+    if not summary.has_reference:
+        if AS_RECORDED not in settings.scenarios:
+            _warn(res, f"{res.name}: no reference orientation: evaluated in the as-recorded scenario, the only one "
+                  "without a reference")
+        return summary
     if not summary.rest.found and any(s != AS_RECORDED for s in settings.scenarios):
         rate_note = "" if rate is None else f" (resampled to {rate:g} Hz)"
         _warn(res, f"{res.name}{rate_note}: {NO_REST_WARNING}")
@@ -245,20 +99,52 @@ def _evaluate_rate(src: Source, rate: float | None, settings: EvalSettings, runn
     for run in runs:
         res.scenarios.setdefault(run.plan.scenario, run.plan.info.to_dict())
     rate_hz = round(summary.rate_all, 3)
+    health = _Health(summary, settings.seed) if rate is None else None
     for group in [runs] if runner.interleaved else [[r] for r in runs]:
+        _one_pass(src, group, runner, health)
+        if health is not None:
+            res.health, health = health.result(), None
         for run in group:
-            run.begin(runner)
-        offset = 0
-        for chunk in src.chunks():
-            for run in group:
-                run.feed(chunk, offset)
-            offset += len(chunk)
+            _collect(run, res, rate, rate_hz, runner.mode)
+
+
+def _collect(run: ScenarioRun, res: SequenceResult, rate: float | None, rate_hz: float, mode: str) -> None:
+    """A finished run's rows, series and estimates into ``res``."""
+    res.rows.extend(run.rows(res, rate, rate_hz, mode))
+    if run.series:
+        run.keep_series(res)
+    if run.estimates is not None:
+        run.keep_estimates(res)
+
+
+def _one_pass(src: Source, group: list[ScenarioRun], runner: Runner, health: _Health | None) -> None:
+    """One pass over the source feeding every run of ``group`` (and the stream's health, when given)."""
+    for run in group:
+        run.begin(runner)
+    offset = 0
+    for chunk in src.chunks():
         for run in group:
-            res.rows.extend(run.rows(res, rate, rate_hz, runner.mode))
-            if run.series:
-                run.keep_series(res)
-            if run.estimates is not None:
-                run.keep_estimates(res)
+            run.feed(chunk, offset)
+        if health is not None:
+            health.add(chunk, offset)
+        offset += len(chunk)
+
+
+class _Health:
+    """The stream's health (:class:`~riann_ros.evaluation.health.StreamHealth`) over the recording as the
+    as-recorded scenario sees it (stamps shifted off zero as for the estimators)."""
+
+    def __init__(self, summary: Summary, seed: int) -> None:
+        self.plan = ScenarioPlan(AS_RECORDED, summary, seed)
+        self.health = StreamHealth(summary.rate_all, self.plan.first_stamp, summary.n)
+
+    def add(self, chunk: Recording, offset: int) -> None:
+        rec = self.plan.apply(chunk, offset)
+        if rec is not None:
+            self.health.add(rec)
+
+    def result(self) -> dict:
+        return self.health.result()
 
 
 def _warn(res: SequenceResult, text: str) -> None:
@@ -340,56 +226,16 @@ def _evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, run
     return res
 
 
-def _init_worker() -> None:
-    import signal
-
-    # Ctrl-C reaches the whole process group: the parent handles it and stops the workers
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # one core per worker: ONNX Runtime and BLAS would otherwise fight over the cores
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = "1"
-
-
-def evaluate_sources(sources: Sequence[str], settings: EvalSettings, jobs: int = 1,
+def evaluate_sources(sources: Sequence[str], settings: EvalSettings, jobs: int | Executor = 1,
                      progress: Progress | None = None, runner: Runner | None = None) -> list[SequenceResult]:
-    """Evaluate inputs, in ``jobs`` worker processes when > 1 (offline only); results in input order."""
-    if jobs <= 1 or len(sources) <= 1 or (runner is not None and not runner.interleaved):
-        results = []
-        for i, src in enumerate(sources):
-            results.append(evaluate_source(src, settings, runner))
-            if progress:
-                progress(i + 1, len(sources), results[-1])
-        return results
-    return _evaluate_parallel(sources, settings, jobs, progress)
-
-
-def _evaluate_parallel(sources: Sequence[str], settings: EvalSettings, jobs: int,
-                       progress: Progress | None) -> list[SequenceResult]:
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
+    """Evaluate inputs, in ``jobs`` worker processes when > 1 (offline only) or on an executor (a Dask cluster,
+    :mod:`~riann_ros.evaluation.executors`); results in input order."""
+    executor = local_executor(jobs, len(sources), runner) if isinstance(jobs, int) else jobs
     results: list[SequenceResult | None] = [None] * len(sources)
-    ctx = mp.get_context("spawn" if os.name == "nt" else "forkserver")
-    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker)
-    try:
-        futures = {pool.submit(evaluate_source, src, settings): i for i, src in enumerate(sources)}
-        for done, fut in enumerate(as_completed(futures), 1):
-            i = futures[fut]
-            try:
-                results[i] = r = fut.result()
-            except Exception as exc:  # a worker died
-                results[i] = r = SequenceResult(source=str(sources[i]), error=f"{sources[i]}: worker failed: {exc}")
+    unit = unit_for(evaluate_source, executor, runner)
+    with closing(executor.map(unit, list(enumerate(sources)), settings)) as finished:
+        for done, (i, res) in enumerate(finished, 1):
+            results[i] = res
             if progress:
-                progress(done, len(sources), r)
-    except BaseException:
-        # Ctrl-C (or any error here): stop the workers now instead of waiting for their sequences
-        procs = list(getattr(pool, "_processes", {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for p in procs:
-            if p.is_alive():
-                p.terminate()
-        for p in procs:
-            p.join(5)
-        raise
-    pool.shutdown(wait=True)
+                progress(done, len(sources), res)
     return [r for r in results if r is not None]

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.estimators.base import AttitudeEstimator
+from riann_ros.estimators.common import BIAS_KEY
 from riann_ros.evaluation.results import RECORDED, RunStats
 from riann_ros.evaluation.sources import Chunk
 from riann_ros.evaluation.specs import EstimatorSpec
@@ -72,7 +73,21 @@ class _OfflineRun:
             stats.mag_samples = stream.mag.samples_with_field
             cal = stream.estimator.mag_cal_status()
             stats.mag_converged_after_s = None if cal is None else cal.converged_after_s
+            stats.gyro_bias_dps = reported_bias(stream.estimator)
         return self.stats
+
+
+def reported_bias(est: AttitudeEstimator) -> list[float] | None:
+    """The gyro-bias estimate (°/s) an estimator reports in its diagnostics, as the node's ``/diagnostics`` shows
+    it; None when it reports none (e.g. Madgwick without its bias front end)."""
+    text = est.diagnostics().get(BIAS_KEY)
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        return None
+    return values if len(values) == 3 else None
 
 
 class OfflineRunner:

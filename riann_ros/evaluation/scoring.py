@@ -4,7 +4,9 @@ Per sample e_α = 2·arccos(√(w² + z²)) of q_err = q_ref ⊗ q_est⁻¹ (hea
 RMSE over the scored samples: score mask ∩ reference present ∩ estimate present (samples the input gate
 rejected have no estimate and are counted as ``n_unestimated``), and beside it evo ape's statistics of the
 per-sample errors: mean, median, std, min and max (:data:`STATS`). Heading and total-angle errors are
-optional extra columns with the same statistics. :class:`Accumulator` keeps running sums (and, for the median,
+optional extra columns with the same statistics, and for 6D runs the heading drift: the heading error after
+aligning the estimate's heading with the reference's at the first scored sample (:func:`yaw_aligned`).
+:class:`Accumulator` keeps running sums (and, for the median,
 a histogram of log-spaced bins, :class:`ErrorStats`), so a bag of any length is scored in bounded memory;
 :func:`score` is the one-chunk case. With the estimator's σ per sample the uncertainty is scored too (NEES,
 95 % coverage, sharpness: :mod:`riann_ros.evaluation.uncertainty`).
@@ -25,7 +27,7 @@ from riann_ros.evaluation.uncertainty import UncertaintySums
 from riann_ros.recording import Recording
 
 STATS = ("rmse", "mean", "median", "std", "min", "max")  # evo ape's statistics, per sequence
-ERRORS = ("inclination", "heading", "total")
+ERRORS = ("inclination", "heading", "total", "heading_drift")
 # the median comes from a histogram of bins whose edges grow by this factor (from HIST_LO_DEG up to 360°): it is
 # the geometric centre of its bin, so within ±0.1 % of the exact median (clamped to [min, max])
 HIST_RATIO = 1.002
@@ -36,7 +38,8 @@ HIST_BINS = math.ceil(math.log(360.0 / HIST_LO_DEG) / _LOG_RATIO) + 2
 
 def stat_field(error: str, stat: str) -> str:
     """The results.json / results.csv column of a statistic: ``rmse_deg``, ``max_err_deg``, ``mean_err_deg``, …
-    for the inclination e_α; ``heading_rmse_deg``, ``total_median_deg``, … for the heading and total errors."""
+    for the inclination e_α; ``heading_rmse_deg``, ``total_median_deg``, ``heading_drift_rmse_deg``, … for the
+    heading, total and heading-drift errors."""
     if error not in ERRORS or stat not in STATS:
         raise ValueError(f"unknown error statistic {error} {stat}")
     if error == "inclination":
@@ -114,9 +117,19 @@ class Score:
     total_std_deg: float | None = None
     total_min_deg: float | None = None
     total_max_deg: float | None = None
+    # the heading error after aligning the start heading (6D runs with --heading: heading drift)
+    heading_drift_rmse_deg: float | None = None
+    heading_drift_mean_deg: float | None = None
+    heading_drift_median_deg: float | None = None
+    heading_drift_std_deg: float | None = None
+    heading_drift_min_deg: float | None = None
+    heading_drift_max_deg: float | None = None
     best_t_offset_s: float | None = None  # added to the estimate stamps, the e_α RMSE is smallest (timing)
     best_t_offset_rmse_deg: float | None = None  # the e_α RMSE there
     t_offset_step_s: float | None = None  # the stream's step the offset search is measured in
+    # RMS rate (°/s) at which the reference's gravity direction turns over the offset search's samples: an offset
+    # shows only where the reference moves (offsets.timing_notes)
+    t_offset_ref_turn_dps: float | None = None
 
     def stat(self, error: str, stat: str) -> float | None:
         """One statistic (:func:`stat_field`), None when not scored."""
@@ -151,6 +164,7 @@ class Accumulator:
         self.n = self.n_scored = self.n_unest = self.n_base = 0
         self.errors = {e: ErrorStats() for e in ERRORS}
         self.unc = UncertaintySums()
+        self.yaw0: float | None = None  # rad, the heading offset at the first scored sample (heading drift)
 
     def add(self, quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_], q: NDArray[np.float64],
             sigma: NDArray[np.float64] | None = None) -> None:
@@ -173,18 +187,24 @@ class Accumulator:
             self.errors["inclination"].add(np.degrees(e))
             self.errors["heading"].add(np.degrees(eh))  # reported for 9D runs, --heading
             self.errors["total"].add(np.degrees(quat.total_error(qt, qe)))
+            if self.yaw0 is None:
+                self.yaw0 = heading_offset(qt[:1], qe[:1])[0]
+            self.errors["heading_drift"].add(np.degrees(quat.heading_error(qt, yaw_aligned(qe, self.yaw0))))
             if sigma is not None:
                 self.unc.add(e, eh, sigma[valid])
 
-    def result(self, with_heading: bool | None = None) -> Score:
-        """The scores; heading and total error when ``with_heading`` (default: as constructed)."""
+    def result(self, with_heading: bool | None = None, drift: bool = False) -> Score:
+        """The scores; heading and total error when ``with_heading`` (default: as constructed); the heading drift
+        when ``drift`` too (6D runs: their heading starts wherever the estimator puts it)."""
         heading = self.with_heading if with_heading is None else with_heading
         if self.n_base == 0:
             raise EvalError("no scored samples (score mask ∩ reference present is empty)")
         if self.n_scored == 0:
             raise EvalError("the estimator gave no output on any scored sample")
 
-        stats: dict[str, Any] = {stat_field(err, st): v for err in ERRORS if heading or err == "inclination"
+        wanted = ["inclination", *(["heading", "total"] if heading else []),
+                  *(["heading_drift"] if heading and drift else [])]
+        stats: dict[str, Any] = {stat_field(err, st): v for err in wanted
                                  for st, v in self.errors[err].summary().items()}
         return Score(n_samples=self.n, n_scored=self.n_scored, n_unestimated=self.n_unest, **stats,
                      **self.unc.result())
@@ -197,6 +217,23 @@ def score(rec: Recording, q_est: NDArray[np.float64], with_heading: bool = False
     acc = Accumulator(with_heading)
     acc.add(rec.quat_ref, np.asarray(rec.score_mask, dtype=bool), np.asarray(q_est, dtype=float))
     return acc.result()
+
+
+def heading_offset(q_ref: NDArray[np.float64], q_est: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The signed heading (rad) of ``q_ref ⊗ q_est⁻¹`` per sample: the rotation about world z that brings the
+    estimate's heading onto the reference's (what :func:`riann_ros.quaternion.heading_error` measures, with its
+    sign)."""
+    qe = quat.multiply(q_ref, quat.conjugate(q_est))
+    return 2.0 * np.arctan2(qe[..., 3], qe[..., 0])
+
+
+def yaw_aligned(q_est: NDArray[np.float64], yaw: float) -> NDArray[np.float64]:
+    """The estimates rotated about world z by ``yaw`` (rad): ``R_z(yaw) ⊗ q_est``. With ``yaw`` the heading offset
+    at the first scored sample (:func:`heading_offset`) the heading error starts at 0 and the inclination and
+    its error are unchanged: what is left is the drift since then."""
+    half = 0.5 * yaw
+    rz = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
+    return quat.multiply(rz, q_est)
 
 
 def error_deg(quat_ref: NDArray[np.float64], q_est: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -212,3 +249,11 @@ def roll_pitch_deg(q: NDArray[np.float64]) -> NDArray[np.float64]:
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
     return np.degrees(np.column_stack([roll, pitch]))
+
+
+def heading_deg(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The heading (°, (N,)) of sensor-to-world quaternions: the Z-Y-X Euler yaw beside :func:`roll_pitch_deg`'s roll
+    and pitch, in (−180°, 180°]; a 6D estimator's starts wherever it initialises (NaN rows stay)."""
+    q = np.asarray(q, dtype=float)
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.degrees(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))

@@ -9,15 +9,17 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from riann_ros.evaluation.aggregate import rate_label
-from riann_ros.evaluation.results import ResultRow
+from riann_ros.evaluation.aggregate import rate_label, rate_order, scenario_order
+from riann_ros.evaluation.perturb import NONE
+from riann_ros.evaluation.results import NATIVE, ResultRow
 from riann_ros.evaluation.scoring import STATS
 
 
 def heading_rows(rows: Sequence[ResultRow]) -> list[list[str]]:
     """Cells of the 9D table: per estimator × scenario × perturbation × rate of the 9D runs, heading and total
     RMSE (BROAD's definitions, mean / max over the sequences) beside the inclination. 6D runs never enter it:
-    their heading is not referenced to anything (``--heading`` scores it as drift in results.json)."""
+    their heading is not referenced to anything (``--heading`` scores it, and the heading drift table shows it
+    aligned at the start)."""
     nine = [r for r in rows if r.sensors == "9D" and r.score.heading_rmse_deg is not None]
     out = []
     keys = dict.fromkeys((r.estimator, r.scenario, r.perturbation, r.rate) for r in nine)
@@ -53,7 +55,15 @@ def aligned(headers: Sequence[str], cells: Sequence[Sequence[str]]) -> list[str]
     return ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in [headers, *cells]]
 
 
-ERROR_TITLES = {"inclination": "inclination e_α", "heading": "heading", "total": "total angle"}
+ERROR_TITLES = {"inclination": "inclination e_α", "heading": "heading", "total": "total angle",
+                "heading_drift": "heading drift (6D: start heading aligned)"}
+
+
+def rows_of(rows: Sequence[ResultRow], error: str) -> list[ResultRow]:
+    """The rows a table of ``error`` shows: those that scored it, the heading and total error of 9D runs only (a 6D
+    estimate's heading starts wherever the estimator puts it: its table is the heading drift)."""
+    out = [r for r in rows if r.has_reference and r.score.stat(error, "rmse") is not None]
+    return [r for r in out if r.sensors == "9D"] if error in ("heading", "total") else out
 
 
 def _num(v: float | None, fmt: str = ".2f") -> str:
@@ -63,8 +73,8 @@ def _num(v: float | None, fmt: str = ".2f") -> str:
 def stats_cells(rows: Sequence[ResultRow], error: str = "inclination") -> tuple[list[str], list[list[str]]]:
     """Headers and cells of a per-sequence statistics table (evo ape's rmse, mean, median, std, min, max of the
     per-sample ``error``; for the inclination also the best time offset and the RMSE there). Rows without that error
-    scored are left out; perturbation and rate columns only when they vary."""
-    rows = [r for r in rows if r.score.stat(error, "rmse") is not None]
+    scored are left out (:func:`rows_of`); perturbation and rate columns only when they vary."""
+    rows = rows_of(rows, error)
     prt = len({r.perturbation for r in rows}) > 1
     multi = len({r.rate for r in rows}) > 1
     offsets = error == "inclination" and any(r.score.best_t_offset_s is not None for r in rows)
@@ -106,3 +116,22 @@ def format_stats_table(rows: Sequence[ResultRow], error: str = "inclination", ma
                                                                                        strict=True))
               for row in cells]
     return "\n".join(lines)
+
+
+def per_sequence_markdown(rows: Sequence[ResultRow]) -> list[str]:
+    """report.md's per-sequence RMSE tables: a table per scenario × perturbation × rate, a column per estimator."""
+    lines: list[str] = []
+    rows = [r for r in rows if r.has_reference]
+    ests = list(dict.fromkeys(r.estimator for r in rows))
+    rmse = {(r.sequence, r.scenario, r.perturbation, r.estimator, r.rate): r.rmse_deg for r in rows}
+    tables = dict.fromkeys((r.scenario, r.perturbation, r.rate) for r in rows)
+    order = scenario_order(r.scenario for r in rows)
+    for scn, prt, rate in sorted(tables, key=lambda k: (order.index(k[0]), rate_order(k[2]))):
+        unit = "" if rate == NATIVE else " Hz"
+        title = f"### {scn}, {rate_label(rate)}{unit}" + ("" if prt == NONE else f", {prt}")
+        lines += [title, "", "| sequence | " + " | ".join(ests) + " |", "|---|" + "---:|" * len(ests)]
+        for seq in dict.fromkeys(r.sequence for r in rows if (r.scenario, r.perturbation, r.rate) == (scn, prt, rate)):
+            cells = [rmse.get((seq, scn, prt, e, rate)) for e in ests]
+            lines.append(f"| {seq} | " + " | ".join("–" if v is None else f"{v:.2f}" for v in cells) + " |")
+        lines.append("")
+    return lines

@@ -19,9 +19,10 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from riann_ros.evaluation.aggregate import tune
+from riann_ros.evaluation.fleet import Fleet, Scale
+from riann_ros.evaluation.names import unique_names
 from riann_ros.evaluation.report import Report
 from riann_ros.evaluation.results import EvalSettings, Progress
-from riann_ros.evaluation.run import evaluate_sources
 from riann_ros.evaluation.runners import Runner
 from riann_ros.evaluation.scenarios import REALISTIC
 
@@ -36,6 +37,7 @@ class EvalRun:
     tune: tuple[str, ...] = ()  # tuning specs, NAME or NAME:PARAM=V1/V2/...; each best spec joins the estimators
     tune_scenario: str = REALISTIC  # the scenario whose mean RMSE the tuning minimises
     command: str = ""  # how the run was asked for (results.json: settings.command)
+    scale: Scale = field(default_factory=Scale)  # a Dask cluster instead of jobs; results kept as they come (resume)
 
 
 def _no_progress(total: int) -> Progress | None:
@@ -53,26 +55,46 @@ class Hooks:
     tuning: Callable[[str], None] = _silent  # the search of a tuning spec starts
     tuned: Callable[[dict[str, Any]], None] = _silent  # its result (aggregate.tune: the grid and its best)
     progress: Callable[[int], Progress | None] = field(default=_no_progress)  # the callback of a pass over N inputs
+    note: Callable[[str], None] = _silent  # a one-line message (the cluster's dashboard, a resumed run)
+
+
+def _tuned(run: EvalRun, settings: EvalSettings, fleet: Fleet, hooks: Hooks) -> list[tuple[dict[str, Any], Any]]:
+    """Each tuning spec's result and best spec: searched now, or as a resumed run's earlier pass saved them."""
+    tuned = fleet.saved_tuning()
+    if tuned is not None:
+        if tuned:
+            hooks.note("tuning: the results the earlier run saved")
+        return list(tuned)
+    tuned = []
+    for text in run.tune:
+        hooks.tuning(text)
+        tuned.append(tune(text, list(run.sources), run.tune_scenario, settings.seed, fleet.executor(),
+                          hooks.progress(len(run.sources)), like=settings))
+        hooks.tuned(tuned[-1][0])
+    if tuned:
+        fleet.save_tuning(tuned)
+    return tuned
 
 
 def evaluate(run: EvalRun, runner: Runner | None = None, hooks: Hooks | None = None,
              started: float | None = None) -> Report:
     """Tune the grids of ``run.tune`` (each best spec is added to the estimators unless one of that label is there),
-    then evaluate every input (``runner``: None in-process, or e.g. the live DDS runner); the report with the time
-    it took since ``started`` (a ``time.perf_counter()`` value; None: now, e.g. earlier when the runner's start-up
-    counts). EvalError when the run cannot go on; an input that fails is a failure in the report."""
+    then evaluate every input (``runner``: None in-process, or e.g. the live DDS runner; ``run.scale``: on a Dask
+    cluster, and each finished input kept in an output folder, where a resumed run finds what is done), each under a
+    name of its own (:func:`~riann_ros.evaluation.names.unique_names`); the report with the time it took since
+    ``started`` (a ``time.perf_counter()`` value; None: now, e.g. earlier when the runner's start-up counts).
+    EvalError when the run cannot go on; an input that fails is a failure in the report.
+    :class:`~riann_ros.evaluation.store.RunMismatch` (a ValueError) before any work for an output folder holding
+    another run's shards."""
     hooks = hooks or Hooks()
     t0 = time.perf_counter() if started is None else started
     sources = list(run.sources)
     settings = replace(run.settings, estimators=list(run.settings.estimators))
-    tuning = []
-    for text in run.tune:
-        hooks.tuning(text)
-        best, spec = tune(text, sources, run.tune_scenario, settings.seed, run.jobs, hooks.progress(len(sources)),
-                          like=settings)
-        tuning.append(best)
-        hooks.tuned(best)
-        if spec.label not in {e.label for e in settings.estimators}:
-            settings.estimators.append(spec)
-    results = evaluate_sources(sources, settings, run.jobs, hooks.progress(len(sources)), runner)
-    return Report(run.command, sources, settings, results, time.perf_counter() - t0, run.jobs, tuning)
+    with Fleet(run.scale, sources, run.settings, run.jobs, runner, run.tune, run.tune_scenario, hooks.note) as fleet:
+        tuned = _tuned(run, settings, fleet, hooks)
+        for _, spec in tuned:
+            if spec.label not in {e.label for e in settings.estimators}:
+                settings.estimators.append(spec)
+        results = fleet.evaluate(settings, hooks.progress)
+    unique_names(results)  # two inputs never print as one (each renamed result warns)
+    return Report(run.command, sources, settings, results, time.perf_counter() - t0, run.jobs, [t for t, _ in tuned])
