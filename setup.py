@@ -32,6 +32,7 @@ setup(
             "riann-bag-convert = riann_ros.cli.convert:main",
             "riann-bag-eval = riann_ros.cli.evaluate:main",
             "riann-topic = riann_ros.cli.topic:main",
+            "riann-mag-calibrate = riann_ros.cli.magcal:main",
         ],
     },
 )

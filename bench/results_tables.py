@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results"
 PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md", "bags/README.md", "docs/evaluation.md")
 FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_deg", "heading_rmse_deg",
-          "total_rmse_deg", "best_t_offset_s")
+          "total_rmse_deg", "best_t_offset_s", "mag_converged_after_s")
 #: the uncertainty scores a file keeps when trimmed with ``--uncertainty`` (riann_ros/evaluation/uncertainty.py)
 UNCERTAINTY_FIELDS = ("n_scored", "nees", "cover95_pct", "err_bottom_decile_deg", "err_top_decile_deg", "yaw_nees",
                       "yaw_cover95_mag_pct", "yaw_cover95_held_pct", "n_yaw_mag", "n_yaw_held", "sigma_hist")
@@ -342,6 +342,67 @@ def uncertainty_heading() -> str:
     return _table(["condition", "estimator", "field used", "held", "NEES"], body, left=2)
 
 
+MAGCAL_CONDITIONS = {  # perturbation → label (docs/magnetometer.md, "Online calibration"; BENCHMARKS.md)
+    "none": "recorded field",
+    "magnetic:offset:20,0,-10": "offset 20, 0, −10 µT",
+    "magnetic:offset:0,28,-21": "offset 0, 28, −21 µT (35 µT)",
+    "magnetic:soft:1.15,0.05,0,0,0.85,0.05,0.05,0,1+magnetic:offset:10,-20,-20": "soft iron + offset 10, −20, −20 µT",
+}
+
+
+def magcal_table() -> str:
+    """Heading RMSE mean / worst over the whole trial and from 60 s on (docs/results/magcal.json, magcal60.json),
+    and from 60 s on as a ratio to the estimator's own recorded-field figure from 60 s on; inclination mean."""
+    whole, late = load("magcal").where(sensors="9D"), load("magcal60").where(sensors="9D")
+    body = []
+    for cond, label in MAGCAL_CONDITIONS.items():
+        for est in ESTIMATORS:
+            w, l0, l1 = (r.where(perturbation=c) for r, c in ((whole, cond), (late, "none"), (late, cond)))
+            h, hl, base = (r.values(est, "heading_rmse_deg") for r in (w, l1, l0))
+            if not h:
+                continue
+            mean_r = (sum(hl) / len(hl)) / (sum(base) / len(base))
+            worst_r = max(a / b for a, b in zip(hl, base, strict=True))
+            body.append([label, NAMES[est], w.mean_max(est, "heading_rmse_deg"), l1.mean_max(est, "heading_rmse_deg"),
+                         f"{mean_r:.2f} / {worst_r:.2f}", f"{w.mean(est):.3f}"])
+    return _table(["condition", "estimator", "heading, whole trial", "heading, from 60 s",
+                   "from 60 s ÷ recorded field from 60 s (mean / worst trial)", "inclination mean"], body, left=2)
+
+
+def magcal_uncertainty() -> str:
+    """RIANN's heading σ over the whole trial, pooled over the trials (docs/results/magcal.json)."""
+    from types import SimpleNamespace
+
+    from riann_ros.evaluation.scoring import Score
+    from riann_ros.evaluation.uncertainty_report import group_scores
+
+    rows = load("magcal").where(sensors="9D", estimator="riann")
+    body = []
+    for cond, label in MAGCAL_CONDITIONS.items():
+        grp = [SimpleNamespace(score=Score(n_samples=r["n_scored"], n_scored=r["n_scored"], n_unestimated=0,
+                                           rmse_deg=r["rmse_deg"], max_err_deg=float("nan"),
+                                           **{k: r.get(k) for k in UNCERTAINTY_FIELDS if k != "n_scored"}))
+               for r in rows.where(perturbation=cond).rows]
+        g = group_scores(grp)
+        conv = [r["mag_converged_after_s"] for r in rows.where(perturbation=cond).rows]
+        done = [c for c in conv if c is not None]
+        body.append([label, _pct(g["yaw_mag"]), _pct(g["yaw_held"]),
+                     "–" if g["yaw_nees"] is None else f"{g['yaw_nees']:.2f}",
+                     f"{len(done)}/{len(conv)}" + (f", {min(done):.0f}–{max(done):.0f} s" if done else "")])
+    return _table(["condition", "coverage 95 %, field used", "held", "NEES", "calibrated (trials, after)"], body)
+
+
+def magcal_saved() -> str:
+    """The saved calibration's second run (docs/results/magcal_saved.json, bench/bench_magcal_saved.py)."""
+    data = json.loads((RESULTS / "magcal_saved.json").read_text())
+    body = [[r["trial"], f"{r['first']:.2f}", f"{r['second']:.2f}", f"{r['recorded']:.2f}",
+             f"{r['second'] - r['recorded']:+.2f}"] for r in data["rows"]]
+    d = [abs(r["second"] - r["recorded"]) for r in data["rows"]]
+    body.append(["mean / worst of the absolute difference", "", "", "", f"{sum(d) / len(d):.2f} / {max(d):.2f}"])
+    return _table(["trial", "first run (offset, calibrating)", "second run (its saved calibration)",
+                   "recorded field", "second − recorded"], body)
+
+
 # ---- figures within sentences ----------------------------------------------------------------------
 def _fig(rows: Rows, est: str) -> str:
     return rows.mean_max(est)
@@ -556,6 +617,9 @@ TABLES: dict[str, Callable[[], str]] = {
     "mag-trials": mag_trials,
     "uncertainty-inclination": uncertainty_inclination,
     "uncertainty-heading": uncertainty_heading,
+    "magcal": magcal_table,
+    "magcal-uncertainty": magcal_uncertainty,
+    "magcal-saved": magcal_saved,
     "cluster-held-out": cluster_held_out,
     "cluster-many": cluster_many,
     "cluster-ratio": cluster_ratio,

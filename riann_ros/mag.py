@@ -8,7 +8,9 @@ path (bag reader, evaluator), so both give an estimator the same field for the s
   ``mag_timeout`` older; otherwise none. Never waits for a reading: a slower or late magnetometer
   only means samples without a field.
 * **calibration** (:class:`MagInput`): ``m = S (m_raw − h)`` with the hard-iron offset ``h`` (tesla,
-  sensor frame) and the soft-iron matrix ``S`` (row-major 3×3), as calibration tools report them.
+  sensor frame) and the soft-iron matrix ``S`` (row-major 3×3), as calibration tools report them. With an
+  estimator that calibrates online (its ``mag_calibration`` parameter, :data:`MAG_CAL_PARAMS`) the raw field
+  passes instead (:attr:`MagInput.raw`) and ``h``, ``S`` are where its calibration starts (:meth:`MagConfig.prior`).
 * **plausibility**: a reading that is not finite, zero, or whose norm is outside
   [:data:`USABLE_MIN_T`, :data:`USABLE_MAX_T`] (a dead or saturated sensor; Earth's field is 25–65 µT) is not
   used; the estimator then runs 6D for that sample (its heading follows the gyro).
@@ -28,6 +30,7 @@ from typing import TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from riann_ros.magcal.records import SOFT_IRON_MODELS, MagCalPrior
 from riann_ros.params import ParamSpec, defaults
 
 F = TypeVar("F", float, NDArray[np.float64])  # one field's component (float) or a column of fields (array)
@@ -59,6 +62,22 @@ MAG_PARAMS: tuple[ParamSpec, ...] = (
 )
 _MAG_DEFAULTS = defaults(MAG_PARAMS)
 
+#: The online calibration's parameters (:mod:`riann_ros.magcal`), part of every 9D estimator's parameters (they
+#: decide what the estimator does with the field); its prior is :data:`MAG_PARAMS`' ``mag_hard_iron`` and
+#: ``mag_soft_iron`` (:meth:`MagConfig.prior`) or a saved calibration. docs/magnetometer.md.
+MAG_CAL_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec("mag_calibration", True, "Calibrate the magnetometer online (hard iron, and soft iron where the motion "
+              "observes it; gyro-aided): mag_hard_iron and mag_soft_iron are the hypothesis it starts from, used as "
+              "they are while the gyro-aided test finds the field consistent with them; once it does not, the "
+              "heading trusts the field only as far as the calibration knows it. false = the field is calibrated "
+              "with mag_hard_iron and mag_soft_iron only."),
+    ParamSpec("mag_hard_iron_sd", 5e-5, "T; per axis, how far the hard iron may be from mag_hard_iron "
+              "once the data rejects it (the calibration's prior standard deviation; a robot's motors, battery and "
+              "frame add tens of µT).", min=1e-9, max=1e-3),
+    ParamSpec("mag_soft_iron_model", "full", "Soft iron the online calibration estimates: full (3x3, with the "
+              "magnetometer's misalignment to the gyro), symmetric, none (hard iron only).", choices=SOFT_IRON_MODELS),
+)
+
 
 @dataclass
 class MagConfig:
@@ -77,6 +96,10 @@ class MagConfig:
     @property
     def timeout_ns(self) -> int:
         return round(self.mag_timeout * 1e9)
+
+    def prior(self) -> MagCalPrior:
+        """The configured calibration as the online calibration's starting point (its σ: the estimator's)."""
+        return MagCalPrior(hard_iron_t=self.mag_hard_iron, soft_iron=self.mag_soft_iron)  # type: ignore[arg-type]
 
 
 class MagPairing:
@@ -154,8 +177,9 @@ class MagInput:
     :meth:`declination_applied` rotates the outputs from then on.
     """
 
-    def __init__(self, config: MagConfig | None = None) -> None:
+    def __init__(self, config: MagConfig | None = None, raw: bool = False) -> None:
         self.config = config or MagConfig()
+        self.raw = raw  # pass the raw field: the estimator calibrates it (plausibility is tested on the raw field)
         self.samples_with_field = 0  # samples that went to the estimator with a field (never reset)
         self.reset()
 
@@ -166,7 +190,7 @@ class MagInput:
     def _calibrated(self, x: F, y: F, z: F) -> tuple[F, F, F]:
         """``S (m − h)`` of one field (floats) or of columns of fields (arrays): the one formula of both paths."""
         c = self.config
-        if c.mag_hard_iron == (0.0, 0.0, 0.0) and c.mag_soft_iron == IDENTITY_9:
+        if self.raw or (c.mag_hard_iron == (0.0, 0.0, 0.0) and c.mag_soft_iron == IDENTITY_9):
             return x, y, z
         h, s = c.mag_hard_iron, c.mag_soft_iron
         dx, dy, dz = x - h[0], y - h[1], z - h[2]

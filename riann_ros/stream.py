@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.gate import ESTIMATOR_FAULT, GAP, GateConfig, GateResult, InputGate
 from riann_ros.mag import MagConfig, MagInput
+from riann_ros.magcal.records import MagCalPrior
 
 __all__ = ["EstimatorStream", "GateConfig", "InputGate"]
 
@@ -25,15 +26,31 @@ class EstimatorStream:
     """A gate in front of an estimator: what the node runs per message, and the evaluator per sequence."""
 
     def __init__(self, estimator: AttitudeEstimator, config: GateConfig | None = None,
-                 mag_config: MagConfig | None = None) -> None:
+                 mag_config: MagConfig | None = None, mag_prior: MagCalPrior | None = None) -> None:
+        """``mag_prior``: where the estimator's online magnetometer calibration starts (a saved calibration,
+        :meth:`MagCalPrior.from_calibration`); None: the configured ``mag_hard_iron`` / ``mag_soft_iron``."""
         self.estimator = estimator
         self.gate = InputGate(config)
-        self.mag = MagInput(mag_config)
+        self.mag = MagInput(mag_config, raw=estimator.calibrates_mag())
+        self.mag_prior: MagCalPrior | None = None  # the prior the estimator's calibration started from
+        self.configure_mag(self.mag.config, mag_prior)
         # σ (rad) of the inclination per axis and of the heading (:meth:`AttitudeEstimator.sigma`): of the last
         # accepted sample of process() (None: rejected), and per sample of the last process_batch() (NaN: rejected)
         self.sigma: NDArray[np.float64] | None = None
         self.batch_sigma: NDArray[np.float64] = np.empty((0, 2))
         self.batch_state: NDArray[np.float64] = np.empty(0)  # the estimator's heading state (NaN: it says none)
+
+    def configure_mag(self, config: MagConfig, prior: MagCalPrior | None = None) -> None:
+        """New magnetometer parameters (the node's run-time change): with an estimator that calibrates online, a
+        new prior (``prior``, or the configured ``mag_hard_iron`` / ``mag_soft_iron`` when None) restarts its
+        calibration; the same prior keeps it."""
+        self.mag.config = config
+        if not self.estimator.calibrates_mag():
+            return
+        new = prior if prior is not None else config.prior()
+        if new != self.mag_prior:
+            self.mag_prior = new
+            self.estimator.set_mag_prior(new)
 
     def reset(self) -> None:
         """Clear the estimator and restart the stamp sequence (the node's ~/reset service)."""

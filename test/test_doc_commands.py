@@ -5,7 +5,8 @@ The commands are taken from the fenced ``bash``/``sh`` blocks and expanded by ba
 continuations, variables, globs such as ``bags/*.mcap``, braces) in a copy of the repository's layout where every
 executable only records its arguments. Each command is then checked by the first rule that applies:
 
-* ``.venv/bin/riann-bag-eval``, ``.venv/bin/riann-bag-convert``, ``.venv/bin/riann-topic``: the executable exists and
+* ``.venv/bin/riann-bag-eval``, ``.venv/bin/riann-bag-convert``, ``.venv/bin/riann-topic``,
+  ``.venv/bin/riann-mag-calibrate``: the executable exists and
   the command line parses with the command's own parser; every file it reads exists in the repository (``bags/``),
   in BROAD (``../shared/datasets/broad``), is made by an earlier command of the same page, or is named ``my_…``
   (your own file, as the README says);
@@ -145,7 +146,7 @@ def _parse(cmd: Command, tool: str):
     import importlib
 
     module = {"riann-bag-eval": "riann_ros.cli.evaluate_parser", "riann-bag-convert": "riann_ros.cli.convert_parser",
-              "riann-topic": "riann_ros.cli.topic"}[tool]
+              "riann-topic": "riann_ros.cli.topic", "riann-mag-calibrate": "riann_ros.cli.magcal_parser"}[tool]
     parser = importlib.import_module(module).build_parser()
     try:
         return parser.parse_args(cmd.argv[1:])
@@ -173,6 +174,9 @@ def files(cmd: Command, ns) -> tuple[list[str], list[str]]:
     elif tool == "riann-bag-convert":
         reads = [*map(str, ns.inputs), *([str(ns.ground_truth)] if ns.ground_truth else [])]
         writes = [str(ns.output)] if ns.output else []
+    elif tool == "riann-mag-calibrate":
+        reads = [str(ns.bag), *([str(ns.prior)] if ns.prior else [])]
+        writes = [str(p) for p in (ns.out, ns.plots) if p is not None]
     else:
         reads, writes = [], []
     return [r.rstrip("/") for r in reads], [w.rstrip("/") for w in writes]

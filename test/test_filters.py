@@ -60,7 +60,8 @@ def test_registry(name: str) -> None:
     for spec in cls.PARAMS:
         assert spec.validate(spec.default) == spec.default
         # VQF has no setter for biasClip; the front end is set up at the first sample
-        assert spec.runtime or spec.name in ("bias_clip", "gyro_bias_estimation", "bias_sigma_init")
+        assert spec.runtime or spec.name in ("bias_clip", "gyro_bias_estimation", "bias_sigma_init",
+                                             "mag_calibration", "mag_hard_iron_sd", "mag_soft_iron_model")
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -165,7 +166,8 @@ def test_vqf_bool_params() -> None:
 
 
 def test_defaults() -> None:
-    front_end = {"gyro_bias_estimation": False, "bias_clip": 8.0, "bias_sigma_init": 3.0}
+    magcal = {"mag_calibration": True, "mag_hard_iron_sd": 5e-5, "mag_soft_iron_model": "full"}
+    front_end = {**magcal, "gyro_bias_estimation": False, "bias_clip": 8.0, "bias_sigma_init": 3.0}
     assert MadgwickEstimator().params == {"beta": DEFAULT_BETA, "beta_marg": 0.041, **front_end} == {
         "beta": 0.033, "beta_marg": 0.041, **front_end}
     assert MahonyEstimator().params == {"kp": DEFAULT_KP, "ki": DEFAULT_KI, **front_end} == {
@@ -180,6 +182,7 @@ def test_defaults() -> None:
         "bias_clip": p["biasClip"],
         "tau_mag": p["tauMag"],
         "mag_dist_rejection": p["magDistRejectionEnabled"],
+        **magcal,
     }
 
 

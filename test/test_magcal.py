@@ -200,7 +200,9 @@ def test_heading_sigma_covers_the_calibration_error_and_the_state_moves_on():
     assert st.state == CALIBRATED and st.heading_sd_bound_rad <= math.radians(2.5) and st.windows == cal.windows
     assert all(0.0 < sd < 1e-6 for sd in st.hard_iron_sd_t) and st.converged_after_s == cal.converged_after_s
     assert 0.4e-6 < cal.field_sd_t() < 2e-6  # the field's σ at the end: the hard iron's floor and a little more
-    assert OnlineMagCalibrator().field_sd_t() > 40e-6  # before any window: the prior's 50 µT
+    fresh = OnlineMagCalibrator()  # before any window the configured calibration is used as it is (hypothesis.py) ...
+    assert fresh.trusted and fresh.field_sd_t() == 0.0
+    assert math.sqrt(fresh.covariance[-1, -1]) > 40.0  # ... while the estimate's σ is the prior's 50 µT
     assert np.mean(z_arr <= 2.0) > 0.9  # the error is inside 2σ at least 90 % of the time
     assert np.mean(z_arr <= 0.1) < 0.9  # and σ is not uselessly wide
 

@@ -66,7 +66,8 @@ def test_node_output_equals_core_on_a_broad_trial(ros, start_node, broad_trial):
     want = np.zeros_like(cov)
     want[:, 0] = want[:, 4] = core.batch_sigma[:, 0] ** 2
     want[:, 8] = core.batch_sigma[:, 1] ** 2
-    assert np.abs(cov - want).max() < 1e-6
+    # (relative: the heading σ holds the calibration's doubt, a function of the attitude the network gives to 1e-5)
+    np.testing.assert_allclose(cov, want, rtol=1e-4, atol=1e-6)
     assert (np.abs(cov[:, 0] - want[:, 0]) < 1e-2 * want[:, 0]).all()  # relative, too (float32 GRU round-off)
     assert (np.linalg.eigvalsh(cov.reshape(-1, 3, 3)) > 0.0).all()
     assert np.sqrt(cov[:, 0]).max() > 3.0 * np.sqrt(cov[:, 0]).min()  # per sample, not a constant
@@ -368,7 +369,8 @@ def test_400hz_imu_with_100hz_mag_equals_offline_and_survives_the_mag_stopping(r
     want = np.zeros((n, 9))
     want[:, 0] = want[:, 4] = sigma[:, 0] ** 2
     want[:, 8] = sigma[:, 1] ** 2
-    assert np.abs(cov - want).max() < 1e-6
+    # (relative: the heading σ holds the calibration's doubt, a function of the attitude the network gives to 1e-5)
+    np.testing.assert_allclose(cov, want, rtol=1e-4, atol=1e-6)
     assert (np.linalg.eigvalsh(cov.reshape(n, 3, 3)) > 0.0).all()
     yaw_sd = np.degrees(np.sqrt(cov[:, 8]))
     corrected = yaw_sd[int(3 * RATE): n // 2]  # the field's 2.6° and the tilt's share (the bias still unknown here)

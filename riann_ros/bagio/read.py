@@ -161,7 +161,8 @@ def _info_from(path: Path, reader) -> dict:
 
 
 def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_topic: str = IMU_TOPIC,
-                    reference: bool = True, pair_mag: MagPairer | None = None) -> Iterator[Recording]:
+                    reference: bool = True, pair_mag: MagPairer | None = None,
+                    mag_topic: str = MAG_TOPIC) -> Iterator[Recording]:
     """Yield the bag as consecutive :class:`Recording` chunks of at most ``chunk`` samples, in stamp order.
 
     Memory stays bounded by the chunk size. Each chunk carries its reference (NaN rows where no
@@ -169,7 +170,8 @@ def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_t
     reference topic, or with ``reference=False``), its score mask and the bag's name/dataset/source/frame_id/meta.
     ``imu_topic``: the ``sensor_msgs/msg/Imu`` topic of the samples (a bag not written by the converter). The
     magnetometer (``/imu/mag``, tesla) comes in ``mag``, paired with the samples by ``pair_mag`` (default
-    :func:`exact_stamps`: the reading with the sample's stamp, NaN rows where none), ``None`` without the topic.
+    :func:`exact_stamps`: the reading with the sample's stamp, NaN rows where none), ``None`` without the topic;
+    ``mag_topic``: another ``sensor_msgs/msg/MagneticField`` topic, which must then be in the bag.
     Raises :class:`BagError` for anything that is not a readable IMU bag.
     """
     path = Path(path)
@@ -177,7 +179,7 @@ def iter_imu_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_t
         raise ValueError("chunk must be >= 1")
     with _opened(path) as reader:
         try:
-            yield from _iter_chunks(path, reader, chunk, imu_topic, reference, pair_mag or exact_stamps)
+            yield from _iter_chunks(path, reader, chunk, imu_topic, reference, pair_mag or exact_stamps, mag_topic)
         except BagError:
             raise
         except (KeyboardInterrupt, GeneratorExit):
@@ -323,12 +325,15 @@ def _at_stamps(raws: list[bytes], parse, width: int, stamps: np.ndarray, last: i
 
 
 def _iter_chunks(path: Path, reader, chunk: int, imu_topic: str = IMU_TOPIC,
-                 reference: bool = True, pair_mag: MagPairer = exact_stamps) -> Iterator[Recording]:
+                 reference: bool = True, pair_mag: MagPairer = exact_stamps,
+                 mag_topic: str = MAG_TOPIC) -> Iterator[Recording]:
     c_imu = _topic_connections(path, reader, imu_topic, IMU_TYPE, required=True)
     c_ref = _topic_connections(path, reader, REF_TOPIC, QUAT_TYPE, required=False) if reference else []
     c_scored = _topic_connections(path, reader, SCORED_TOPIC, BOOL_TYPE, required=False)
-    # the magnetometer is optional: a /imu/mag of another type (a foreign bag) is ignored, not an error
-    c_mag = [c for c in reader.connections if c.topic == MAG_TOPIC and c.msgtype == MAG_TYPE]
+    # the layout's magnetometer is optional: a /imu/mag of another type (a foreign bag) is ignored, not an error; a
+    # topic asked for by name must be there
+    c_mag = ([c for c in reader.connections if c.topic == MAG_TOPIC and c.msgtype == MAG_TYPE]
+             if mag_topic == MAG_TOPIC else _topic_connections(path, reader, mag_topic, MAG_TYPE, required=True))
     info = _info_from(path, reader)
     buf = _ChunkBuffer(path, info, bool(c_ref), {c.id for c in c_imu}, {c.id for c in c_ref}, imu_topic,
                        {c.id for c in c_mag}, pair_mag)

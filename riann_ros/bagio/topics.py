@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 from riann_ros import defaults
 from riann_ros import quaternion as quat
 from riann_ros.bagio.cdr import _f64_cols, _stamps_of, _uniform_rows
-from riann_ros.bagio.layout import IMU_TOPIC, IMU_TYPE, BagError, typestore
+from riann_ros.bagio.layout import IMU_TOPIC, IMU_TYPE, MAG_TOPIC, BagError, typestore
 from riann_ros.bagio.read import MagPairer, _opened, iter_imu_chunks
 from riann_ros.constants import NS_PER_S
 from riann_ros.recording import Recording
@@ -287,12 +287,12 @@ class Aligner:
 def iter_topic_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu_topic: str = IMU_TOPIC,
                       reference_topic: str | None = None, estimate_topics: Sequence[str] = (), t_offset_ns: int = 0,
                       max_gap_ns: int = round(defaults.MAX_GAP_S * NS_PER_S), pair_mag: MagPairer | None = None,
-                      ) -> Iterator[tuple[Recording, dict[str, NDArray[np.float64]]]]:
+                      mag_topic: str = MAG_TOPIC) -> Iterator[tuple[Recording, dict[str, NDArray[np.float64]]]]:
     """The IMU samples of ``imu_topic`` in chunks, each with the orientations of ``estimate_topics`` at its samples
     (stamps + ``t_offset_ns``; (N, 6): w, x, y, z and the σ of :func:`sigmas_of_variances`) and, with
     ``reference_topic``, that topic as its reference (instead of the layout's ``/ground_truth/attitude``). The
-    score mask is the layout's ``/ground_truth/scored`` if present, else all scored;
-    the magnetometer is paired by ``pair_mag`` (:func:`~riann_ros.bagio.read.iter_imu_chunks`). BagError for missing
+    score mask is the layout's ``/ground_truth/scored`` if present, else all scored; the magnetometer
+    (``mag_topic``) is paired by ``pair_mag`` (:func:`~riann_ros.bagio.read.iter_imu_chunks`). BagError for missing
     topics or topics without an orientation."""
     path = Path(path)
     topics = [t for t in (reference_topic, *estimate_topics) if t]
@@ -304,7 +304,7 @@ def iter_topic_chunks(path: str | os.PathLike[str], chunk: int = 100_000, *, imu
             for t in estimate_topics}
     try:
         for rec in iter_imu_chunks(path, chunk, imu_topic=imu_topic, reference=reference_topic is None,
-                                   pair_mag=pair_mag):
+                                   pair_mag=pair_mag, mag_topic=mag_topic):
             if ref is not None:
                 rec.quat_ref = ref.at(rec.stamps_ns)
             yield rec, {t: a.at(rec.stamps_ns) for t, a in ests.items()}

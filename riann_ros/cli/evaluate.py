@@ -93,6 +93,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
         topics=topics,
         offset_steps=args.offset_steps,
         salvage=args.salvage,
+        score_from_s=args.score_from,
         input_warnings=input_warnings,
     )
     eval_inputs.check_recorded(settings)

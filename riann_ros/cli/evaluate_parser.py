@@ -160,6 +160,9 @@ def _conditions(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rest", default=None, metavar="START:END",
                    help="the initial rest, in seconds from the first sample, whose mean gyro is removed as the turn-on "
                    "bias (default: detected from the signals before the first scored sample; see docs/evaluation.md)")
+    p.add_argument("--score-from", type=float, default=0.0, metavar="SECONDS",
+                   help="score every metric only from SECONDS after each sequence's first sample (e.g. the heading "
+                        "after a magnetometer calibration has converged); recorded in results.json")
     p.add_argument("--seed", type=int, default=0, help="seed of the random gyro bias (per sequence: seed + name)")
     p.add_argument("--rates", default=None,
                    help="comma-separated sampling rates (Hz) to resample to (FFT), e.g. 50,100,200,500; 'native' "

@@ -44,6 +44,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
+from riann_ros.estimators.magcal_slot import MagCalSlot
+from riann_ros.magcal.records import MagCalibration, MagCalPrior, MagCalStatus
 from riann_ros.params import ParamSpec, find
 
 Array = NDArray[np.float64]
@@ -78,6 +80,8 @@ class AttitudeEstimator(ABC):
         self.params: dict[str, Any] = {p.name: p.default for p in self.PARAMS}
         for key, value in params.items():
             self.params[key] = specs[key].validate(value)
+        # the online magnetometer calibration (estimators with riann_ros.mag.MAG_CAL_PARAMS): kept over reset()
+        self.magcal = MagCalSlot(self.params) if "mag_calibration" in self.params else None
         self.reset()
 
     # -- parameters -----------------------------------------------------------------------------
@@ -100,6 +104,31 @@ class AttitudeEstimator(ABC):
     def diagnostics(self) -> dict[str, str]:
         """Estimator-specific values for the node's ``/diagnostics`` (e.g. its gyro-bias estimate)."""
         return {}
+
+    # -- magnetometer calibration (docs/magnetometer.md) -------------------------------------------
+    def calibrates_mag(self) -> bool:
+        """True when the estimator calibrates the field online (its ``mag_calibration`` parameter): it then takes
+        the raw field (:class:`riann_ros.mag.MagInput` passes it uncalibrated)."""
+        return self.magcal is not None and self.magcal.on
+
+    def set_mag_prior(self, prior: MagCalPrior) -> None:
+        """Where the online calibration starts, and the hypothesis it tests: the configured ``mag_hard_iron`` /
+        ``mag_soft_iron`` (:meth:`riann_ros.mag.MagConfig.prior`) or a saved calibration
+        (:meth:`MagCalPrior.from_calibration`). Restarts the calibration; nothing else of the state changes."""
+        if self.magcal is not None:
+            self.magcal.set_prior(prior)
+            self._on_mag_prior()
+
+    def _on_mag_prior(self) -> None:  # noqa: B027 - optional hook, default does nothing
+        """Hook for estimators that hand the calibrator to a part of themselves (RIANN's heading stage)."""
+
+    def mag_calibration(self) -> MagCalibration | None:
+        """The online calibration's current estimate (what ``~/save_mag_calibration`` writes); None when off."""
+        return self.magcal.calibration() if self.magcal is not None else None
+
+    def mag_cal_status(self) -> MagCalStatus | None:
+        """The online calibration's state for ``/diagnostics``; None when off."""
+        return self.magcal.status() if self.magcal is not None else None
 
     # -- estimation -----------------------------------------------------------------------------
     @abstractmethod
@@ -129,7 +158,11 @@ class AttitudeEstimator(ABC):
         got. Default: the documented constants (see the module docstring); the heading's σ with a field only for
         estimators that use it (``USES_MAG``). Never changes the state."""
         f = np.asarray(fields, dtype=bool) & self.USES_MAG
-        yaw = np.where(f, np.radians(MAG_HEADING_SD_DEG), np.radians(YAW_FREE_SD_DEG))
+        mag_sd = np.radians(MAG_HEADING_SD_DEG)
+        cal = self.magcal.sd_rad if self.magcal is not None and self.magcal.on else None
+        if cal is not None and len(cal) == len(f) and cal.any():  # the calibration's share (0 while trusted)
+            mag_sd = np.minimum(np.hypot(mag_sd, cal), np.radians(YAW_FREE_SD_DEG))
+        yaw = np.where(f, mag_sd, np.radians(YAW_FREE_SD_DEG))
         return np.column_stack([np.full(len(f), np.radians(INCLINATION_SD_DEG)), yaw])
 
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:

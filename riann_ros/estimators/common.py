@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike
 from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
 from riann_ros.estimators.bias import FrontEndSlot
+from riann_ros.estimators.magcal_slot import MagCalSlot
 from riann_ros.rotations import Quat, rotate
 
 BIAS_KEY = "gyro bias estimate (deg/s)"
@@ -107,11 +108,25 @@ class Rows(NamedTuple):
         return Rows(self.acc[i:], self.gyr[i:], self.mag[i:], self.dt[i:])
 
 
-def loop_rows(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None, front_end: FrontEndSlot) -> Rows:
-    """The batch for a loop: sanitised, the gyro debiased by ``front_end``; without ``mag`` every row is None."""
+def loop_rows(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None, front_end: FrontEndSlot,
+              magcal: MagCalSlot | None = None) -> Rows:
+    """The batch for a loop: sanitised, the gyro debiased by ``front_end``; without ``mag`` every row is None; with
+    ``magcal`` on, the field calibrated online (:meth:`MagCalSlot.calibrate`, a row without a field is None)."""
     a, g, h = sanitize_arrays(acc, gyr, dt)
     m = [None] * len(a) if mag is None else sanitize_mag(mag, len(a))
-    return Rows(a.tolist(), front_end.debias(a, g, h).tolist(), m, h.tolist())
+    al, gl, hl = a.tolist(), front_end.debias(a, g, h).tolist(), h.tolist()
+    if magcal is not None and magcal.on:
+        m = magcal.calibrate(al, gl, hl, m)
+    return Rows(al, gl, m, hl)
+
+
+def calibrated_field(acc: Array, gyr: Array, dt: Array, mag: ArrayLike | None, magcal: MagCalSlot | None
+                     ) -> ArrayLike | None:
+    """``mag`` calibrated online by ``magcal`` when it is on (NaN rows: no field; sanitised inputs), else as given."""
+    if magcal is None or not magcal.on or mag is None:
+        return mag
+    rows = magcal.calibrate(acc.tolist(), gyr.tolist(), dt.tolist(), sanitize_mag(mag, len(acc)))
+    return np.array([(math.nan,) * 3 if u is None else u for u in rows], dtype=float).reshape(-1, 3)
 
 
 def initialise(rows: Rows, out: list) -> tuple[Quat | None, Rows, bool]:

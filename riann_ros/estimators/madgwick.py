@@ -55,6 +55,7 @@ from numpy.typing import ArrayLike
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
 from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows
+from riann_ros.mag import MAG_CAL_PARAMS
 
 #: ahrs 0.4.0 ``Madgwick`` default ``gain_imu`` (IMU/6D mode); Madgwick's report gives β = √(3/4)·ω̃ with
 #: ω̃ the gyro measurement error, and 0.033 corresponds to ω̃ ≈ 2.2°/s.
@@ -158,6 +159,7 @@ class MadgwickEstimator(AttitudeEstimator):
             max=10.0,
             runtime=True,
         ),
+        *MAG_CAL_PARAMS,
         *front_end_params(False, "the filter"),
     )
 
@@ -175,7 +177,7 @@ class MadgwickEstimator(AttitudeEstimator):
         return self._observed
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
-        rows = loop_rows(acc, gyr, dt, mag, self._fe)
+        rows = loop_rows(acc, gyr, dt, mag, self._fe, self.magcal)
         nine = mag is not None
         out: list = []
         state, used = (self._nwu_state() if nine else self._q), self._observed

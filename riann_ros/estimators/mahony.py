@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
 from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows
+from riann_ros.mag import MAG_CAL_PARAMS
 from riann_ros.rotations import Vec
 
 #: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
@@ -126,6 +127,7 @@ class MahonyEstimator(AttitudeEstimator):
             max=10.0,
             runtime=True,
         ),
+        *MAG_CAL_PARAMS,
         *front_end_params(False, "the filter (its own integral term then tracks what is left)"),
     )
 
@@ -147,7 +149,7 @@ class MahonyEstimator(AttitudeEstimator):
         return self._observed
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
-        rows = loop_rows(acc, gyr, dt, mag, self._fe)
+        rows = loop_rows(acc, gyr, dt, mag, self._fe, self.magcal)
         out: list = []
         q, used = self._q, self._observed
         if q is None:

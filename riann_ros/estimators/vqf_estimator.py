@@ -44,7 +44,8 @@ from vqf import VQF
 
 from riann_ros import defaults
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.common import BIAS_KEY, bias_text, sanitize_arrays
+from riann_ros.estimators.common import BIAS_KEY, bias_text, calibrated_field, sanitize_arrays
+from riann_ros.mag import MAG_CAL_PARAMS
 
 # defaults of vqf 2.1.2 (VQFParams)
 DEFAULT_TAU_ACC = 3.0
@@ -107,6 +108,7 @@ class VqfEstimator(AttitudeEstimator):
             "with the gyro while disturbed (VQF magDistRejectionEnabled; 9D only). Default true = vqf default.",
             runtime=True,
         ),
+        *MAG_CAL_PARAMS,
     )
     USES_MAG = True
 
@@ -155,7 +157,8 @@ class VqfEstimator(AttitudeEstimator):
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
         a, g, h = sanitize_arrays(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])
         v, ts = self._ensure(float(h[0]))
-        m = _field_ut(None if mag is None else np.reshape(mag, (1, 3)), 1)[0]
+        mag = calibrated_field(a, g, h, None if mag is None else np.reshape(mag, (1, 3)), self.magcal)
+        m = _field_ut(mag, 1)[0]
         self._mag_used = bool(m.any())
         if self._mag_used:
             v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]), m)
@@ -168,8 +171,8 @@ class VqfEstimator(AttitudeEstimator):
         if len(a) == 0:
             return np.empty((0, 4))
         v, ts = self._ensure(float(h[0]))
-        g = np.ascontiguousarray(g * (h / ts)[:, None])
-        m = _field_ut(mag, len(a))  # zero rows: VQF skips updateMag
+        m = _field_ut(calibrated_field(a, g, h, mag, self.magcal), len(a))
+        g = np.ascontiguousarray(g * (h / ts)[:, None])  # zero rows: VQF skips updateMag
         self._mag_used = bool(m[-1].any())
         out = v.updateBatch(g, np.ascontiguousarray(a), m)["quat9D"]
         return np.array(out, dtype=float)

@@ -197,6 +197,7 @@ class Report:
             "rest": None if s.rest is None else list(s.rest),
             "rest_definition": REST_DEFINITION,
             "offset_steps": s.offset_steps,
+            "score_from_s": s.score_from_s,
             "perturbation_definition": PERTURB_DEFINITIONS,
             "metric": METRIC,
             "input_warnings": s.input_warnings,

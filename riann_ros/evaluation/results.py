@@ -43,6 +43,7 @@ class EvalSettings:
     topics: BagTopics = field(default_factory=BagTopics)  # which topics of the bags; recorded estimates
     offset_steps: int = OFFSET_STEPS  # search the e_α-minimising time offset within ± this many steps (0: not)
     salvage: bool = False  # score the readable part of a bag cut off by a crash (a repaired copy, bagio.repair)
+    score_from_s: float = 0.0  # score every metric only from this long after the sequence's first sample (s)
     input_warnings: list[str] = field(default_factory=list)  # found while matching the inputs (estimate files)
 
     @property
@@ -67,6 +68,9 @@ class RunStats:
     resets: dict[str, int] = field(default_factory=dict)  # estimator restarts per cause
     live: dict[str, int] | None = None  # live replays: published, received, lost, unexpected
     mag_samples: int = 0  # samples the estimator got with a magnetic field (> 0: a 9D run)
+    # s after the run's first sample its online magnetometer calibration was first called calibrated (None: never,
+    # or it calibrates none; NaN in results.csv)
+    mag_converged_after_s: float | None = None
     gyro_bias_dps: list[float] | None = None  # the estimator's gyro-bias estimate at the end (None: it reports none)
 
 
@@ -108,6 +112,8 @@ class ResultRow:
         d.update({f"reset_{k}": v for k, v in self.stats.resets.items()})
         d.update(self.stats.live or {})
         d["cpu_seconds"] = self.stats.cpu_seconds
+        if self.sensors == "9D":
+            d["mag_converged_after_s"] = self.stats.mag_converged_after_s
         d["has_reference"] = self.has_reference
         if self.stats.gyro_bias_dps is not None:
             d.update(zip(BIAS_KEYS, self.stats.gyro_bias_dps, strict=True))

@@ -71,6 +71,8 @@ class _OfflineRun:
             stats.rejected = {k: int(v) for k, v in stream.gate.rejected.items()}
             stats.resets = {k: int(v) for k, v in stream.gate.resets.items()}
             stats.mag_samples = stream.mag.samples_with_field
+            cal = stream.estimator.mag_cal_status()
+            stats.mag_converged_after_s = None if cal is None else cal.converged_after_s
             stats.gyro_bias_dps = reported_bias(stream.estimator)
         return self.stats
 

@@ -55,6 +55,7 @@ class ScenarioRun:
         rate = plan.gate.nominal_rate
         self.gate = GateConfig.for_rate(condition.nominal_rate(rate)) if condition.parts else plan.gate
         self.acc = [Accumulator(settings.with_heading) for _ in self.specs]
+        self.score_from_ns = plan.first_stamp + round(settings.score_from_s * 1e9)  # scored from this stamp on
         # the time offset that minimises e_α (one scenario per sequence × condition × rate: see run._plan_runs)
         self.offsets = (OffsetSearch(len(self.specs), 1.0 / self.gate.nominal_rate, settings.offset_steps)
                         if offsets and settings.offset_steps > 0 and not free else None)
@@ -94,10 +95,11 @@ class ScenarioRun:
         run = self.run
         sigmas = (run.sigmas([len(self.own), len(self.recorded)]) if isinstance(run, Joined)
                   else run_sigmas(run, len(self.specs)))
+        mask = rec.score_mask & (rec.stamps_ns >= self.score_from_ns)  # --score-from
         for acc, q, sig in zip(self.acc, qs, sigmas, strict=True):
-            acc.add(rec.quat_ref, rec.score_mask, q, sig)
+            acc.add(rec.quat_ref, mask, q, sig)
         if self.offsets is not None:
-            self.offsets.add(rec.stamps_ns, rec.quat_ref, rec.score_mask, qs)
+            self.offsets.add(rec.stamps_ns, rec.quat_ref, mask, qs)
         if self.agreement is not None:
             self.agreement.add(rec.stamps_ns, qs)
         if self.series and (rec.quat_ref is not None or self.free):

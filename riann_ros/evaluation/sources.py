@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros import defaults
-from riann_ros.bagio.layout import IMU_TOPIC
+from riann_ros.bagio.layout import IMU_TOPIC, MAG_TOPIC
 from riann_ros.constants import NS_PER_S
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.input_hints import BROAD_SUFFIXES, check_input
@@ -69,6 +69,7 @@ class BagTopics:
 
     imu: str = IMU_TOPIC
     reference: str | None = None  # None: the layout's /ground_truth/attitude
+    mag: str = MAG_TOPIC  # the magnetometer (another topic must be in the bag)
     estimates: tuple[str, ...] = ()
     t_offset_s: float = 0.0  # added to the stamps of the estimate topics and files
     max_gap_s: float = defaults.MAX_GAP_S  # slerp between messages at most this far apart; hold within half of it
@@ -77,11 +78,11 @@ class BagTopics:
     @property
     def plain(self) -> bool:
         """Only the layout's topics (estimate files aside: they are not in the bag)."""
-        return self.imu == IMU_TOPIC and self.reference is None and not self.estimates
+        return self.imu == IMU_TOPIC and self.reference is None and not self.estimates and self.mag == MAG_TOPIC
 
     def options(self) -> list[str]:
         """The command-line options that ask for these topics (for messages)."""
-        out = [] if self.imu == IMU_TOPIC else ["--imu-topic"]
+        out = ([] if self.imu == IMU_TOPIC else ["--imu-topic"]) + ([] if self.mag == MAG_TOPIC else ["--mag-topic"])
         out += ["--ground-truth-topic"] if self.reference else []
         return out + (["--estimate-topic"] if self.estimates else [])
 
@@ -162,7 +163,8 @@ class Source:
 
         for rec, recorded in iter_topic_chunks(self.path, self.chunk, imu_topic=t.imu, reference_topic=t.reference,
                                                estimate_topics=t.estimates, t_offset_ns=round(t.t_offset_s * NS_PER_S),
-                                               max_gap_ns=round(t.max_gap_s * NS_PER_S), pair_mag=NodePairing()):
+                                               max_gap_ns=round(t.max_gap_s * NS_PER_S), pair_mag=NodePairing(),
+                                               mag_topic=t.mag):
             yield Chunk.of(rec, recorded) if t.estimates else rec
 
 

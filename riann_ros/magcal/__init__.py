@@ -29,6 +29,11 @@ field (:meth:`~.online.OnlineMagCalibrator.heading_sd_rad`). The state: *uncalib
 (Cauchy) least squares started from the online estimate, with a covariance; not the ``magyc`` package (why: module
 docstring of :mod:`.offline`).
 
+**The prior as a hypothesis** (:mod:`.hypothesis`): the configured (or saved) calibration is used as it is while
+the windows are consistent with it (a calibrated sensor keeps its numbers), with the doubt they leave in the
+heading's σ; once they reject it the estimate and its σ take over (docs/magnetometer.md, "Online calibration").
+
 Modules: :mod:`.records` (frozen records and the physical constants), :mod:`.windows`, :mod:`.model`,
-:mod:`.solver`, :mod:`.online`, :mod:`.offline`, :mod:`.store` (the YAML file), :mod:`.synthetic` (test sensors).
+:mod:`.solver`, :mod:`.hypothesis`, :mod:`.online`, :mod:`.offline`, :mod:`.store` (the YAML file),
+:mod:`.synthetic` (test sensors).
 """

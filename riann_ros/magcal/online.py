@@ -15,6 +15,10 @@ the current attitude and field, per sample (a cached 3×3 field covariance, refr
 :data:`REFRESH_ANGLE_RAD` of rotation); the state is *calibrated* once the largest such σ over all headings at the
 current tilt is at most :data:`CALIBRATED_SD_RAD`, *uncalibrated* while no window has been added, *converging*
 in between.
+
+The prior as a hypothesis (:mod:`.hypothesis`): while the windows are consistent with the configured (or saved)
+calibration, the readings are calibrated with it as it is and :meth:`heading_sd_rad` adds nothing (the heading is a
+calibrated sensor's); once they reject it (:attr:`trusted` False, for good), the estimate and its σ take over.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import math
 import numpy as np
 
 from riann_ros.mag import USABLE_MAX_T, USABLE_MIN_T
+from riann_ros.magcal.hypothesis import PriorTest
 from riann_ros.magcal.model import Array, CalModel, heading_sd_bound
 from riann_ros.magcal.records import (
     CALIBRATED,
@@ -45,6 +50,9 @@ from riann_ros.magcal.windows import Window, Windower, WindowSet
 from riann_ros.rotations import Quat, Vec, rotate
 
 _COS_REFRESH = math.cos(0.5 * REFRESH_ANGLE_RAD)
+#: below this posterior probability that the configured calibration is wrong, its share of the heading σ is none (a
+#: millionth of even a 180° doubt is 0.2°: below the field heading's own σ, 2.5°, in quadrature: 0.006°)
+UNDOUBTED = 1e-6
 _MIN2_UT, _MAX2_UT = (USABLE_MIN_T / UT) ** 2, (USABLE_MAX_T / UT) ** 2  # µT²: riann_ros.mag's plausible norms
 
 
@@ -58,6 +66,8 @@ class OnlineMagCalibrator:
         self.model = CalModel(soft_iron_model, np.asarray(prior.soft_iron).reshape(3, 3))
         self.lam0, self.theta0 = self.model.prior(prior)
         self.est = InfoEstimate(self.model, self.lam0, self.theta0)
+        self.test = PriorTest(self.model, self.theta0)  # does the prior still hold?
+        self.agree = 0  # consecutive windows that agree with a rejected prior
         self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
         self.switches = 0  # times a candidate replaced the estimate
         self.windower = Windower()
@@ -109,13 +119,29 @@ class OnlineMagCalibrator:
 
     def heading_sd_rad(self, q: Quat, field_world_t: Vec) -> float:
         """rad; the σ the calibration adds to the heading of this sample: ``q`` its attitude (sensor → world),
-        ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical."""
+        ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical, and
+        while the last window contradicted the estimate (the field disturbed, or the magnetic situation changed:
+        nothing is known of the calibration until a window agrees again or a new estimate replaces it). While the
+        prior holds: the share of the doubt about it (:mod:`.hypothesis`)."""
+        doubt = 1.0 - self.test.p_holds if self.test.holds else 1.0
+        if doubt < UNDOUBTED:
+            return 0.0
         fx, fy = field_world_t[0], field_world_t[1]
         fh = math.sqrt(fx * fx + fy * fy)
         if fh <= 0.0:
             return math.pi
+        if self.test.holds:  # the field calibrated as configured: the mixture's share (riann_ros.magcal.hypothesis)
+            s1 = self._heading_sd(q, fx / fh, fy / fh, fh)
+            d = 0.0 if self.m_last is None else heading_gap(self._est_a, self._est_c, self.m_last, q, field_world_t)
+            return min(math.sqrt(doubt * (s1 * s1 + d * d)), math.pi)
+        if self.cand is not None:  # the last window contradicted the estimate: disturbed, or the situation changed
+            return math.pi
+        return self._heading_sd(q, fx / fh, fy / fh, fh)
+
+    def _heading_sd(self, q: Quat, ex: float, ey: float, fh: float) -> float:
+        """rad; the estimate's heading σ for the horizontal field direction (ex, ey) of strength ``fh`` (T)."""
         self._maybe_refresh()
-        wx, wy, wz = rotate((q[0], -q[1], -q[2], -q[3]), (fy / fh, -fx / fh, 0.0))  # across the field, sensor frame
+        wx, wy, wz = rotate((q[0], -q[1], -q[2], -q[3]), (ey, -ex, 0.0))  # across the field, sensor frame
         s = self.su
         var = (s[0] * wx * wx + s[3] * wy * wy + s[5] * wz * wz
                + 2.0 * (s[1] * wx * wy + s[2] * wx * wz + s[4] * wy * wz))
@@ -124,7 +150,9 @@ class OnlineMagCalibrator:
     def field_sd_t(self) -> float:
         """T; the calibrated field's σ in its worst direction for the current orientation: how far its norm and
         dip can be off through the calibration alone (a disturbance test against a learned reference should widen
-        its band by a few of these while the calibration converges)."""
+        its band by a few of these while the calibration converges); 0 while the prior holds."""
+        if self.test.holds:
+            return 0.0
         self._maybe_refresh()
         return self.field_sd_ut * UT
 
@@ -140,11 +168,42 @@ class OnlineMagCalibrator:
             est.add(j, r0, var, d2, k)
             self.windows += 1
             self.cand = None
+            self._test(w, j, r0, var)
         else:  # a disturbed field, or the magnetic situation changed: a candidate learns from the rejected windows
             self.rejected += 1
             self._candidate(j, r0, ws)
+        if not self.test.holds:
+            self._retest(w, j, r0, var)
         self._cache()
         self._set_state()
+
+    def _test(self, w: Window, j: Array, r0: Array, var: float) -> None:
+        """The prior's test (:mod:`.hypothesis`) after a window the estimate took."""
+        if not self.test.holds:
+            return
+        tol = self._tolerance(w)
+        self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol)
+
+    def _tolerance(self, w: Window) -> Array:
+        return self.test.tolerance_at(np.asarray(w.m1_ut), self.q)
+
+    def _retest(self, w: Window, j: Array, r0: Array, var: float) -> None:
+        """After the prior was rejected: :data:`~.records.SWITCH_WINDOWS` consecutive windows that agree with it
+        restore it, as a changed magnetic situation replaces the estimate (a magnet attached for a while and taken
+        off again); the estimate and the test start anew from the prior."""
+        if self.test.window_fails(j, r0, var, self._tolerance(w)):
+            self.agree = 0
+            return
+        self.agree += 1
+        if self.agree >= SWITCH_WINDOWS:
+            self.est, self.cand = InfoEstimate(self.model, self.lam0, self.theta0), None
+            self.test = PriorTest(self.model, self.theta0)
+            self.windows, self.agree = 0, 0
+
+    @property
+    def trusted(self) -> bool:
+        """The prior still holds: the readings are calibrated with it as configured (module docstring)."""
+        return self.test.holds
 
     def _candidate(self, j: Array, r0: Array, ws: WindowSet) -> None:
         """A rejected window goes to the candidate (restarted from the prior when it does not fit the candidate
@@ -189,9 +248,13 @@ class OnlineMagCalibrator:
         return self.model.with_floor(self.est.cov * max(1.0, self.unit_weight))
 
     def _cache(self) -> None:
-        a = self.model.soft_iron(self.theta)
+        theta = self.theta0 if self.test.holds else self.theta  # the calibration the readings get
+        a = self.model.soft_iron(theta)
         self._a = tuple(float(v) for v in a.reshape(9))
-        self._c = tuple(float(v) for v in self.theta[self.model.p:])
+        self._c = tuple(float(v) for v in theta[self.model.p:])
+        est_a = self.model.soft_iron(self.theta)  # the estimate's own (the same once the prior is rejected)
+        self._est_a = tuple(float(v) for v in est_a.reshape(9))
+        self._est_c = tuple(float(v) for v in self.theta[self.model.p:])
         self.q_refresh = None  # refresh the field covariance at the next heading σ
 
     def _maybe_refresh(self) -> None:
@@ -240,4 +303,16 @@ class OnlineMagCalibrator:
         cal = self.calibration()
         return MagCalStatus(state=self.state, hard_iron_t=cal.hard_iron_t, hard_iron_sd_t=cal.hard_iron_sd_t,
                             heading_sd_bound_rad=self.bound, windows=self.windows, rejected=self.rejected,
-                            unit_weight=self.unit_weight, converged_after_s=self.converged_after_s)
+                            unit_weight=self.unit_weight, converged_after_s=self.converged_after_s,
+                            prior_holds=self.test.holds)
+
+
+def heading_gap(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat, field_world_t: Vec) -> float:
+    """rad; the heading difference between the calibration ``(a, c)`` (row-major soft iron, ``c`` in µT) of the
+    raw reading ``m`` (µT) and ``field_world_t`` (another calibration's, world frame), at the attitude ``q``."""
+    x, y, z = m
+    u = (a[0] * x + a[1] * y + a[2] * z - c[0], a[3] * x + a[4] * y + a[5] * z - c[1],
+         a[6] * x + a[7] * y + a[8] * z - c[2])
+    w = rotate(q, u)
+    f = field_world_t
+    return abs(math.atan2(w[0] * f[1] - w[1] * f[0], w[0] * f[0] + w[1] * f[1]))

@@ -67,7 +67,7 @@ MAX_STEP_S = 0.2
 # ------------------------------------------------------------------------------------------------------------------
 #: T; the prior standard deviation of an unknown hard iron per axis: a robot's motors, battery, frame and board
 #: add "tens of µT" (Earth's field ≈ 50 µT).
-HARD_IRON_PRIOR_SD_T = 50.0 * UT
+HARD_IRON_PRIOR_SD_T = 50e-6  # (50 µT written in T: the exact float of config/riann.yaml's 5.0e-05)
 #: the prior standard deviation of the soft iron's symmetric part per entry (Frobenius-isotropic): soft-iron scale
 #: errors and cross-coupling of 5–15 %.
 SOFT_IRON_PRIOR_SD = 0.1
@@ -180,7 +180,8 @@ class MagCalibration:
 class MagCalStatus:
     """What the node's ``/diagnostics`` shows, once per window: the state, the estimate and its uncertainty, the
     bound of the heading error it can add at the current tilt (rad), the windows used and rejected as disturbed,
-    and the residual scale (the variance of unit weight; ≈ 1 when the noise model fits)."""
+    the residual scale (the variance of unit weight; ≈ 1 when the noise model fits), and whether the configured
+    (or saved) calibration still holds (:mod:`~riann_ros.magcal.hypothesis`: the field is then used as configured)."""
 
     state: CalState
     hard_iron_t: tuple[float, float, float]
@@ -190,3 +191,4 @@ class MagCalStatus:
     rejected: int
     unit_weight: float
     converged_after_s: float | None
+    prior_holds: bool = True

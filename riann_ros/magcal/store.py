@@ -60,7 +60,8 @@ def to_yaml(cal: MagCalibration) -> str:
     return HEADER + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=10_000)
 
 
-def _is_calibration_file(path: Path) -> bool:
+def is_calibration_file(path: Path) -> bool:
+    """Whether ``path`` holds a calibration file of this format (False for anything unreadable)."""
     try:
         doc = yaml.safe_load(path.read_text())
     except (OSError, UnicodeDecodeError, yaml.YAMLError):
@@ -74,7 +75,7 @@ def save_calibration(path: str | os.PathLike[str], cal: MagCalibration, replace_
     target = Path(path)
     if target.is_dir():
         raise CalibrationFileError(f"{target}: is a folder, not a calibration file")
-    if target.exists() and not replace_other and not _is_calibration_file(target):
+    if target.exists() and not replace_other and not is_calibration_file(target):
         raise CalibrationFileError(f"{target}: exists and is not a magnetometer calibration file; not replaced")
     text = to_yaml(cal)
     folder = target.parent if str(target.parent) else Path(".")

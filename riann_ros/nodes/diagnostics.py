@@ -14,6 +14,7 @@ from rclpy.node import Node
 from riann_ros import gate as gt
 from riann_ros import mag as mg
 from riann_ros import stream as st
+from riann_ros.nodes.mag_calibration import CalibrationFile, status_values
 
 RATE_CHECK_SAMPLES = 100  # accepted samples (restarts excluded) whose median dt gives the measured stamp rate
 RATE_TOLERANCE = 0.10  # relative difference between measured and nominal rate that is warned about
@@ -85,6 +86,7 @@ class Diagnostics:
         self.proc_us: list[float] = []
         self.est_us: list[float] = []
         self.config_warnings: list[str] = []  # the start-up warnings on parameters (values written but not applied)
+        self.mag_file = CalibrationFile("")  # the node's mag_calibration_file
         node.create_timer(period_s, self.publish)
 
     def level(self) -> tuple[bytes, str]:
@@ -148,6 +150,8 @@ class Diagnostics:
             "heading": "magnetic (9D)" if est.heading_observed() else "gyro only",
         }
         values.update(est.diagnostics())
+        if est.USES_MAG:
+            values.update(status_values(est.mag_cal_status(), self.mag_file))
         for reason in gt.REJECT_REASONS:
             values[f"rejected {reason} (total)"] = str(gate.rejected[reason])
         for cause in (gt.GAP, gt.CLOCK_JUMP):

@@ -1,7 +1,8 @@
 """The one ROS 2 node base behind riann_node, madgwick_node, mahony_node and vqf_node.
 
 It owns the ROS side of one estimator: the ``imu/data_raw`` and ``imu/mag`` subscriptions and their QoS,
-the parameters (:mod:`riann_ros.nodes.parameters`), the ``~/reset`` service, the outputs
+the parameters (:mod:`riann_ros.nodes.parameters`), the ``~/reset`` service, the saved magnetometer calibration
+(``mag_calibration_file``, ``~/save_mag_calibration``: :mod:`riann_ros.nodes.mag_calibration`), the outputs
 (:mod:`riann_ros.nodes.outputs`) and ``/diagnostics`` (:mod:`riann_ros.nodes.diagnostics`). What to do
 with a sample (dt from stamps, input checks, resets) is decided by the ROS-free
 :class:`~riann_ros.stream.EstimatorStream`, the same code the offline evaluator runs.
@@ -34,6 +35,7 @@ from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
 from riann_ros.nodes import ros_args, usage
 from riann_ros.nodes.diagnostics import Diagnostics
+from riann_ros.nodes.mag_calibration import SAVE_SERVICE, CalibrationFile
 from riann_ros.nodes.outputs import Outputs, rpy_topic
 from riann_ros.nodes.parameters import NODE_PARAMS, QOS_CHOICES, NodeParameters, collect_changes
 
@@ -69,11 +71,13 @@ class EstimatorNode(Node):
         p = self._params.declare()
         if not p["fixed_frame"].strip("/ "):
             raise ValueError("fixed_frame must not be empty")
+        self.mag_file = self._load_mag_file(p)
         self._values = p
         self._est_names = {s.name for s in est_specs}
         self.stream = st.EstimatorStream(create(self.ESTIMATOR, **{k: p[k] for k in self._est_names}),
                                          gt.GateConfig(**{s.name: p[s.name] for s in gt.GATE_PARAMS}),
-                                         mg.MagConfig(**{s.name: p[s.name] for s in mg.MAG_PARAMS}))
+                                         mg.MagConfig(**{s.name: p[s.name] for s in mg.MAG_PARAMS}),
+                                         mag_prior=self.mag_file.prior)
         self.add_pre_set_parameters_callback(self._params.coerce_sets)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -87,8 +91,11 @@ class EstimatorNode(Node):
         uses_mag = p["use_mag"] != "false" and self.stream.estimator.USES_MAG
         self._mag_sub = self.create_subscription(MagneticField, MAG_TOPIC, self._on_mag, qos) if uses_mag else None
         self.create_service(Trigger, "~/reset", self._on_reset)
+        if self.stream.estimator.USES_MAG:
+            self.create_service(Trigger, SAVE_SERVICE, self._on_save_mag_calibration)
         self.diag = Diagnostics(self, self.stream, self.ESTIMATOR, INPUT_TOPIC, MAG_TOPIC,
                                 float(p["diagnostics_period"]))
+        self.diag.mag_file = self.mag_file
         self.diag.world = self.outputs.world
         self._log_start(p, uses_mag, params_files or [], notes or [])
 
@@ -106,7 +113,7 @@ class EstimatorNode(Node):
         for text in notes:
             log.info(f"arguments: {text}")
         warnings = []
-        for level, text in self._params.log:
+        for level, text in [*self._params.log, *self.mag_file.log]:
             if level == "warning":  # (rclpy's logger wants one severity per call site)
                 log.warning(text)
                 warnings.append(text)
@@ -120,6 +127,16 @@ class EstimatorNode(Node):
             log.warning(text)
             warnings.append(text)
         self.diag.config_warnings = warnings  # WARN in /diagnostics too: values written but not applied
+
+    def _load_mag_file(self, p: dict[str, Any]) -> CalibrationFile:
+        """Read ``mag_calibration_file``: a usable file's hard and soft iron replace the parameters of those names
+        (set before the run-time callbacks exist: a start-up value, not a change); the node logs the outcome."""
+        f = CalibrationFile(p["mag_calibration_file"])
+        if f.loaded is not None:
+            p["mag_hard_iron"], p["mag_soft_iron"] = f.loaded.hard_iron_t, f.loaded.soft_iron
+            self.set_parameters([Parameter("mag_hard_iron", value=list(f.loaded.hard_iron_t)),
+                                 Parameter("mag_soft_iron", value=list(f.loaded.soft_iron))])
+        return f
 
     # -- run-time parameters ----------------------------------------------------------------------
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
@@ -135,7 +152,9 @@ class EstimatorNode(Node):
             return SetParametersResult(successful=False, reason=str(e))
         self._values = values
         self.stream.gate.config = new_gate
-        self.stream.mag.config = new_mag
+        # a new mag_hard_iron / mag_soft_iron restarts the online calibration from them; else it goes on
+        moved = {"mag_hard_iron", "mag_soft_iron"} & set(changes)
+        self.stream.configure_mag(new_mag, None if moved else self.stream.mag_prior)
         self.outputs.configure(values)
         self.get_logger().info("parameters changed: " + ", ".join(f"{k}={v}" for k, v in changes.items()))
         return SetParametersResult(successful=True)
@@ -252,6 +271,13 @@ class EstimatorNode(Node):
         return response
 
 
+    def _on_save_mag_calibration(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        response.success, response.message = self.mag_file.save(self.stream.estimator.mag_calibration())
+        log = self.get_logger()
+        (log.info if response.success else log.warning)(f"{SAVE_SERVICE}: {response.message}")
+        return response
+
+
 def help_text(node_cls: type[EstimatorNode]) -> str:
     """``--help`` of a node executable: its topics and every parameter it declares (:mod:`riann_ros.nodes.usage`)."""
     est = estimator_class(node_cls.ESTIMATOR)
@@ -266,6 +292,9 @@ def help_text(node_cls: type[EstimatorNode]) -> str:
         ("out", "/diagnostics", "diagnostic_msgs/DiagnosticArray: rates, rejections, warnings"),
         ("srv", "~/reset", "std_srvs/Trigger: clear the estimator state"),
     ]
+    if est.USES_MAG:
+        topics.append(("srv", SAVE_SERVICE, "std_srvs/Trigger: write the magnetometer calibration to "
+                       "mag_calibration_file"))
     doc = sys.modules[node_cls.__module__].__doc__ or node_cls.NODE_NAME
     return usage.usage(node_cls.NODE_NAME, doc.strip().splitlines()[0], topics, NODE_PARAMS, node_cls.ESTIMATOR,
                        est.PARAMS)

@@ -27,6 +27,7 @@ from riann_ros import mag as mg
 from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.estimators import REGISTRY, estimator_class
 from riann_ros.nodes import imu_tools
+from riann_ros.nodes.mag_calibration import MAG_CALIBRATION_FILE
 from riann_ros.params import ParamSpec
 
 QOS_CHOICES = ("sensor_data", "reliable", "best_effort")
@@ -71,7 +72,7 @@ NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("remove_gravity_vector", False, "Subtract gravity (9.80665 m/s² along the estimated vertical) from "
               "linear_acceleration in imu/data, as imu_tools' remove_gravity_vector.", runtime=True),
 )
-NODE_PARAMS: tuple[ParamSpec, ...] = (*gt.GATE_PARAMS, *mg.MAG_PARAMS, *NODE_ONLY_PARAMS)
+NODE_PARAMS: tuple[ParamSpec, ...] = (*gt.GATE_PARAMS, *mg.MAG_PARAMS, MAG_CALIBRATION_FILE, *NODE_ONLY_PARAMS)
 
 _ROS_TYPES = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER, float: Parameter.Type.DOUBLE,
               str: Parameter.Type.STRING, tuple: Parameter.Type.DOUBLE_ARRAY}

@@ -55,6 +55,7 @@ from riann_ros.estimators.riann.stage import (
     UncertaintyIn,
     Vec,
 )
+from riann_ros.mag import MAG_CAL_PARAMS
 
 
 class RiannEstimator(AttitudeEstimator):
@@ -84,6 +85,7 @@ class RiannEstimator(AttitudeEstimator):
                   "inclinations averaged (the paper's training augmentation used at run time); 1 = the single "
                   "network. Compute grows with it.", min=1, max=MAX_COPIES),
         *front_end_params(True, "the network"),
+        *MAG_CAL_PARAMS,
         ParamSpec("restart_gap", 0.1,
                   "s; after a stamp step longer than this (and than 4 input steps) a fresh network state takes "
                   "over from the first row after the hole. 0 = never.", min=0.0, max=3600.0),
@@ -128,7 +130,8 @@ class RiannEstimator(AttitudeEstimator):
         self.network = Network(self.model)
         self.carry = Carry()
         self.handover = Handover(p["hole_blend"])
-        self.heading = Heading(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"], p["estimate_mag_delay"])
+        self.heading = Heading(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"], p["estimate_mag_delay"],
+                               self.magcal.cal if self.magcal is not None else None)
         self.uncertainty = Uncertainty()
         self.stages = [*front, self.bias, self.network, self.carry, self.handover, self.heading, self.uncertainty]
 
@@ -149,6 +152,10 @@ class RiannEstimator(AttitudeEstimator):
     def _restart(self, cause: Cause) -> None:
         for stage in self.stages:
             stage.restart(cause)
+
+    def _on_mag_prior(self) -> None:
+        if self.stages and self.magcal is not None:
+            self.heading.calibrate_with(self.magcal.cal)
 
     def _on_params_changed(self) -> None:
         p = self.params

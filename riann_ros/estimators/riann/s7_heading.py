@@ -24,6 +24,7 @@ from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
 from riann_ros.estimators.riann.s7a_mag import MagHeading
 from riann_ros.estimators.riann.stage import SMALL_BLOCK, Cause, HeadingBlock, HeadingIn, Quat, Vec
+from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.rotations import about_z, conj, qmul, twist
 
 
@@ -32,9 +33,14 @@ class Heading:
 
     NAME = "heading"
 
-    def __init__(self, tau_mag_s: float, mag_delay_s: float, reject: bool, estimate_delay: bool) -> None:
-        self.mag = MagHeading(tau_mag_s, mag_delay_s, reject, estimate_delay)
+    def __init__(self, tau_mag_s: float, mag_delay_s: float, reject: bool, estimate_delay: bool,
+                 cal: OnlineMagCalibrator | None = None) -> None:
+        self.mag = MagHeading(tau_mag_s, mag_delay_s, reject, estimate_delay, cal)
         self.restart(Cause.RESET)
+
+    def calibrate_with(self, cal: OnlineMagCalibrator | None) -> None:
+        """The online magnetometer calibration the heading uses from now on (None: the field comes calibrated)."""
+        self.mag.cal, self.mag.trusted = cal, True
 
     def configure(self, tau_mag_s: float, mag_delay_s: float, reject: bool, estimate_delay: bool) -> None:
         """The run-time parameters of the magnetic heading (:meth:`.s7a_mag.MagHeading.configure`)."""
@@ -56,12 +62,15 @@ class Heading:
         qc, delta, dt, mag, bridges, tilt_sd = h.q, block.carry.delta, s.step_s, s.mag, h.bridge_sd_deg, h.blend_sd_deg
         gain = [0.0] * len(qc)
         dip = [0.0] * len(qc)
+        cal = [0.0] * len(qc)
+        doubt = [0.0] * len(qc)
+        self._cal_sd, self._doubt_sd = cal, doubt  # filled where the magnetic heading runs
         if len(qc) <= SMALL_BLOCK:
             q = np.array([self._one(i, qc[i], delta[i], dt[i], None if mag is None else mag[i], bridges.get(i),
                                     tilt_sd[i], gain, dip) for i in range(len(qc))])
         else:
             q = self._vector(block, gain, dip)
-        return HeadingBlock(q, gain, dip)
+        return HeadingBlock(q, gain, dip, cal, doubt)
 
     def _one(self, i: int, qc: Quat, delta: Quat, dt: float, mag: Vec | None, bridge: float | None, tilt_sd: float,
              gain: list[float], dip: list[float]) -> Quat:
@@ -78,6 +87,7 @@ class Heading:
             self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), math.tau)
             gain[i] = self.mag.gain
             dip[i] = self.mag.ref_dip
+            self._cal_sd[i], self._doubt_sd[i] = self.mag.cal_sd, self.mag.doubt_sd
         w, x, y, z = qmul(about_z(self.psi), qc)
         n = math.sqrt(w * w + x * x + y * y + z * z)
         if w < 0.0:  # sign convention: w >= 0
@@ -134,6 +144,7 @@ class Heading:
             psi += step(qo, delta[i], dt[i], None if mag is None else mag[i], tilt_sd[i])
             gain[first + i] = self.mag.gain
             dip[first + i] = self.mag.ref_dip
+            self._cal_sd[first + i], self._doubt_sd[first + i] = self.mag.cal_sd, self.mag.doubt_sd
             out[i] = psi
         return out
 

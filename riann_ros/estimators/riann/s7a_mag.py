@@ -10,7 +10,18 @@ as the inverse-variance weighted mean of the bridged heading and each field head
 while the inclination is uncertain (``1 / (σ_w² + tan²(dip) σ_t²)``, ``σ_w`` = :data:`REACQUIRE_FIELD_SD_DEG`, a
 weight of its own: stage 8 reports the fitted field σ, :data:`~riann_ros.defaults.MAG_HEADING_SD_DEG`). The
 correction is a rotation about the world vertical: the inclination is never changed by the field.
-docs/magnetometer.md has the physics.
+
+With the online calibration (:attr:`MagHeading.cal`, :mod:`riann_ros.magcal`) the raw field goes to it first, and
+all of the above sees the calibrated field. While the configured calibration holds (the gyro-aided test,
+:mod:`riann_ros.magcal.hypothesis`) nothing else changes. Once it is rejected the heading starts over from the next
+field (the one it has was set by a field calibrated wrongly), and each field heading counts as much as the
+calibration knows it: its weight is ``1/(σ_m² + σ_c²)`` (``σ_c`` the heading σ the calibration adds at this sample,
+``σ_m`` the field heading's own, stage 8's MAG_SD): the gain is ``dt/tau_mag · σ_m²/(σ_m² + σ_c²)``, and the start's
+inverse-variance mean stays open while ``σ_c > σ_m``; the disturbance test widens its norm and dip bands by three
+of the calibrated field's σ. While the configured calibration is used its gains are today's: no other source of
+heading exists that the field could be weighed against (the gyro's heading came from the same field); the doubt
+the windows leave about it goes to stage 8's σ (:attr:`MagHeading.doubt_sd`). docs/magnetometer.md has the
+physics.
 """
 
 from __future__ import annotations
@@ -18,7 +29,10 @@ from __future__ import annotations
 import math
 
 from riann_ros.constants import DEG
+from riann_ros.defaults import MAG_HEADING_SD_DEG
 from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
+from riann_ros.magcal.online import OnlineMagCalibrator
+from riann_ros.magcal.records import GYRO_BIAS_RESIDUAL_SD_RAD_S
 from riann_ros.rotations import IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
 
 # VQF's defaults (vqf 2.1.2 VQFParams): magnetic disturbance rejection
@@ -39,14 +53,19 @@ GYR_LP_TAU = 0.5  # s, low-pass of |ω| for NEW_MIN_GYR
 #: first fields after a hole four times as much
 REACQUIRE_FIELD_SD_DEG = 5.0
 BRIDGE_GATE = 3.0  # the bridge is dropped if the first field after the hole is this many standard deviations off
+MAG_SD = MAG_HEADING_SD_DEG * DEG  # rad; a calibrated field heading's σ (stage 8's): a calibration's σ weighs on it
+CAL_BAND = 3.0  # the disturbance bands widen by this many of the calibrated field's σ while it converges
 
 
 class MagHeading:
     """The heading correction state (see the module docstring); :meth:`step` per sample."""
 
-    def __init__(self, tau_mag: float, mag_delay: float, reject: bool, estimate_delay: bool = True) -> None:
+    def __init__(self, tau_mag: float, mag_delay: float, reject: bool, estimate_delay: bool = True,
+                 cal: OnlineMagCalibrator | None = None) -> None:
         self.configure(tau_mag, mag_delay, reject, estimate_delay)
         self.latency = LatencyEstimator()
+        self.cal = cal  # the online calibration (None: the field comes calibrated); kept over a reset
+        self.trusted = True  # the calibration's prior held at the last sample
         self.reset()
 
     def configure(self, tau_mag: float, mag_delay: float, reject: bool, estimate_delay: bool) -> None:
@@ -77,7 +96,13 @@ class MagHeading:
         self.reacq = False  # re-acquiring the heading after a hole (start phase without reference learning)
         self.weight = 0.0  # while re-acquiring: Σ of the weights (1/deg²) of the bridge and the fields since the hole
         self.gate = False  # the next field is tested against the bridge
+        self.switch = False  # the configured calibration was rejected or restored since the last field
+        self.wsum = 0.0  # Σ of the start's weights (relative to a calibrated field's: 1 each while trusted)
+        self.cal_sd = 0.0  # the heading σ the calibration's estimate added to the last field (rad)
+        self.doubt_sd = 0.0  # while the configured calibration is used: the σ of the doubt that it holds (rad)
         self.latency.reset()
+        if self.cal is not None:
+            self.cal.restart()
 
     @property
     def observed(self) -> bool:
@@ -93,6 +118,8 @@ class MagHeading:
         field to pass the norm and dip test again would set the heading at once, and a field that passes after
         being rejected is not a trusted one (an attached magnet's field passes in some orientations). The heading
         then carries on over the bridge, and takes the field at the usual gain once it is accepted."""
+        if self.cal is not None:
+            self.cal.restart()
         if self.started and not (self.disturbed and bridge_sd):
             self.t, self.reacq = 0.0, True
             self.weight = 1.0 / (bridge_sd * bridge_sd) if bridge_sd else 0.0
@@ -121,6 +148,39 @@ class MagHeading:
         ``delta`` is the sample's bias-corrected gyro increment (sensor frame), ``mag`` its field or None,
         ``tilt_sd`` the standard deviation (deg) of ``q``'s inclination after a hole (0: converged)."""
         self.gain = 0.0
+        if self.cal is not None:
+            mag = self._calibrated(q, delta, dt, mag)
+        mag = self._delayed(delta, dt, mag)
+        if mag is None:
+            return 0.0
+        mn = math.sqrt(mag[0] * mag[0] + mag[1] * mag[1] + mag[2] * mag[2])
+        mw = rotate(q, mag)
+        if mw[0] * mw[0] + mw[1] * mw[1] <= 0.0:
+            return 0.0  # the field is vertical: no heading information
+        err = math.atan2(mw[0], mw[1])
+        dip = -math.asin(max(-1.0, min(1.0, mw[2] / mn)))
+        scale = self._weight(q, mw)
+        if not self.started or (self.switch and self._switched(mn, dip)):
+            self._begin(mn, dip, scale)
+            return err
+        self.t += dt
+        k = dt / self.tau_mag * scale
+        start = self.t < self.tau_mag or scale < 0.5  # open while the calibration adds more than the field's σ
+        self.reacq = self.reacq and start
+        initial = start and not self.reacq  # the first start: the field reference is learned too
+        if initial:
+            self.n += 1
+            self.wsum += scale
+            k = max(k, scale / self.wsum)
+        if self.reject:
+            k = self._disturbance(mn, dip, dt, k, initial)
+        if self.reacq and k > 0.0 and not self.disturbed:  # (not the half gain after a long rejection)
+            k = max(k, self._reacquire_gain(err, mw, tilt_sd))
+        self.gain = k
+        return k * err
+
+    def _delayed(self, delta: Quat, dt: float, mag: Vec | None) -> Vec | None:
+        """The gyro's rate low-pass and the latency (stage 7b) from this sample; the field rotated back over it."""
         w = to_rotvec(delta)
         rate = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / dt if dt > 0.0 else 0.0
         self.gyr_lp += dt / (GYR_LP_TAU + dt) * (rate - self.gyr_lp)
@@ -130,41 +190,60 @@ class MagHeading:
             r = self._delay_rotation(delta, dt)
             if mag is not None:
                 mag = rotate((r[0], -r[1], -r[2], -r[3]), mag)
-        if mag is None:
-            return 0.0
-        mn = math.sqrt(mag[0] * mag[0] + mag[1] * mag[1] + mag[2] * mag[2])
-        mw = rotate(q, mag)
-        if mw[0] * mw[0] + mw[1] * mw[1] <= 0.0:
-            return 0.0  # the field is vertical: no heading information
-        err = math.atan2(mw[0], mw[1])
-        dip = -math.asin(max(-1.0, min(1.0, mw[2] / mn)))
-        if not self.started:
-            self.started = True
-            self.t, self.n = 0.0, 1
-            self.norm_lp = self.ref_norm = self.cand_norm = mn
-            self.dip_lp = self.ref_dip = self.cand_dip = dip
-            self.gain = 1.0
-            return err
-        self.t += dt
-        k = dt / self.tau_mag
-        start = self.t < self.tau_mag
-        self.reacq = self.reacq and start
-        initial = start and not self.reacq  # the first start: the field reference is learned too
-        if initial:
-            self.n += 1
-            k = max(k, 1.0 / self.n)
-        if self.reject:
-            k = self._disturbance(mn, dip, dt, k, initial)
-        if self.reacq and k > 0.0 and not self.disturbed:  # (not the half gain after a long rejection)
-            k = max(k, self._reacquire_gain(err, mw, tilt_sd))
-        self.gain = k
-        return k * err
+        return mag
+
+    def _weight(self, q: Quat, mw: Vec) -> float:
+        """This field heading's weight relative to a calibrated one's, ``σ_m²/(σ_m² + σ_c²)`` (1 while the
+        configured calibration holds, or without the online calibration; the σ its doubt leaves then goes to
+        :attr:`doubt_sd`)."""
+        if self.cal is None:
+            return 1.0
+        if self.trusted:  # used as configured; the doubt the windows leave goes to the σ only (stage 8)
+            self.doubt_sd = self.cal.heading_sd_rad(q, mw)
+            return 1.0
+        self.doubt_sd = 0.0
+        self.cal_sd = self.cal.heading_sd_rad(q, mw)
+        return MAG_SD * MAG_SD / (MAG_SD * MAG_SD + self.cal_sd * self.cal_sd)
+
+    def _calibrated(self, q: Quat, delta: Quat, dt: float, mag: Vec | None) -> Vec | None:
+        """The sample through the online calibration (every sample: its gyro extends the open window); the calibrated
+        field or None. When its prior is rejected the next field sets the heading anew."""
+        assert self.cal is not None
+        out = self.cal.update(delta, dt, mag, self.delay, q)
+        if self.trusted != self.cal.trusted:  # rejected, or (a changed magnetic situation) restored
+            self.trusted, self.cal_sd, self.switch = self.cal.trusted, 0.0, True
+        return out
+
+    def _switched(self, norm: float, dip: float) -> bool:
+        """The configured calibration was just rejected, or restored; ``norm``, ``dip``: the first field calibrated
+        anew. If the field was being rejected as disturbed and the newly calibrated one fits the field reference
+        again, the magnetic situation changed under a heading the gyro held (a magnet attached, or taken off): that
+        heading bridges to the new fields, its σ the field heading's at the last accepted field plus the residual
+        gyro bias over the time rejected (returns False: carry on). Otherwise, after a rejection, the heading and the
+        reference came from fields calibrated wrongly: this field sets both anew (returns True)."""
+        self.switch = False  # (the bands as for a calibrated field: the new calibration is one, or nothing fits)
+        fits = abs(norm - self.ref_norm) < NORM_TH * self.ref_norm and abs(dip - self.ref_dip) < DIP_TH
+        if not (self.started and self.disturbed and fits):
+            return not self.trusted
+        bridge_deg = math.hypot(MAG_HEADING_SD_DEG, GYRO_BIAS_RESIDUAL_SD_RAD_S / DEG * self.reject_t)
+        self.t, self.reacq, self.gate = 0.0, True, True
+        self.weight = 1.0 / (bridge_deg * bridge_deg)
+        return False
+
+    def _begin(self, norm: float, dip: float, scale: float) -> None:
+        """The first field (since a reset, or since the configured calibration was rejected) sets the heading and
+        the field reference; ``scale`` its weight in the start's mean."""
+        self.started = True
+        self.t, self.n, self.wsum, self.reacq = 0.0, 1, scale, False
+        self.norm_lp = self.ref_norm = self.cand_norm = norm
+        self.dip_lp = self.ref_dip = self.cand_dip = dip
+        self.gain = 1.0
 
     def _reacquire_gain(self, err: float, mw: Vec, tilt_sd: float) -> float:
         """The weight of this field's heading (error ``err``, rad; world-frame field ``mw``) in the mean since the
         hole; the first field after a hole also tests the bridge (module docstring)."""
         tan_dip = abs(mw[2]) / math.sqrt(mw[0] * mw[0] + mw[1] * mw[1])
-        var = REACQUIRE_FIELD_SD_DEG * REACQUIRE_FIELD_SD_DEG + (tan_dip * tilt_sd) ** 2
+        var = REACQUIRE_FIELD_SD_DEG * REACQUIRE_FIELD_SD_DEG + (tan_dip * tilt_sd) ** 2 + (self.cal_sd / DEG) ** 2
         if self.gate:  # the first field after the hole: is the bridge consistent with it?
             self.gate = False
             if (err / DEG) ** 2 > BRIDGE_GATE * BRIDGE_GATE * (1.0 / self.weight + var):
@@ -186,7 +265,8 @@ class MagHeading:
             self.ref_dip += kr * (dip - self.ref_dip)
             self.cand_norm, self.cand_dip = self.ref_norm, self.ref_dip
             return k
-        if abs(n - self.ref_norm) < NORM_TH * self.ref_norm and abs(dip - self.ref_dip) < DIP_TH:
+        band = 0.0 if self.cal is None or self.trusted else CAL_BAND * self.cal.field_sd_t()  # T
+        if abs(n - self.ref_norm) < NORM_TH * self.ref_norm + band and abs(dip - self.ref_dip) < DIP_TH + band / n:
             self.undist_t += dt
             if self.undist_t >= MIN_UNDISTURBED:
                 self.disturbed = False

@@ -27,7 +27,13 @@ heading carries beyond the field's, which follows the heading stage step by step
   the hole (the bridge's σ is a bound made for the inclination's hand-over; the share is fitted on the trials run
   with holes);
 - every correction with gain ``k`` (stage 7a: ``dt/τ_mag``, the running mean while it starts or re-acquires) leaves
-  ``(1 − k)`` of it: ``x ← (1 − k)(x + σ_b·t)``.
+  ``(1 − k)`` of it: ``x ← (1 − k)(x + σ_b·t)``;
+- the online magnetometer calibration's share: a field whose heading the calibration knows to ``σ_c`` (stage 7a;
+  0 while the configured calibration holds) moves a part ``x_c`` of the carried error the way it moves the
+  heading, ``x_c ← (1 − k) x_c + k σ_c`` (the calibration's error is common to consecutive fields, so it does not
+  average out: the heading's share of it is the weighted mean of theirs); while the configured calibration is used,
+  the doubt the gyro-aided test leaves about it, ``x_d`` (stage 7a: it concerns every field the heading took
+  alike, so the newest value counts, not a mean); ``x`` is ``√(x² + x_c² + x_d²)``.
 
 So after a long rejection, a gap or a badly bridged hole the σ stays wide until the field has pulled the heading in,
 at the heading stage's own pace.
@@ -99,7 +105,7 @@ class Uncertainty:
         self.started = False
         self.known = False  # a field has set the heading (since the reset or the last gap)
         if cause is Cause.RESET:
-            self.x_bridge = self.x_carried = self.since = 0.0
+            self.x_bridge = self.x_carried = self.since = self.x_cal = self.x_doubt = 0.0
             self.last: tuple[float, float] | None = None  # the newest sample's σ (rad), for diagnostics
 
     def run(self, block: UncertaintyIn) -> Uncertainties:
@@ -123,7 +129,10 @@ class Uncertainty:
             h = (hand.blend_sd_deg[i] + hand.fresh_sd_deg[i]) * DEG  # never both non-zero
             frows.append((self.spread, self.rate_lp, h, bs))
             si = math.sqrt(inclination_var(self.spread, self.rate_lp, h, bs))
-            y = self._yaw(heading.gain[i], s.step_s[i], heading.dip_rad[i], bs, hand.bridge_sd_deg.get(i))
+            if heading.gain[i] > 0.0:
+                self.x_doubt = heading.doubt_sd_rad[i]
+            y = self._yaw(heading.gain[i], s.step_s[i], heading.dip_rad[i], bs, hand.bridge_sd_deg.get(i),
+                          heading.cal_sd_rad[i])
             yrows.append(y)
             sy = YAW_FREE_SD if y[0] == FREE else min(math.sqrt(heading_var(si, y[1], y[2], y[3])), YAW_FREE_SD)
             sig.append((si, sy))
@@ -132,7 +141,7 @@ class Uncertainty:
         return Uncertainties(np.array(sig).reshape(-1, 2), np.array(frows).reshape(-1, len(FEATURES)),
                              np.array(yrows).reshape(-1, len(YAW_FEATURES)))
 
-    def _yaw(self, k: float, dt: float, dip: float, bias_sd: float, bridge: float | None
+    def _yaw(self, k: float, dt: float, dip: float, bias_sd: float, bridge: float | None, cal_sd: float = 0.0
              ) -> tuple[float, float, float, float]:
         """The heading's inputs of one sample (:data:`YAW_FEATURES`); ``k`` the heading stage's gain toward the
         field, ``bias_sd`` the bias σ (rad/s), ``bridge`` the σ (deg) of a hole's bridge ending at the sample. The
@@ -145,13 +154,19 @@ class Uncertainty:
             if self.known:
                 self.x_bridge *= 1.0 - k
                 self.x_carried = (1.0 - k) * (self.x_carried + bias_sd * self.since)
+                self.x_cal += k * (cal_sd - self.x_cal)
             else:  # the first correction since the reset or a gap: before it the heading could be anything
-                self.x_bridge, self.x_carried = 0.0, (1.0 - k) * YAW_FREE_SD
+                self.x_bridge, self.x_carried, self.x_cal = 0.0, (1.0 - k) * YAW_FREE_SD, k * cal_sd
             self.since, self.known = 0.0, True
-            return (USED, self.x_bridge, self.x_carried, math.tan(min(abs(dip), MAX_DIP)))
+            return (USED, self.x_bridge, self._carried(self.x_carried), math.tan(min(abs(dip), MAX_DIP)))
         if not self.known:
             return (FREE, 0.0, 0.0, 0.0)
-        return (HELD, self.x_bridge, self.x_carried + bias_sd * self.since, math.tan(min(abs(dip), MAX_DIP)))
+        return (HELD, self.x_bridge, self._carried(self.x_carried + bias_sd * self.since),
+                math.tan(min(abs(dip), MAX_DIP)))
+
+    def _carried(self, x: float) -> float:
+        """The carried error with the calibration's share (the module docstring)."""
+        return math.hypot(x, self.x_cal, self.x_doubt) if self.x_cal or self.x_doubt else x
 
     def diagnostics(self) -> dict[str, str]:
         if self.last is None:

@@ -102,9 +102,11 @@ RESTARTS: dict[str, dict[Cause, str]] = {
         Cause.RESET: "ends",
     },
     "heading": {
-        Cause.HOLE: "kept; with a field, re-acquired weighing the bridge (not while the field is rejected)",
-        Cause.GAP: "kept; with a field, re-acquired without a bridge",
-        Cause.RESET: "anew (starts at zero, or at the first field)",
+        Cause.HOLE: "kept; with a field, re-acquired weighing the bridge (not while the field is rejected); the "
+                    "magnetometer calibration's open window dropped",
+        Cause.GAP: "kept; with a field, re-acquired without a bridge; the calibration's open window dropped",
+        Cause.RESET: "anew (starts at zero, or at the first field); the magnetometer calibration kept (the robot's), "
+                     "its open window dropped",
     },
     "uncertainty": {
         Cause.HOLE: "kept; the hand-over's σ and a share of the bridge's are added",
@@ -268,11 +270,16 @@ class HeadingIn(NamedTuple):
 
 class HeadingBlock(NamedTuple):
     """Stage 7's output: the output attitudes (n, 4), w >= 0, and per sample the heading's gain toward the field
-    (0: not corrected) and the field reference's dip (0 before a field)."""
+    (0: not corrected), the field reference's dip (0 before a field), the σ the online magnetometer calibration's
+    estimate adds to the field's heading (0 while the configured calibration is used, or without the online
+    calibration), and while the configured calibration is used the σ of the doubt the gyro-aided test leaves
+    about it (0 otherwise)."""
 
     q: Array
     gain: list[float]
     dip_rad: list[float]
+    cal_sd_rad: list[float]
+    doubt_sd_rad: list[float]
 
 
 class UncertaintyIn(NamedTuple):

@@ -33,7 +33,9 @@ DEFINITIONS = {
     "a scored sample; the samples in a hole are removed",
     "magnetic": "magnetic:offset:X,Y,Z (µT, sensor frame, from the first sample) or magnetic:disturb:B@T0-T1s "
     "(B µT fixed in the sensor frame, direction drawn per sequence, T0-T1 s after the first sample): added "
-    "to the magnetometer; recordings without one are left as they are",
+    "to the magnetometer; magnetic:soft:D11,D12,...,D33 (a soft iron: the reading multiplied by the row-major "
+    "3x3 matrix D from the first sample; before an offset in the same condition: D m + offset); recordings "
+    "without a magnetometer are left as they are",
     "seeding": "per sequence, condition and perturbation: sha256 of '<seed>:<sequence>:<condition>:<index>'",
 }
 # the accepted forms of every kind (``points`` is the suffix of jitter and rate), in the order of DEFINITIONS
@@ -46,7 +48,8 @@ EXAMPLES = {
     "fifo": ("fifo:20ms",),
     "bias": ("bias:3,3,0", "bias:random:2 (deg/s)"),
     "dropout": ("dropout:0.1-0.6s@10s",),
-    "magnetic": ("magnetic:offset:20,0,-10 (µT)", "magnetic:disturb:40@10-20s"),
+    "magnetic": ("magnetic:offset:20,0,-10 (µT)", "magnetic:disturb:40@10-20s",
+                 "magnetic:soft:1.15,0.05,0,0,0.85,0.05,0.05,0,1"),
 }
 
 
@@ -160,6 +163,10 @@ def _dropout(args: str) -> Perturbation | None:
 
 
 def _magnetic(args: str) -> Perturbation | None:
+    m = re.fullmatch(",".join([rf"soft:(-?{_NUM})", *[rf"(-?{_NUM})"] * 8]), args)
+    if m:
+        d = tuple(float(v) for v in m.groups())
+        return Magnetic(soft=d) if abs(float(np.linalg.det(np.reshape(d, (3, 3))))) > 1e-6 else None
     m = re.fullmatch(rf"offset:(-?{_NUM}),(-?{_NUM}),(-?{_NUM})", args)
     if m:
         return Magnetic(offset=(float(m.group(1)), float(m.group(2)), float(m.group(3))))

@@ -46,25 +46,31 @@ class _AddBias(Transform):
 
 
 # ---------------------------------------------------------------------------------------------------
-# magnetic: hard-iron offset, disturbance window
+# magnetic: hard-iron offset, soft iron, disturbance window
 # ---------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Magnetic(Perturbation):
     """A field added to the magnetometer (µT, sensor frame): constant from the first sample (``offset``),
-    or ``strength`` µT in a direction drawn per sequence between ``t0`` and ``t1`` s after it."""
+    or ``strength`` µT in a direction drawn per sequence between ``t0`` and ``t1`` s after it; or a soft iron: the
+    reading multiplied by the 3×3 matrix ``soft`` (row-major) from the first sample."""
 
     offset: tuple[float, float, float] | None = None
     strength: float = 0.0
     t0: float = 0.0
     t1: float = 0.0
+    soft: tuple[float, ...] | None = None
     kind = "magnetic"
 
     def text(self) -> str:
+        if self.soft is not None:
+            return "magnetic:soft:" + ",".join(f"{v:g}" for v in self.soft)
         if self.offset is not None:
             return "magnetic:offset:" + ",".join(f"{v:g}" for v in self.offset)
         return f"magnetic:disturb:{self.strength:g}@{self.t0:g}-{self.t1:g}s"
 
     def start(self, rng: np.random.Generator) -> Transform:
+        if self.soft is not None:
+            return _SoftIron(np.asarray(self.soft, dtype=float).reshape(3, 3))
         if self.offset is not None:
             return _AddField(np.asarray(self.offset, dtype=float) * 1e-6, None)
         d = rng.normal(size=3)
@@ -92,3 +98,18 @@ class _AddField(Transform):
 
     def info(self) -> dict[str, Any]:
         return {"field_uT": (self.field * 1e6).round(6).tolist(), "samples": self.samples}
+
+
+class _SoftIron(Transform):
+    def __init__(self, matrix: NDArray[np.float64]) -> None:
+        self.matrix = matrix
+        self.samples = 0
+
+    def __call__(self, rec: Recording) -> Recording:
+        if rec.mag is None or len(rec) == 0:
+            return rec
+        self.samples += len(rec)
+        return with_samples(rec, mag=rec.mag @ self.matrix.T)
+
+    def info(self) -> dict[str, Any]:
+        return {"soft_iron": self.matrix.reshape(9).round(6).tolist(), "samples": self.samples}

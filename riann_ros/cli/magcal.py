@@ -1,0 +1,168 @@
+"""``riann-mag-calibrate``: fit the magnetometer's hard and soft iron from a recorded bag and save the calibration.
+
+Example::
+
+    riann-mag-calibrate my_robot.mcap --out my_mag.yaml
+
+The command line (options, exit status) is :mod:`riann_ros.cli.magcal_parser`. The bag is read like
+``riann-bag-eval`` reads it (:func:`riann_ros.evaluation.sources.read_whole`: the magnetometer paired with the IMU
+samples the nodes' way); the fit and its checks are :func:`riann_ros.magcal.bag_fit.calibrate_recording`, the file
+:func:`riann_ros.magcal.store.save_calibration` (atomic; an existing calibration file is replaced only with
+``--force``, any other file never), the figures :mod:`riann_ros.magcal.plots`. Nothing is written when the input
+cannot be read or gives nothing to calibrate from (exit status 1). Reference: docs/magnetometer.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from riann_ros.cli.magcal_parser import (
+    EXIT_CALIBRATED,
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_NOT_CONVERGED,
+    EXIT_USAGE,
+    build_parser,
+)
+from riann_ros.magcal.bag_fit import NoMagnetometer, NotCalibratable, RecordingFit
+from riann_ros.magcal.records import CALIBRATED, MAX_DELAY_S, UT, MagCalPrior
+
+
+def _err(text: str) -> None:
+    print(f"riann-mag-calibrate: {text}", file=sys.stderr)
+
+
+def _figures(args: argparse.Namespace) -> list[Path]:
+    """The figure files this run writes (none without --out or --plots, or with --no-plots)."""
+    if args.no_plots or (args.out is None and args.plots is None):
+        return []
+    stem = args.out.stem if args.out is not None else args.bag.stem
+    folder = args.plots if args.plots is not None else args.out.parent
+    return [folder / f"{stem}_sphere.png", folder / f"{stem}_heading.png"]
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Refuse (ValueError, exit status 2) outputs that exist, before any work."""
+    from riann_ros.magcal.store import CalibrationFileError, is_calibration_file
+
+    _delay(args)
+    if args.out is not None and args.out.exists():
+        if args.out.is_dir() or not is_calibration_file(args.out):
+            raise ValueError(str(CalibrationFileError(f"{args.out}: exists and is not a magnetometer calibration "
+                                                      "file; not replaced (not even with --force)")))
+        if not args.force:
+            raise ValueError(f"{args.out}: exists; --force replaces it")
+    if args.plots is not None and args.plots.exists() and not args.plots.is_dir():
+        raise ValueError(f"--plots {args.plots}: exists and is not a folder")
+    old = [f for f in _figures(args) if f.exists()]
+    if old and not args.force:
+        raise ValueError(f"{old[0]}: exists; --force replaces it (or --no-plots)")
+
+
+def _delay(args: argparse.Namespace) -> float | None:
+    """--mag-delay in s (None: auto); ValueError for anything else."""
+    if args.mag_delay.strip().lower() == "auto":
+        return None
+    try:
+        d = float(args.mag_delay)
+    except ValueError:
+        d = math.nan
+    if not 0.0 <= d <= MAX_DELAY_S:
+        raise ValueError(f"--mag-delay must be auto or 0 to {MAX_DELAY_S:g} s, got {args.mag_delay!r}")
+    return d
+
+
+def _prior(args: argparse.Namespace) -> MagCalPrior | None:
+    from riann_ros.magcal.store import load_calibration
+
+    return None if args.prior is None else MagCalPrior.from_calibration(load_calibration(args.prior))
+
+
+def format_fit(rf: RecordingFit) -> str:
+    """The fit as printed: the estimate with its σ, the state, the residual and the checks."""
+    f = rf.fit
+    cal = f.calibration
+    sd = cal.hard_iron_sd_t
+    s_sd = [math.sqrt(max(cal.covariance[i * 12 + i], 0.0)) for i in range(9)]
+    lines = [f"recording: {rf.seconds:.1f} s, {rf.readings} magnetometer readings, {f.windows} windows of rotation "
+             f"({f.outliers} left out or down-weighted as disturbed)",
+             f"magnetometer latency behind the gyro: {rf.delay_s * 1e3:.1f} ms "
+             f"({'estimated: the least residual' if rf.delay_estimated else 'given'})",
+             "hard iron (µT): " + "  ".join(f"{a} {h / UT:+7.2f} ± {s / UT:.2f}"
+                                           for a, h, s in zip("xyz", cal.hard_iron_t, sd, strict=True)),
+             f"soft iron ({cal.soft_iron_model}; ± σ per entry):"]
+    for r in range(3):
+        lines.append("    " + "  ".join(f"{cal.soft_iron[3 * r + c]:+.4f} ± {s_sd[3 * r + c]:.4f}" for c in range(3)))
+    lines += [f"state: {cal.state}",
+              f"residual: {f.residual_rms_ut:.2f} µT RMS per window (variance of unit weight {f.unit_weight:.2f})",
+              f"field |m|: raw σ {rf.norm_sd_raw_ut:.2f} µT, calibrated {f.field_norm_ut:.2f} ± "
+              f"{f.field_norm_sd_ut:.2f} µT (the sphere)",
+              f"heading before / after: north moves {rf.north_spread_raw_deg:.1f}° / {rf.north_spread_cal_deg:.1f}° "
+              "RMS in the gyro-carried frame while the sensor turns"]
+    if rf.unobserved_axes:
+        lines.append(f"not observed: hard iron along {', '.join(rf.unobserved_axes)} (the sensor did not turn about "
+                     "the axes across it); it stays near the prior, and the node goes on calibrating it online")
+    return "\n".join(lines)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from riann_ros.evaluation import BagTopics, EvalError
+    from riann_ros.evaluation.sources import read_whole
+    from riann_ros.magcal import plots
+    from riann_ros.magcal.bag_fit import calibrate_recording
+    from riann_ros.magcal.store import CalibrationFileError, save_calibration
+
+    topics = BagTopics(**{k: "/" + v.strip().lstrip("/") for k, v in (("imu", args.imu_topic),
+                                                                       ("mag", args.mag_topic)) if v})
+    try:
+        prior = _prior(args)
+        rec = read_whole(args.bag, topics)
+        rf = calibrate_recording(rec, prior, args.soft_iron_model, _delay(args))
+    except (EvalError, CalibrationFileError) as exc:
+        _err(str(exc))
+        return EXIT_FAILED
+    except NotCalibratable as exc:
+        hint = "; another topic: --mag-topic" if isinstance(exc, NoMagnetometer) else ""
+        _err(f"{args.bag}: {exc}{hint}; nothing written")
+        return EXIT_FAILED
+    print(format_fit(rf))
+    if args.out is not None:
+        try:
+            save_calibration(args.out, rf.fit.calibration)
+        except (CalibrationFileError, OSError) as exc:
+            _err(f"{exc}; nothing written")
+            return EXIT_FAILED
+        print(f"wrote {args.out} (load it with the node parameter mag_calibration_file)")
+    figures = _figures(args)
+    if figures:
+        figures[0].parent.mkdir(parents=True, exist_ok=True)
+        for path, plot in zip(figures, (plots.plot_sphere, plots.plot_heading), strict=True):
+            print(f"wrote {plot(rf, path, f'{args.bag.name}: ')}")
+    if rf.fit.calibration.state != CALIBRATED:
+        _err(f"warning: the calibration is {rf.fit.calibration.state}, not calibrated: too little rotation to bound "
+             "the heading error it adds to the field's own 2.5° (turn the sensor through more headings, and tilt "
+             "it where it can be tilted)")
+        return EXIT_NOT_CONVERGED
+    return EXIT_CALIBRATED
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The CLI (exit status: :mod:`riann_ros.cli.magcal_parser`)."""
+    args = build_parser().parse_args(argv)
+    try:
+        _check_outputs(args)
+    except ValueError as exc:
+        _err(str(exc))
+        return EXIT_USAGE
+    try:
+        return _run(args)
+    except KeyboardInterrupt:
+        _err("interrupted; the calibration file is written whole or not at all")
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

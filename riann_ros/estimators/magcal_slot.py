@@ -1,0 +1,100 @@
+"""The online magnetometer calibration in an estimator (ROS-free): one :class:`MagCalSlot` per 9D estimator.
+
+The slot owns the estimator's :class:`~riann_ros.magcal.online.OnlineMagCalibrator` (built from the estimator's
+:data:`~riann_ros.mag.MAG_CAL_PARAMS` and the prior the stream gives it, :meth:`MagCalSlot.set_prior`). It belongs
+to the robot, not to a run of the filter: a reset keeps the estimate (its open window is dropped), and so does a
+hole or a gap.
+
+RIANN's heading stage (:mod:`~riann_ros.estimators.riann.s7a_mag`) calls the calibrator per sample itself (it has
+the attitude and the magnetometer's latency). Madgwick, Mahony and VQF get it as a front end
+(:meth:`MagCalSlot.calibrate`), like the gyro-bias front end (:mod:`.bias`): per sample the gyro increment goes to
+the calibrator (with the field's latency behind the gyro estimated as RIANN's stage 7b does, for the windows'
+ends; the filters themselves use the field as it comes), the filter gets the calibrated field, and
+:attr:`MagCalSlot.sd_rad` holds the σ the calibration
+adds to each sample's heading (0 while the configured calibration holds), which their yaw σ includes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from riann_ros.magcal.latency import LatencyEstimator
+from riann_ros.magcal.online import OnlineMagCalibrator
+from riann_ros.magcal.records import MagCalibration, MagCalPrior, MagCalStatus
+from riann_ros.rotations import Quat, from_rotvec, rotate
+
+
+class MagCalSlot:
+    """The calibration of one estimator (module docstring); off when its ``mag_calibration`` parameter is."""
+
+    def __init__(self, params: dict[str, Any]) -> None:
+        self.on = bool(params["mag_calibration"])
+        self.model = params["mag_soft_iron_model"]
+        self.hard_iron_sd_t = float(params["mag_hard_iron_sd"])
+        self.cal: OnlineMagCalibrator | None = None
+        self.latency = LatencyEstimator()  # the windows' ends need the field's latency behind the gyro (stage 7b's fit)
+        # per sample of the last calibrate(): the heading σ the calibration adds (rad)
+        self.sd_rad: NDArray[np.float64] = np.zeros(0)
+        self.set_prior(MagCalPrior())
+
+    def set_prior(self, prior: MagCalPrior) -> None:
+        """Start the calibration anew from ``prior`` (the configured ``mag_hard_iron`` / ``mag_soft_iron``, or a
+        saved calibration); without a covariance its hard iron's σ is the ``mag_hard_iron_sd`` parameter."""
+        if prior.covariance is None:
+            prior = dataclasses.replace(prior, hard_iron_sd_t=self.hard_iron_sd_t)
+        self.cal = OnlineMagCalibrator(prior, self.model) if self.on else None
+
+    def restart(self) -> None:
+        """A reset, a gap or a hole: the open window is dropped, the estimate kept."""
+        if self.cal is not None:
+            self.cal.restart()
+
+    def calibration(self) -> MagCalibration | None:
+        return self.cal.calibration() if self.cal is not None else None
+
+    def status(self) -> MagCalStatus | None:
+        return self.cal.status() if self.cal is not None else None
+
+    def calibrate(self, acc: list, gyr: list, dt: list, mag: list) -> list:
+        """The classical filters' front end: ``acc``, ``gyr`` (bias-corrected where the filter corrects it), ``dt``
+        and the raw ``mag`` rows (a zero row or None: no field) → the calibrated rows (None: no field, and none
+        while the calibration says the field's heading is unknown: the filter's gyro holds it); the heading σ the
+        calibration adds per sample (the doubt about the configured calibration while it is used) into
+        :attr:`sd_rad`."""
+        cal = self.cal
+        assert cal is not None
+        out: list = []
+        sd = []
+        lat = self.latency
+        for (ax, ay, az), (gx, gy, gz), h, m in zip(acc, gyr, dt, mag, strict=True):
+            q = _tilt(ax, ay, az)
+            field = None if m is None or not (m[0] or m[1] or m[2]) else (m[0], m[1], m[2])
+            rv = (gx * h, gy * h, gz * h)
+            delta = from_rotvec(*rv)
+            u = cal.update(delta, h, field, lat.delay(0.0), q)
+            lat.add(delta, rv, h, u)
+            s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
+            if s >= math.pi:  # the field's heading is unknown (the last window contradicted the estimate)
+                u, s = None, 0.0
+            out.append(u)
+            sd.append(s)
+        self.sd_rad = np.asarray(sd, dtype=float)
+        return out
+
+
+def _tilt(ax: float, ay: float, az: float) -> Quat | None:
+    """The zero-heading attitude of an accelerometer sample (the shortest rotation of its direction onto +z), or
+    None without one: the calibration needs only the tilt."""
+    n = math.sqrt(ax * ax + ay * ay + az * az)
+    if not 0.0 < n < math.inf:
+        return None
+    w = 1.0 + az / n
+    if w < 1e-9:  # upside down: half a turn about x
+        return (0.0, 1.0, 0.0, 0.0)
+    k = 1.0 / math.sqrt(w * w + (ay / n) ** 2 + (ax / n) ** 2)
+    return (w * k, ay / n * k, -ax / n * k, 0.0)

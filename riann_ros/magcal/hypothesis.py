@@ -1,0 +1,115 @@
+"""The configured calibration as a hypothesis the gyro tests (numpy, ROS-free).
+
+A configured (or saved) calibration ``θ₀`` is either right — to within what a calibrated magnetometer's heading
+already carries, the field heading's own σ (:data:`~.records.FIELD_HEADING_SD_RAD`) — or it is not (a robot's
+motors, battery and frame add tens of µT nobody measured). The windows' gyro-aided constraint (:mod:`.model`) tells
+the two apart: under ``H₀`` ("``θ₀`` is right") each window's residual at ``θ₀`` is the window's noise plus what
+the tolerance allows; under ``H₁`` ("``θ`` is unknown, the prior's σ") the windows point to another ``θ``.
+
+While ``H₀`` holds the field is used as configured and the calibration adds nothing to the heading's σ (the
+heading is that of a calibrated sensor); once the windows reject it, the calibration's own estimate and σ take over
+for the rest of the robot's run (the decision is kept over a reset and a hole: the sensor is the same).
+
+The test (:meth:`PriorTest.add`) is the generalised likelihood ratio of ``H₀`` against ``H₁`` on the windows the
+estimate holds: ``D² = δᵀ Λ_d (I + C_tol Λ_d)⁻¹ δ`` with ``δ = θ̂ − θ₀``, ``Λ_d`` the windows' information and
+``C_tol`` the tolerance's covariance, divided by the variance of unit weight when it exceeds 1 (windows noisier than
+the noise model widen the test with the σ); ``H₀`` is rejected when ``D²`` exceeds the χ² quantile
+:data:`PRIOR_REJECT_P` for the directions the windows observe, ``H₁`` is the more probable hypothesis
+(:attr:`PriorTest.p_holds` below ½: a large ``D²`` spread over many observed directions is still ``H₀``'s when
+the prior of ``H₁`` would have allowed far larger ones), and at least :data:`MIN_FAILED_WINDOWS` windows
+fail ``H₀`` on their own (a single magnetically disturbed window that the loose ``H₁`` prior still admits does not
+reject a calibration that every other window agrees with).
+
+Until the windows have decided, the heading must not claim a calibrated sensor's σ: :attr:`PriorTest.p_holds` is
+the posterior probability of ``H₀`` (Bayes factor of the two linear-Gaussian models on the same windows, each
+hypothesis a priori as likely as the other: nothing says whether a robot's magnetometer was calibrated), and the
+heading's σ while ``H₀`` is used includes ``(1 − p) (σ₁² + Δ²)``: ``σ₁`` the heading σ under ``H₁``'s estimate and
+``Δ`` the heading difference between the two calibrations (:meth:`~.online.OnlineMagCalibrator.heading_sd_rad`).
+Before any window (at rest) ``p`` is ½: the field is used, and said to be unverified; every window that agrees with
+``H₀`` multiplies its odds by the Occam factor of the directions it observes (tens per direction).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.stats import chi2
+
+from riann_ros.magcal.model import Array, CalModel, rotation_matrix
+from riann_ros.magcal.records import FIELD_HEADING_SD_RAD, GATE_CHI2
+from riann_ros.magcal.solver import InfoEstimate
+
+#: the test's false-rejection probability: a right calibration is rejected once in 1000 runs' tests.
+PRIOR_REJECT_P = 0.999
+#: windows that must fail ``H₀`` on their own (each at the gate's 99.9 %, :data:`~.records.GATE_CHI2`) before the
+#: test may reject it: three independent 1-in-1000 failures of a right calibration (1e-9) — a lone disturbed window
+#: is not evidence against it.
+MIN_FAILED_WINDOWS = 3
+_QUANTILE = tuple(float(chi2.ppf(PRIOR_REJECT_P, k)) for k in range(1, 13))
+_TAN_TOL = math.tan(FIELD_HEADING_SD_RAD)
+
+
+class PriorTest:
+    """Whether the prior ``θ₀`` still holds (module docstring); :meth:`add` once per window the estimate takes."""
+
+    def __init__(self, model: CalModel, theta0: Array) -> None:
+        self.model = model
+        self.theta0 = theta0
+        self.holds = True
+        self.failed = 0  # windows that failed H₀ on their own
+        self.d2 = 0.0  # the last test's D² (diagnostics)
+        self.p_holds = 0.5  # the posterior probability of H₀ (module docstring)
+
+    def tolerance(self, u_ut: Array, horizontal_ut: float) -> Array:
+        """``C_tol`` (n, n) in θ: per axis of the hard iron the offset whose heading error, across a horizontal
+        field of ``horizontal_ut``, is :data:`~.records.FIELD_HEADING_SD_RAD`; per soft-iron direction the same
+        error at the field ``u_ut``'s strength."""
+        tol_h = _TAN_TOL * horizontal_ut
+        tol_s = tol_h / max(float(np.linalg.norm(u_ut)), 1e-9)
+        return np.diag(np.r_[np.full(self.model.p, tol_s * tol_s), np.full(3, tol_h * tol_h)])
+
+    def tolerance_at(self, m_ut: Array, q: tuple[float, float, float, float] | None) -> Array:
+        """:meth:`tolerance` for the raw reading ``m_ut`` calibrated with θ₀, its horizontal part at the attitude
+        ``q`` (sensor → world; None: a mid-latitude dip of 60°)."""
+        u = self.model.soft_iron(self.theta0) @ m_ut - self.theta0[self.model.p:]
+        horizontal = (float(np.hypot(*(rotation_matrix(q) @ u)[:2])) if q is not None
+                      else 0.5 * float(np.linalg.norm(u)))
+        return self.tolerance(u, horizontal)
+
+    def window_fails(self, j: Array, r0: Array, var: float, tol: Array) -> bool:
+        """Whether one window fails ``H₀`` on its own: its residual at θ₀ against its noise and the tolerance."""
+        r = r0 + j @ self.theta0
+        s = var * np.eye(3) + j @ tol @ j.T
+        return float(r @ np.linalg.solve(s, r)) > GATE_CHI2
+
+    def add(self, est: InfoEstimate, failed: bool, tol: Array) -> bool:
+        """The test after the estimate ``est`` took a window (``failed``: it failed ``H₀`` on its own); returns
+        whether ``H₀`` still holds (once rejected, never again)."""
+        if not self.holds:
+            return False
+        self.failed += int(failed)
+        self.p_holds = self._posterior(est, tol)
+        delta = est.theta - self.theta0
+        lam = est.lam
+        m = lam @ np.linalg.inv(np.eye(self.model.n) + tol @ lam)
+        self.d2 = float(delta @ (0.5 * (m + m.T)) @ delta) / max(1.0, est.unit_weight)
+        dof = min(max(est.observed, 1), len(_QUANTILE))
+        if self.failed >= MIN_FAILED_WINDOWS and self.d2 > _QUANTILE[dof - 1] and self.p_holds < 0.5:
+            self.holds = False
+        return self.holds
+
+    def _posterior(self, est: InfoEstimate, tol: Array) -> float:
+        """P(H₀ | windows): the Bayes factor of ``H₀`` (θ ~ N(θ₀, C_tol)) against ``H₁`` (θ ~ N(θ₀, Λ₀⁻¹)) on the
+        windows' information ``Λ`` and gradient ``g = η − Λ θ₀``, both scaled by the variance of unit weight;
+        ``log B₀₁ = ½ gᵀ[(C_tol⁻¹ + Λ)⁻¹ − (Λ₀ + Λ)⁻¹] g + ½ log det(I + Λ₀⁻¹Λ) − ½ log det(I + C_tol Λ)``."""
+        k = max(1.0, est.unit_weight)
+        lam = est.lam / k
+        g = (est.eta - est.lam @ self.theta0) / k
+        eye = np.eye(self.model.n)
+        a0 = tol @ np.linalg.inv(eye + lam @ tol)
+        c1 = np.linalg.inv(est.lam0)
+        a1 = np.linalg.inv(est.lam0 + lam)
+        log_b = 0.5 * float(g @ (a0 - a1) @ g)
+        log_b += 0.5 * (np.linalg.slogdet(eye + c1 @ lam)[1] - np.linalg.slogdet(eye + tol @ lam)[1])
+        return 1.0 / (1.0 + math.exp(min(-log_b, 700.0)))

@@ -1,0 +1,67 @@
+"""The configured calibration as a hypothesis the gyro tests (riann_ros.magcal.hypothesis, in the online calibrator):
+kept and trusted on a calibrated sensor, rejected on an offset, restored when the offset goes away again."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from riann_ros import quaternion as quat
+from riann_ros.datasets.synthetic import generate
+from riann_ros.magcal.online import OnlineMagCalibrator
+from riann_ros.magcal.records import SWITCH_WINDOWS, UT, MagCalPrior
+from riann_ros.magcal.synthetic import distort
+
+H_UT = np.array([15.0, -10.0, 8.0])
+
+
+def feed(cal: OnlineMagCalibrator, rec, raw, track=None):
+    inc = quat.from_rotvec(rec.gyr * rec.dt[:, None]).tolist()
+    for d, dt, m, q in zip(inc, rec.dt.tolist(), raw.tolist(), rec.quat_ref.tolist(), strict=True):
+        cal.update(tuple(d), dt, tuple(m), 0.0, tuple(q))
+        if track is not None:
+            track.append((cal.trusted, cal.test.p_holds, cal.heading_sd_rad(tuple(q), (0.0, 20e-6, -40e-6))))
+
+
+def recording(seed: int = 0, duration: float = 60.0):
+    rec = generate(duration=duration, rate=100.0, seed=seed, bias=0.0, gyr_noise=0.002)
+    return rec
+
+
+def test_a_right_calibration_holds_and_its_doubt_vanishes():
+    rec = recording()
+    raw = distort(rec.quat_ref, H_UT * UT, noise_t=0.4e-6, seed=1)
+    cal = OnlineMagCalibrator(MagCalPrior(hard_iron_t=tuple(H_UT * UT)))
+    track: list = []
+    feed(cal, rec, raw, track)
+    assert cal.trusted and cal.windows > 20 and cal.test.p_holds > 1.0 - 1e-6
+    assert track[0][2] > 0.5  # before any window: unverified (σ of radians)
+    assert track[-1][2] == 0.0  # verified: the calibration adds nothing to the heading
+    assert cal.status().prior_holds
+
+
+def test_a_wrong_calibration_is_rejected_within_a_few_windows_and_the_estimate_takes_over():
+    rec = recording()
+    raw = distort(rec.quat_ref, H_UT * UT, noise_t=0.4e-6, seed=1)
+    cal = OnlineMagCalibrator()  # configured: no hard iron
+    track: list = []
+    feed(cal, rec, raw, track)
+    assert not cal.trusted and not cal.status().prior_holds
+    first = next(i for i, t in enumerate(track) if not t[0])
+    assert rec.t[first] < 15.0  # a few windows of motion
+    assert np.abs(np.array(cal.calibration().hard_iron_t) / UT - H_UT).max() < 1.0
+    assert track[-1][2] < np.radians(2.5)  # calibrated: its own σ, small
+
+
+def test_a_rejected_calibration_comes_back_when_the_offset_goes():
+    """A magnet attached (the configured calibration rejected) and taken off again: SWITCH_WINDOWS windows that
+    agree with the configured calibration restore it, and the field is used as configured again."""
+    rec = recording(duration=90.0)
+    raw = distort(rec.quat_ref, np.zeros(3), noise_t=0.4e-6, seed=1)
+    on = (rec.t > 5.0) & (rec.t < 35.0)
+    raw[on] += H_UT * UT
+    cal = OnlineMagCalibrator()
+    track: list = []
+    feed(cal, rec, raw, track)
+    trusted = np.array([t[0] for t in track])
+    assert not trusted[(rec.t > 20.0) & (rec.t < 35.0)].any()  # rejected while the magnet is on
+    assert trusted[-1] and cal.windows >= 1 and SWITCH_WINDOWS > 1  # restored after it came off

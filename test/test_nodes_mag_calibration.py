@@ -1,0 +1,131 @@
+"""The saved magnetometer calibration over real DDS (riann_ros.nodes.mag_calibration): ``~/save_mag_calibration``
+writes the online calibration atomically to ``mag_calibration_file`` and the next start loads it (the node equal to
+the offline estimator within 1e-4 with the calibration on, before and after); a bad file is refused with one clear
+message and the node runs on its parameters, and the service never replaces it; /diagnostics shows the state."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import QuaternionStamped
+from sensor_msgs.msg import Imu, MagneticField
+from std_srvs.srv import Trigger
+from test_nodes_node_base import RATE, motion, send
+
+from conftest import wait_for, wait_matched
+from helpers_ros import quats, stamp_ns
+from riann_ros.cli.live import call_service
+from riann_ros.estimators import create
+from riann_ros.mag import MagConfig, pair_fields
+from riann_ros.magcal.records import STATES, UT, MagCalPrior
+from riann_ros.magcal.store import load_calibration
+from riann_ros.nodes.mag_calibration import SAVE_SERVICE
+from riann_ros.stream import EstimatorStream, GateConfig
+
+pytestmark = pytest.mark.ros
+H_UT = np.array([20.0, 0.0, -10.0])  # the robot's hard iron, in the raw field the node gets
+
+
+def offline(name: str, stamps, acc, gyr, raw, sent, config: MagConfig, prior: MagCalPrior | None) -> np.ndarray:
+    fields = pair_fields(stamps, stamps[sent], raw[sent], config.timeout_ns)
+    stream = EstimatorStream(create(name), GateConfig(nominal_rate=RATE), config, mag_prior=prior)
+    assert stream.estimator.calibrates_mag()
+    q, ok = stream.process_batch(stamps, acc, gyr, fields)
+    assert ok.all()
+    return q
+
+
+def run_node(ros, node, name: str, seconds: float, seed: int, t0_shift: int = 0):
+    """Feed ``seconds`` of motion with a 100 Hz raw field; (stamps, acc, gyr, raw, sent, outputs, diagnostics)."""
+    pub_imu, pub_mag = ros.publisher(Imu, "imu/data_raw"), ros.publisher(MagneticField, "imu/mag")
+    att = ros.collect(QuaternionStamped, "imu/attitude" if name == "riann" else f"imu/{name}/attitude")
+    diags = ros.collect(DiagnosticArray, "/diagnostics")
+    wait_matched([pub_imu, pub_mag], [att], f"node to connect (log: {node.output()})")
+    n = int(seconds * RATE)
+    stamps, acc, gyr, mag = motion(n, seed)
+    stamps = stamps + t0_shift
+    raw = mag + H_UT * UT
+    sent = send(ros, pub_imu, pub_mag, att, stamps, acc, gyr, raw, mag_until=n)
+    wait_for(lambda: len(att.messages) >= n, 30, f"all outputs ({len(att.messages)} of {n}; log: {node.output()})")
+    wait_for(lambda: len(diags.messages) >= 2, 10, "diagnostics")
+    got = att.messages
+    assert [stamp_ns(m) for m in got] == stamps.tolist()
+    ros.destroy(pub_imu, pub_mag, att, diags)
+    return stamps, acc, gyr, raw, sent, quats(got), diags.messages
+
+
+def diag_values(messages, node_name: str) -> tuple[int, dict[str, str]]:
+    s = [st for d in messages for st in d.status if st.name.startswith(node_name + ":")][-1]
+    return s.level, {kv.key: kv.value for kv in s.values}
+
+
+def save(ros, node_name: str) -> Trigger.Response:
+    client = ros.node.create_client(Trigger, f"/{node_name}/{SAVE_SERVICE.removeprefix('~/')}")
+    assert client.wait_for_service(timeout_sec=10)
+    res = call_service(client, Trigger.Request(), 10)
+    ros.node.destroy_client(client)
+    assert res is not None, f"no answer from {SAVE_SERVICE}"
+    return res
+
+
+def equal_quats(a: np.ndarray, b: np.ndarray, tol: float = 1e-4) -> None:
+    d = np.minimum(np.abs(a - b).max(axis=1), np.abs(a + b).max(axis=1))
+    assert d.max() < tol, (d.max(), np.flatnonzero(d > tol)[:10])
+
+
+def test_saved_once_loaded_at_the_next_start(ros, start_node, tmp_path):
+    folder = tmp_path / "cal"
+    folder.mkdir()
+    path = folder / "my_mag.yaml"
+    args = ("-p", "input_qos:=reliable", "-p", f"nominal_rate:={RATE}", "-p", f"mag_calibration_file:={path}",
+            "-p", "diagnostics_period:=0.2")
+    node = start_node("riann_node", *args)
+    stamps, acc, gyr, raw, sent, q_node, diags = run_node(ros, node, "riann", 8.0, seed=1)
+    assert "does not exist yet" in node.output()
+    # over DDS the node equals the offline estimator with the calibration on (the default), from the parameters
+    equal_quats(q_node, offline("riann", stamps, acc, gyr, raw, sent, MagConfig(), None))
+    _, values = diag_values(diags, "riann_node")
+    assert values["mag calibration"] in STATES and "/" in values["mag calibration windows (used / rejected)"]
+    assert values["mag calibration file"] == f"{path} (not read at start)"
+    res = save(ros, "riann_node")
+    assert res.success, res.message
+    assert res.message.startswith(f"wrote {path}: ") and "hard iron" in res.message
+    cal = load_calibration(path)
+    assert cal.windows > 0
+    assert sorted(p.name for p in folder.iterdir()) == ["my_mag.yaml"]  # atomic: no temporary file left
+    assert node.stop() == 0
+    # the next start loads it: its hard and soft iron are the parameters, its estimate the calibration's start
+    node2 = start_node("riann_node", *args)
+    stamps2, acc2, gyr2, raw2, sent2, q_node2, diags2 = run_node(ros, node2, "riann", 6.0, seed=2,
+                                                                 t0_shift=10**12)
+    log = node2.output()
+    assert f"mag_calibration_file {path} loaded: {cal.state}" in log
+    config = MagConfig(mag_hard_iron=cal.hard_iron_t, mag_soft_iron=cal.soft_iron)
+    equal_quats(q_node2, offline("riann", stamps2, acc2, gyr2, raw2, sent2, config,
+                                 MagCalPrior.from_calibration(cal)))
+    _, values2 = diag_values(diags2, "riann_node")
+    assert values2["mag calibration file"] == f"{path} (loaded at start)"
+    assert int(values2["mag calibration windows (used / rejected)"].split(" / ")[0]) >= cal.windows
+    # saved again: the same file, replaced (it is a calibration file)
+    res2 = save(ros, "riann_node")
+    assert res2.success and load_calibration(path).windows >= cal.windows
+
+
+def test_a_bad_file_is_refused_and_never_replaced(ros, start_node, tmp_path):
+    path = tmp_path / "my_params.yaml"
+    text = "vqf_node:\n  ros__parameters:\n    tau_acc: 3.0\n"
+    path.write_text(text)
+    node = start_node("vqf_node", "-p", "input_qos:=reliable", "-p", f"nominal_rate:={RATE}",
+                      "-p", f"mag_calibration_file:={path}", "-p", "diagnostics_period:=0.2")
+    stamps, acc, gyr, raw, sent, q_node, diags = run_node(ros, node, "vqf", 3.0, seed=3, t0_shift=2 * 10**12)
+    log = node.output()
+    assert log.count("mag_calibration_file refused") == 1
+    assert f"{path}: not a magnetometer calibration file" in log and "running on the parameters" in log
+    equal_quats(q_node, offline("vqf", stamps, acc, gyr, raw, sent, MagConfig(), None))  # it runs on them
+    level, values = diag_values(diags, "vqf_node")
+    assert level == DiagnosticStatus.WARN and values["mag calibration file"].endswith("(refused at start: see the log)")
+    assert values["mag calibration"] in STATES
+    res = save(ros, "vqf_node")
+    assert not res.success and "not a magnetometer calibration file" in res.message
+    assert path.read_text() == text
