@@ -46,7 +46,11 @@ lint: $(BIN)/.installed
 
 # the whole suite: real DDS, BROAD accuracy, colcon (the README's second command)
 test: $(BIN)/.installed lint
-	ROS_DOMAIN_ID=$(USER_ROS_DOMAIN_ID) $(BIN)/python -m pytest -n $(JOBS)
+	ROS_DOMAIN_ID=$(USER_ROS_DOMAIN_ID) $(BIN)/python -m pytest -m "not scale" -n $(JOBS)
+
+# the corpus-sized runs (marker scale: 1000 listed inputs on a local Dask cluster), minutes on 2 cores
+test-scale: $(BIN)/.installed
+	ROS_DOMAIN_ID=$(USER_ROS_DOMAIN_ID) $(BIN)/python -m pytest -m scale -n $(JOBS)
 
 # the tests that need no DDS and are not marked slow (41 s on 2 cores with lint, warm): while you work
 test-fast: $(BIN)/.installed

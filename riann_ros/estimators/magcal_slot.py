@@ -75,6 +75,11 @@ class MagCalSlot:
             q = _tilt(ax, ay, az)
             field = None if m is None or not (m[0] or m[1] or m[2]) else (m[0], m[1], m[2])
             rv = (gx * h, gy * h, gz * h)
+            if not math.isfinite(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]):
+                cal.restart()  # a turn no window can hold (a degenerate gyro sample): the open window goes
+                out.append(None)
+                sd.append(0.0)
+                continue
             delta = from_rotvec(*rv)
             u = cal.update(delta, h, field, lat.delay(0.0), q)
             lat.add(delta, rv, h, u)
