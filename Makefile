@@ -52,7 +52,7 @@ test: $(BIN)/.installed lint
 test-scale: $(BIN)/.installed
 	ROS_DOMAIN_ID=$(USER_ROS_DOMAIN_ID) $(BIN)/python -m pytest -m scale -n $(JOBS)
 
-# the tests that need no DDS and are not marked slow (41 s on 2 cores with lint, warm): while you work
+# the tests that need no DDS and are not marked slow (50 s on 2 cores with lint, warm): while you work
 test-fast: $(BIN)/.installed
 	ROS_DOMAIN_ID=$(USER_ROS_DOMAIN_ID) $(BIN)/python -m pytest -m "not ros and not slow" -q -n $(JOBS)
 
