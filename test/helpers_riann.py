@@ -196,3 +196,14 @@ def outputs_of(stage: Any) -> list:
 
     stage.run = kept
     return out
+
+
+def still_then_turning(n: int, seed: int = 3, rate: float = 200.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` noisy samples at ``rate``: level and still for the first half, then turning about all three axes
+    (acc, gyr, dt)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / rate
+    gyr = np.column_stack([np.sin(t), 0.5 * np.cos(2 * t), 0.3 * np.sin(0.5 * t)]) * (t > n / rate / 2)[:, None]
+    gyr += rng.normal(0, 0.01, (n, 3))
+    acc = np.array([0.0, 0.0, GRAVITY]) + rng.normal(0, 0.05, (n, 3))
+    return acc, gyr, np.full(n, 1.0 / rate)

@@ -7,29 +7,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers_riann import still_then_turning
 
-from riann_ros.constants import GRAVITY
 from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.estimators import create
-
-
-def _motion(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) / RATE
-    gyr = np.column_stack([np.sin(t), 0.5 * np.cos(2 * t), 0.3 * np.sin(0.5 * t)]) * (t > n / RATE / 2)[:, None]
-    gyr += rng.normal(0, 0.01, (n, 3))
-    acc = np.array([0.0, 0.0, GRAVITY]) + rng.normal(0, 0.05, (n, 3))
-    return acc, gyr, np.full(n, 1.0 / RATE)
-
-
-RATE = 200.0
 
 
 @pytest.mark.parametrize("name", ["madgwick", "mahony", "vqf"])
 def test_classical_filters_report_their_documented_constants(name):
     """With the field calibrated as configured (the online calibration's doubt about it: test_magcal_estimators)."""
     est = create(name, mag_calibration=False)
-    acc, gyr, dt = _motion(20)
+    acc, gyr, dt = still_then_turning(20)
     mag = np.tile([0.0, 2e-5, -4e-5], (20, 1))
     mag[:10] = np.nan
     est.update_batch(acc, gyr, dt, mag)

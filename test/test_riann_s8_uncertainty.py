@@ -8,12 +8,11 @@ import math
 import numpy as np
 import pytest
 from helpers_mag import rot_z, static
-from helpers_riann import outputs_of
+from helpers_riann import outputs_of, still_then_turning
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from riann_ros import quaternion as quat
-from riann_ros.constants import GRAVITY
 from riann_ros.defaults import MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.estimators import create
 from riann_ros.estimators.riann import RiannEstimator
@@ -35,18 +34,9 @@ from riann_ros.stream import EstimatorStream, GateConfig
 RATE = 200.0
 
 
-def _motion(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) / RATE
-    gyr = np.column_stack([np.sin(t), 0.5 * np.cos(2 * t), 0.3 * np.sin(0.5 * t)]) * (t > n / RATE / 2)[:, None]
-    gyr += rng.normal(0, 0.01, (n, 3))
-    acc = np.array([0.0, 0.0, GRAVITY]) + rng.normal(0, 0.05, (n, 3))
-    return acc, gyr, np.full(n, 1.0 / RATE)
-
-
 def test_riann_sigma_batch_equals_per_sample_and_grows_with_the_copies_spread():
     n = 1200
-    acc, gyr, dt = _motion(n)
+    acc, gyr, dt = still_then_turning(n)
     est = RiannEstimator()
     q_b = est.update_batch(acc, gyr, dt)
     s_b = est.sigma(np.zeros(n, dtype=bool))
@@ -76,7 +66,7 @@ def test_riann_sigma_never_changes_the_attitude():
     """The attitude with stage 8 equals the attitude with its output ignored (it only reads): run twice, once
     asking for σ after every sample, once never."""
     n = 600
-    acc, gyr, dt = _motion(n, seed=5)
+    acc, gyr, dt = still_then_turning(n, seed=5)
     a = RiannEstimator()
     b = RiannEstimator(model=a.model)
     q_a = np.array([a.update(acc[i], gyr[i], dt[i]) for i in range(n)])
@@ -94,7 +84,7 @@ def test_riann_sigma_after_a_gap_is_the_fresh_network_s_until_it_has_converged()
     from riann_ros.estimators.riann.s6_handover import FRESH_DONE, S_REST, TAU
 
     n = 2500
-    acc, gyr, dt = _motion(n, seed=7)
+    acc, gyr, dt = still_then_turning(n, seed=7)
     cut = 1300  # a gap before this sample (in motion, which starts at sample 1250)
     batch = RiannEstimator()
     batch.update_batch(acc[:cut], gyr[:cut], dt[:cut])
@@ -132,7 +122,7 @@ def test_riann_sigma_after_a_gap_is_the_fresh_network_s_until_it_has_converged()
 def test_riann_reports_its_heading_state_through_the_stream_the_others_none():
 
     n = 600
-    acc, gyr, _ = _motion(n, seed=2)
+    acc, gyr, _ = still_then_turning(n, seed=2)
     mag = np.tile([0.0, 2e-5, -4e-5], (n, 1))
     mag[:100] = mag[400:] = np.nan
     stamps = (np.arange(n) * 1e9 / RATE).astype(np.int64) + 10**9
@@ -153,7 +143,7 @@ def test_riann_heading_sigma_follows_the_field():
     while it corrects, growing with the gyro's drift while it is absent; the per-sample formula equals the vectorised
     one."""
     n = 2400
-    acc, gyr, dt = _motion(n, seed=9)
+    acc, gyr, dt = still_then_turning(n, seed=9)
     mag = np.tile([0.0, 2e-5, -4e-5], (n, 1))
     mag[:100] = np.nan  # no field yet
     mag[1600:] = np.nan  # the field goes away
