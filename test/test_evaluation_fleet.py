@@ -14,6 +14,10 @@ import time
 
 import pytest
 
+# the CLI's main in a process of its own that writes its own peak resident set (VmHWM) to a file: the client's
+# memory, the local cluster's scheduler included, the worker processes not
+from bench_cluster import CLIENT
+
 from riann_ros import bagio
 from riann_ros.datasets.synthetic import generate
 from riann_ros.evaluation import executors, store
@@ -21,17 +25,6 @@ from riann_ros.evaluation import executors, store
 pytest.importorskip("distributed")
 
 CLIENT_LIMIT_MB = 500
-# the CLI's main in a process of its own that reports its own peak resident set (VmHWM of /proc/self/status: this
-# process and its threads, the local cluster's scheduler included; the worker processes are not the client). Not
-# RUSAGE_SELF's ru_maxrss: Linux carries it over fork and exec, so it would report the test process's own peak
-CLIENT = """
-import re, sys
-from riann_ros.cli.evaluate import main
-code = main(sys.argv[2:])
-with open("/proc/self/status") as status, open(sys.argv[1], "w") as f:
-    f.write(re.search(r"VmHWM:\\s+(\\d+) kB", status.read()).group(1))
-sys.exit(code)
-"""
 
 
 @pytest.mark.slow
