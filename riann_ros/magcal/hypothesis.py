@@ -16,9 +16,10 @@ estimate holds: ``D² = δᵀ Λ_d (I + C_tol Λ_d)⁻¹ δ`` with ``δ = θ̂ �
 the noise model widen the test with the σ); ``H₀`` is rejected when ``D²`` exceeds the χ² quantile
 :data:`PRIOR_REJECT_P` for the directions the windows observe, ``H₁`` is the more probable hypothesis
 (:attr:`PriorTest.p_holds` below ½: a large ``D²`` spread over many observed directions is still ``H₀``'s when
-the prior of ``H₁`` would have allowed far larger ones), and at least :data:`MIN_FAILED_WINDOWS` windows
-fail ``H₀`` on their own (a single magnetically disturbed window that the loose ``H₁`` prior still admits does not
-reject a calibration that every other window agrees with).
+the prior of ``H₁`` would have allowed far larger ones), and both still hold without the :data:`ROBUST_WINDOWS`
+windows that contradict ``H₀`` the most on their own (a magnetically disturbed window or two that the loose ``H₁``
+prior still admits do not reject a calibration that every other window agrees with; evidence spread thinly over
+many windows of slow rotation, none of them decisive alone, does).
 
 Until the windows have decided, the heading must not claim a calibrated sensor's σ: :attr:`PriorTest.p_holds` is
 the posterior probability of ``H₀`` (Bayes factor of the two linear-Gaussian models on the same windows, each
@@ -36,16 +37,16 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from riann_ros.magcal.model import Array, CalModel, rotation_matrix
+from riann_ros.magcal.model import Array, CalModel, posterior, rotation_matrix
 from riann_ros.magcal.records import FIELD_HEADING_SD_RAD, GATE_CHI2
 from riann_ros.magcal.solver import InfoEstimate
 
 #: the test's false-rejection probability: a right calibration is rejected once in 1000 runs' tests.
 PRIOR_REJECT_P = 0.999
-#: windows that must fail ``H₀`` on their own (each at the gate's 99.9 %, :data:`~.records.GATE_CHI2`) before the
-#: test may reject it: three independent 1-in-1000 failures of a right calibration (1e-9) — a lone disturbed window
-#: is not evidence against it.
-MIN_FAILED_WINDOWS = 3
+#: the test must reject ``H₀`` without this many of the windows that contradict it the most on their own (their
+#: residual at θ₀ against their noise and the tolerance): a lone disturbed window, or two, is not evidence against a
+#: calibration; the evidence must be in the others.
+ROBUST_WINDOWS = 2
 _QUANTILE = tuple(float(chi2.ppf(PRIOR_REJECT_P, k)) for k in range(1, 13))
 _TAN_TOL = math.tan(FIELD_HEADING_SD_RAD)
 
@@ -57,9 +58,11 @@ class PriorTest:
         self.model = model
         self.theta0 = theta0
         self.holds = True
-        self.failed = 0  # windows that failed H₀ on their own
+        self.failed = 0  # windows that failed H₀ on their own (diagnostics)
         self.d2 = 0.0  # the last test's D² (diagnostics)
         self.p_holds = 0.5  # the posterior probability of H₀ (module docstring)
+        #: the ROBUST_WINDOWS windows that contradict H₀ the most: (their distance², Λ_i, η_i)
+        self.worst: list[tuple[float, Array, Array]] = []
 
     def tolerance(self, u_ut: Array, horizontal_ut: float) -> Array:
         """``C_tol`` (n, n) in θ: per axis of the hard iron the offset whose heading error, across a horizontal
@@ -77,39 +80,59 @@ class PriorTest:
                       else 0.5 * float(np.linalg.norm(u)))
         return self.tolerance(u, horizontal)
 
-    def window_fails(self, j: Array, r0: Array, var: float, tol: Array) -> bool:
-        """Whether one window fails ``H₀`` on its own: its residual at θ₀ against its noise and the tolerance."""
+    def window_d2(self, j: Array, r0: Array, var: float, tol: Array) -> float:
+        """One window's distance² from ``H₀`` on its own: its residual at θ₀ against its noise and the tolerance."""
         r = r0 + j @ self.theta0
         s = var * np.eye(3) + j @ tol @ j.T
-        return float(r @ np.linalg.solve(s, r)) > GATE_CHI2
+        return float(r @ np.linalg.solve(s, r))
 
-    def add(self, est: InfoEstimate, failed: bool, tol: Array) -> bool:
-        """The test after the estimate ``est`` took a window (``failed``: it failed ``H₀`` on its own); returns
-        whether ``H₀`` still holds (once rejected, never again)."""
+    def window_fails(self, j: Array, r0: Array, var: float, tol: Array) -> bool:
+        """Whether one window fails ``H₀`` on its own (at the gate's 99.9 %, :data:`~.records.GATE_CHI2`)."""
+        return self.window_d2(j, r0, var, tol) > GATE_CHI2
+
+    def add(self, est: InfoEstimate, j: Array, r0: Array, var: float, tol: Array) -> bool:
+        """The test after the estimate ``est`` took the window ``(j, r0, var)``; returns whether ``H₀`` still holds
+        (once rejected, never again)."""
         if not self.holds:
             return False
-        self.failed += int(failed)
-        self.p_holds = self._posterior(est, tol)
-        delta = est.theta - self.theta0
-        lam = est.lam
-        m = lam @ np.linalg.inv(np.eye(self.model.n) + tol @ lam)
-        self.d2 = float(delta @ (0.5 * (m + m.T)) @ delta) / max(1.0, est.unit_weight)
-        dof = min(max(est.observed, 1), len(_QUANTILE))
-        if self.failed >= MIN_FAILED_WINDOWS and self.d2 > _QUANTILE[dof - 1] and self.p_holds < 0.5:
-            self.holds = False
+        d2_w = self.window_d2(j, r0, var, tol)
+        self.failed += int(d2_w > GATE_CHI2)
+        self._keep_worst(d2_w, (j.T @ j) / var, -(j.T @ r0) / var)
+        k = max(1.0, est.unit_weight)
+        self.p_holds = self._posterior(est.lam0, est.lam / k, (est.eta - est.lam @ self.theta0) / k, tol)
+        self.d2 = self._distance(est.theta, est.lam, k, tol)
+        if self._rejects(self.d2, self.p_holds, est.observed):  # and without the windows that contradict it most:
+            lam = est.lam - sum(w[1] for w in self.worst)
+            eta = est.eta - sum(w[2] for w in self.worst)
+            theta, _, observed = posterior(est.lam0, self.theta0, lam, eta)
+            p = self._posterior(est.lam0, lam / k, (eta - lam @ self.theta0) / k, tol)
+            self.holds = not self._rejects(self._distance(theta, lam, k, tol), p, observed)
         return self.holds
 
-    def _posterior(self, est: InfoEstimate, tol: Array) -> float:
+    def _keep_worst(self, d2: float, lam: Array, eta: Array) -> None:
+        self.worst.append((d2, lam, eta))
+        self.worst.sort(key=lambda w: -w[0])
+        del self.worst[ROBUST_WINDOWS:]
+
+    @staticmethod
+    def _rejects(d2: float, p_holds: float, observed: int) -> bool:
+        dof = min(max(observed, 1), len(_QUANTILE))
+        return d2 > _QUANTILE[dof - 1] and p_holds < 0.5
+
+    def _distance(self, theta: Array, lam: Array, k: float, tol: Array) -> float:
+        """``D²`` of the estimate ``theta`` from θ₀ with the windows' information ``lam`` (module docstring)."""
+        delta = theta - self.theta0
+        m = lam @ np.linalg.inv(np.eye(self.model.n) + tol @ lam)
+        return float(delta @ (0.5 * (m + m.T)) @ delta) / k
+
+    def _posterior(self, lam0: Array, lam: Array, g: Array, tol: Array) -> float:
         """P(H₀ | windows): the Bayes factor of ``H₀`` (θ ~ N(θ₀, C_tol)) against ``H₁`` (θ ~ N(θ₀, Λ₀⁻¹)) on the
         windows' information ``Λ`` and gradient ``g = η − Λ θ₀``, both scaled by the variance of unit weight;
         ``log B₀₁ = ½ gᵀ[(C_tol⁻¹ + Λ)⁻¹ − (Λ₀ + Λ)⁻¹] g + ½ log det(I + Λ₀⁻¹Λ) − ½ log det(I + C_tol Λ)``."""
-        k = max(1.0, est.unit_weight)
-        lam = est.lam / k
-        g = (est.eta - est.lam @ self.theta0) / k
         eye = np.eye(self.model.n)
         a0 = tol @ np.linalg.inv(eye + lam @ tol)
-        c1 = np.linalg.inv(est.lam0)
-        a1 = np.linalg.inv(est.lam0 + lam)
+        c1 = np.linalg.inv(lam0)
+        a1 = np.linalg.inv(lam0 + lam)
         log_b = 0.5 * float(g @ (a0 - a1) @ g)
         log_b += 0.5 * (np.linalg.slogdet(eye + c1 @ lam)[1] - np.linalg.slogdet(eye + tol @ lam)[1])
         return 1.0 / (1.0 + math.exp(min(-log_b, 700.0)))

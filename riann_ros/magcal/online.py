@@ -181,8 +181,7 @@ class OnlineMagCalibrator:
         """The prior's test (:mod:`.hypothesis`) after a window the estimate took."""
         if not self.test.holds:
             return
-        tol = self._tolerance(w)
-        self.test.add(self.est, self.test.window_fails(j, r0, var, tol), tol)
+        self.test.add(self.est, j, r0, var, self._tolerance(w))
 
     def _tolerance(self, w: Window) -> Array:
         return self.test.tolerance_at(np.asarray(w.m1_ut), self.q)

@@ -3,10 +3,13 @@
 A world-fixed field seen from a turning sensor: with the sensor's attitude ``q`` (sensor → world) and the gyro's
 rotation ``P`` from a window's first reading to its last (``q_end = q_start ⊗ P``), the calibrated readings satisfy
 ``u_start = R(P) u_end``. :class:`Windower` accumulates ``P`` from the bias-corrected gyro increments (one
-quaternion product per sample) and closes a window once the sensor has turned :data:`WINDOW_ANGLE_RAD`; a window
-that has not turned :data:`WINDOW_MIN_ANGLE_RAD` within :data:`WINDOW_MAX_S` is dropped (at rest and in straight
-motion no window closes, so nothing moves). The next window starts at the next reading, so no two windows share a
-reading and their noises are independent.
+quaternion product per sample) and closes a window once the sensor has turned :data:`WINDOW_ANGLE_RAD`. A motion
+that swings back before that (a wobble, a robot's small turns) closes it at the farthest reading of the swing once
+the sensor has come back :data:`TURN_BACK_RAD` from it, if that reading is at least :data:`WINDOW_MIN_ANGLE_RAD` from
+the start (the swing's end is where the window's angle is largest and the sensor slowest); so does
+:data:`WINDOW_MAX_S`, and a window that has not turned :data:`WINDOW_MIN_ANGLE_RAD` by then is dropped (at rest and
+in straight motion no window closes, so nothing moves). The next window starts at the next reading, so no two
+windows share a reading and their noises are independent.
 
 The magnetometer's latency ``D`` (RIANN's stage 7b estimates it): a reading stamped ``t`` saw the field at
 ``t − D``, so each end of a window takes the gyro attitude of ``t − D``, interpolated in a short history of the
@@ -27,6 +30,9 @@ from riann_ros.rotations import IDENTITY, Quat, Vec, conj, normalized, qmul
 
 _COS_HALF = math.cos(0.5 * WINDOW_ANGLE_RAD)
 _COS_HALF_MIN = math.cos(0.5 * WINDOW_MIN_ANGLE_RAD)
+#: rad; a window whose sensor has come back this far from its farthest reading closes there (module docstring): far
+#: more than the gyro noise over a swing, small against the least window angle.
+TURN_BACK_RAD = 5.0 * math.pi / 180.0
 
 
 @dataclass(frozen=True)
@@ -89,6 +95,8 @@ class Windower:
         self.qa: Quat = IDENTITY  # the attitude at the window's first sample (for the angle test)
         self.t0 = 0.0
         self.rate0 = 0.0
+        self.best_angle = 0.0  # rad; the farthest reading of the open window from its start
+        self.best: tuple[Vec, Quat, float, float] | None = None  # its (reading, attitude it saw, t, rate)
 
     def restart(self) -> None:
         """A hole or a reset: the open window is dropped (the rotation across the hole is not known)."""
@@ -128,29 +136,45 @@ class Windower:
         qa = self.qa
         q = self.q
         c = abs(qa[0] * q[0] + qa[1] * q[1] + qa[2] * q[2] + qa[3] * q[3])  # cos(angle/2) since the start
-        if c > _COS_HALF and self.t - self.t0 < WINDOW_MAX_S:
-            return None
+        timed = self.t - self.t0 >= WINDOW_MAX_S
         if mag_ut is None:
             if self.t - self.t0 >= WINDOW_MAX_S + 1.0:  # no reading for a long time: start over at the next one
                 self.open = False
             return None
-        if c > _COS_HALF_MIN:  # timed out without turning enough: no information, start over here
+        if c <= _COS_HALF:
+            return self._close(mag_ut, self._reading_attitude(delay_s), _rate(delta, dt))
+        angle = 2.0 * math.acos(min(1.0, c))
+        if angle > self.best_angle:
+            self.best_angle = angle
+            if angle >= WINDOW_MIN_ANGLE_RAD:
+                self.best = (mag_ut, self._reading_attitude(delay_s), self.t, _rate(delta, dt))
+        elif self.best is not None and (timed or angle <= self.best_angle - TURN_BACK_RAD):
+            m, q1, t1, rate1 = self.best  # the swing's end: the window closes there, the next one starts here
+            w = self._close(m, q1, rate1, t1)
             self._start(mag_ut, delta, dt, delay_s)
-            return None
-        return self._close(mag_ut, delta, dt, delay_s)
+            return w
+        if timed:  # timed out without turning enough: no information, start over here
+            self._start(mag_ut, delta, dt, delay_s)
+        return None
+
+    def _reading_attitude(self, delay_s: float) -> Quat:
+        """The integrated attitude the current sample's reading saw (``delay_s`` earlier)."""
+        return self._attitude_at(self.t - delay_s) if delay_s > 0.0 else self.q
 
     def _start(self, m: Vec, delta: Quat, dt: float, delay_s: float) -> None:
         self.open = True
         self.m0 = m
         self.qa = self.q
-        self.q0 = self._attitude_at(self.t - delay_s) if delay_s > 0.0 else self.q
+        self.q0 = self._reading_attitude(delay_s)
         self.t0 = self.t
         self.rate0 = _rate(delta, dt)
+        self.best_angle, self.best = 0.0, None
 
-    def _close(self, m: Vec, delta: Quat, dt: float, delay_s: float) -> Window:
-        q1 = self._attitude_at(self.t - delay_s) if delay_s > 0.0 else self.q
+    def _close(self, m: Vec, q1: Quat, rate1: float, t1: float | None = None) -> Window:
+        """The window from the start to the reading ``m`` (the attitude ``q1`` it saw, the rate ``rate1`` then, at
+        time ``t1``: now when None)."""
         rot = normalized(qmul(conj(self.q0), q1))
-        w = Window(self.m0, m, rot, self.t - self.t0, _angle(rot), self.rate0, _rate(delta, dt))
+        w = Window(self.m0, m, rot, (self.t if t1 is None else t1) - self.t0, _angle(rot), self.rate0, rate1)
         self.open = False
         self.q = normalized(self.q)
         return w
