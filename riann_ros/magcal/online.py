@@ -168,12 +168,12 @@ class OnlineMagCalibrator:
             est.add(j, r0, var, d2, k)
             self.windows += 1
             self.cand = None
+            self.agree = 0
             self._test(w, j, r0, var)
         else:  # a disturbed field, or the magnetic situation changed: a candidate learns from the rejected windows
             self.rejected += 1
-            self._candidate(j, r0, ws)
-        if not self.test.holds:
-            self._retest(w, j, r0, var)
+            if self.test.holds or not self._retest(w, j, r0, var):
+                self._candidate(j, r0, ws)
         self._cache()
         self._set_state()
 
@@ -186,18 +186,21 @@ class OnlineMagCalibrator:
     def _tolerance(self, w: Window) -> Array:
         return self.test.tolerance_at(np.asarray(w.m1_ut), self.q)
 
-    def _retest(self, w: Window, j: Array, r0: Array, var: float) -> None:
-        """After the prior was rejected: :data:`~.records.SWITCH_WINDOWS` consecutive windows that agree with it
-        restore it, as a changed magnetic situation replaces the estimate (a magnet attached for a while and taken
-        off again); the estimate and the test start anew from the prior."""
+    def _retest(self, w: Window, j: Array, r0: Array, var: float) -> bool:
+        """After the prior was rejected, a window the estimate rejected: :data:`~.records.SWITCH_WINDOWS` consecutive
+        such windows that agree with the prior restore it, as a changed magnetic situation replaces the estimate (a
+        magnet attached for a while and taken off again); the estimate and the test start anew from the prior. (A
+        window that agrees with both, a rotation that observes none of the difference between them, is evidence for
+        neither.) Returns whether the window agreed with the prior."""
         if self.test.window_fails(j, r0, var, self._tolerance(w)):
             self.agree = 0
-            return
+            return False
         self.agree += 1
         if self.agree >= SWITCH_WINDOWS:
             self.est, self.cand = InfoEstimate(self.model, self.lam0, self.theta0), None
             self.test = PriorTest(self.model, self.theta0)
             self.windows, self.agree = 0, 0
+        return True
 
     @property
     def trusted(self) -> bool:
