@@ -245,3 +245,27 @@ def test_records_refuse_bad_values():
         MagCalPrior(hard_iron_sd_t=0.0)
     with pytest.raises(ValueError, match="soft-iron model"):
         OnlineMagCalibrator(soft_iron_model="diagonal")  # type: ignore[arg-type]
+
+
+def test_a_swing_closes_its_window_at_its_farthest_reading():
+    """A swing out to 20° and back (never 45°): the window closes at the swing's end, once the sensor has come back
+    TURN_BACK_RAD; a swing of 10° (below WINDOW_MIN_ANGLE_RAD) closes none."""
+    from riann_ros.magcal.windows import TURN_BACK_RAD, Windower
+
+    def windows(amplitude_deg: float) -> list:
+        t = np.arange(400) / 100.0
+        ang = np.radians(amplitude_deg) * 0.5 * (1.0 - np.cos(2.0 * np.pi * t / 4.0))  # 0 → amplitude → 0 in 4 s
+        inc = quat.from_rotvec(np.column_stack([np.zeros_like(t), np.diff(ang, prepend=0.0), np.zeros_like(t)]))
+        w = Windower()
+        out = []
+        for i, d in enumerate(inc.tolist()):
+            got = w.add(tuple(d), 0.01, (float(i), 0.0, 40.0))  # the reading's x tells which sample it is
+            if got is not None:
+                out.append((i, got))
+        return out
+
+    (i, w), = windows(20.0)
+    assert np.degrees(w.angle_rad) == pytest.approx(20.0, abs=0.1)
+    assert w.m1_ut[0] == pytest.approx(200.0, abs=2.0)  # the reading at the swing's end (t = 2 s)
+    assert 200 < i < 300 and np.degrees(TURN_BACK_RAD) < 20.0  # closed once the sensor came back, not at the timeout
+    assert windows(10.0) == []

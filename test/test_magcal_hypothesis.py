@@ -65,3 +65,64 @@ def test_a_rejected_calibration_comes_back_when_the_offset_goes():
     trusted = np.array([t[0] for t in track])
     assert not trusted[(rec.t > 20.0) & (rec.t < 35.0)].any()  # rejected while the magnet is on
     assert trusted[-1] and cal.windows >= 1 and SWITCH_WINDOWS > 1  # restored after it came off
+
+
+def wobble(seconds: float = 120.0, amplitude_deg: float = 12.0, rate: float = 100.0):
+    """A sensor that only wobbles (a phone held still, a robot on a rough floor): rotations of at most
+    ``amplitude_deg`` about varying axes, slow; (gyro increments, attitudes, dt)."""
+    t = np.arange(int(seconds * rate)) / rate
+    a = np.radians(amplitude_deg)
+    rv = np.column_stack([a * np.sin(2 * np.pi * 0.31 * t), a * np.sin(2 * np.pi * 0.23 * t + 1.0),
+                          0.5 * a * np.sin(2 * np.pi * 0.17 * t + 2.0)])
+    q = quat.from_rotvec(rv)
+    inc = quat.multiply(quat.conjugate(q[:-1]), q[1:])
+    return np.vstack([[1.0, 0.0, 0.0, 0.0], inc]), q, np.full(len(t), 1.0 / rate)
+
+
+def feed_wobble(cal: OnlineMagCalibrator, inc, q, dt, raw) -> None:
+    for d, h, m, a in zip(inc.tolist(), dt.tolist(), raw.tolist(), q.tolist(), strict=True):
+        cal.update(tuple(d), h, tuple(m), 0.0, tuple(a))
+
+
+def test_a_wobble_rejects_a_wrong_calibration_no_window_of_it_decisive_alone():
+    """Small slow rotations: each window says little (none fails the configured calibration on its own), all of them
+    together reject it; the same motion keeps a right one."""
+    inc, q, dt = wobble()
+    raw = distort(q, H_UT * UT, noise_t=0.4e-6, seed=2)
+    wrong = OnlineMagCalibrator()
+    feed_wobble(wrong, inc, q, dt, raw)
+    assert wrong.windows >= 20  # windows close at the swings' ends
+    assert not wrong.trusted
+    right = OnlineMagCalibrator(MagCalPrior(hard_iron_t=tuple(H_UT * UT)))
+    feed_wobble(right, inc, q, dt, raw)
+    assert right.trusted and right.test.p_holds > 0.99
+
+
+def test_two_disturbed_windows_do_not_reject_a_right_calibration():
+    rec = recording()
+    raw = distort(rec.quat_ref, H_UT * UT, noise_t=0.4e-6, seed=1)
+    for t0 in (20.0, 40.0):  # a magnet passing by twice, 50 ms each: at most one window's end each time
+        raw[(rec.t >= t0) & (rec.t < t0 + 0.05)] += np.array([30.0, -20.0, 25.0]) * UT
+    cal = OnlineMagCalibrator(MagCalPrior(hard_iron_t=tuple(H_UT * UT)))
+    track: list = []
+    feed(cal, rec, raw, track)
+    assert all(t[0] for t in track)
+
+
+def test_windows_that_observe_nothing_of_the_difference_do_not_restore_a_rejected_calibration():
+    """Rejected on rich motion (an offset along x), then turning about x only: those windows agree with the configured
+    calibration and with the estimate alike (x is their rotation axis), so they are no evidence that the offset went."""
+    rec = recording()
+    h = np.array([20.0, 0.0, 0.0])
+    raw = distort(rec.quat_ref, h * UT, noise_t=0.4e-6, seed=1)
+    cal = OnlineMagCalibrator()
+    feed(cal, rec, raw)
+    assert not cal.trusted
+    cal.restart()
+    t = np.arange(6000) / 100.0
+    ang = np.radians(60.0) * np.sin(2 * np.pi * 0.4 * t)  # swinging about the sensor's x axis
+    q = quat.from_rotvec(np.column_stack([ang, np.zeros_like(ang), np.zeros_like(ang)]))
+    inc = np.vstack([[1.0, 0.0, 0.0, 0.0], quat.multiply(quat.conjugate(q[:-1]), q[1:])])
+    feed_wobble(cal, inc, q, np.full(len(t), 0.01), distort(q, h * UT, noise_t=0.4e-6, seed=3))
+    assert not cal.trusted
+    assert np.abs(np.array(cal.calibration().hard_iron_t) / UT - h).max() < 1.5

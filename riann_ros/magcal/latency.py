@@ -17,10 +17,6 @@ MAX_WINDOW = 0.2  # s; a longer window (no field, a gap) is dropped
 DELAY_TAU = 30.0  # s of windows; older windows are forgotten with this time constant
 DELAY_PRIOR = 1.0  # (rad/s)²; the starting value weighs as much as one window with a 1 rad/s change of rate
 MAX_DELAY = 0.1  # s; the largest latency compensated
-#: s; how far the starting value may be from the latency: nothing is known of it but its range [0, MAX_DELAY] (the σ of
-#: a uniform distribution over it, 29 ms). DELAY_PRIOR is the weight of this much doubt: the fit's σ is
-#: ``DELAY_PRIOR_SD · √(DELAY_PRIOR / (DELAY_PRIOR + Σ g·g))``, the prior's share of the information.
-DELAY_PRIOR_SD = MAX_DELAY / math.sqrt(12.0)
 
 
 class LatencyEstimator:
@@ -53,12 +49,6 @@ class LatencyEstimator:
         """The latency to compensate (s): the fit with ``start`` as its prior, within [0, MAX_DELAY]."""
         d = (DELAY_PRIOR * start + self.num) / (DELAY_PRIOR + self.den)
         return min(max(d, 0.0), MAX_DELAY)
-
-    def sd(self, floor: float) -> float:
-        """s; the standard deviation of :meth:`delay`: :data:`DELAY_PRIOR_SD` while no window has informed it,
-        shrinking with the windows' information (the forgetting keeps it from vanishing), never below ``floor``
-        (what the fit cannot resolve: a sample's rounding, the sensor's own filter)."""
-        return math.hypot(floor, DELAY_PRIOR_SD * math.sqrt(DELAY_PRIOR / (DELAY_PRIOR + self.den)))
 
     def add(self, delta: Quat, rv: Vec, dt: float,
             mag: Vec | None) -> None:

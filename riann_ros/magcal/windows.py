@@ -133,14 +133,19 @@ class Windower:
             if mag_ut is not None:
                 self._start(mag_ut, delta, dt, delay_s)
             return None
-        qa = self.qa
-        q = self.q
-        c = abs(qa[0] * q[0] + qa[1] * q[1] + qa[2] * q[2] + qa[3] * q[3])  # cos(angle/2) since the start
-        timed = self.t - self.t0 >= WINDOW_MAX_S
         if mag_ut is None:
             if self.t - self.t0 >= WINDOW_MAX_S + 1.0:  # no reading for a long time: start over at the next one
                 self.open = False
             return None
+        return self._reading(mag_ut, delta, dt, delay_s)
+
+    def _reading(self, mag_ut: Vec, delta: Quat, dt: float, delay_s: float) -> Window | None:
+        """A reading while a window is open: it closes the window (at 45°, or at a swing's end), becomes the swing's
+        farthest, or starts over a window that timed out without turning."""
+        qa = self.qa
+        q = self.q
+        c = abs(qa[0] * q[0] + qa[1] * q[1] + qa[2] * q[2] + qa[3] * q[3])  # cos(angle/2) since the start
+        timed = self.t - self.t0 >= WINDOW_MAX_S
         if c <= _COS_HALF:
             return self._close(mag_ut, self._reading_attitude(delay_s), _rate(delta, dt))
         angle = 2.0 * math.acos(min(1.0, c))
