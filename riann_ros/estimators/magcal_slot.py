@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from riann_ros.magcal.latency import LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
-from riann_ros.magcal.records import MagCalibration, MagCalPrior, MagCalStatus
+from riann_ros.magcal.records import DELAY_SD_S, MagCalibration, MagCalPrior, MagCalStatus
 from riann_ros.rotations import Quat, from_rotvec, rotate
 
 
@@ -81,7 +81,7 @@ class MagCalSlot:
                 sd.append(0.0)
                 continue
             delta = from_rotvec(*rv)
-            u = cal.update(delta, h, field, lat.delay(0.0), q)
+            u = cal.update(delta, h, field, lat.delay(0.0), q, lat.sd(DELAY_SD_S))
             lat.add(delta, rv, h, u)
             s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
             if s >= math.pi:  # the field's heading is unknown (the last window contradicted the estimate)

@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from riann_ros.magcal.records import HARD_IRON_PRIOR_SD_T
 from riann_ros.rotations import IDENTITY, Quat, Vec, cross, qmul, rotate
 
 # online latency fit (LatencyEstimator)
@@ -17,6 +20,11 @@ MAX_WINDOW = 0.2  # s; a longer window (no field, a gap) is dropped
 DELAY_TAU = 30.0  # s of windows; older windows are forgotten with this time constant
 DELAY_PRIOR = 1.0  # (rad/s)²; the starting value weighs as much as one window with a 1 rad/s change of rate
 MAX_DELAY = 0.1  # s; the largest latency compensated
+#: s; how far the starting value may be from the latency: nothing is known of it but its range [0, MAX_DELAY] (the
+#: standard deviation of a uniform distribution over it). DELAY_PRIOR is the weight of this much doubt.
+DELAY_PRIOR_SD = MAX_DELAY / math.sqrt(12.0)
+_NOISE2 = DELAY_PRIOR * DELAY_PRIOR_SD * DELAY_PRIOR_SD  # a window's normalised noise variance (class docstring)
+_B_PRIOR = _NOISE2 / (HARD_IRON_PRIOR_SD_T * HARD_IRON_PRIOR_SD_T)  # the weight of b's prior (b in T)
 
 
 class LatencyEstimator:
@@ -24,14 +32,18 @@ class LatencyEstimator:
 
     A constant world field seen by a rotating sensor obeys ``m(t₁) = R(ρ)ᵀ m(t₀)``, ``ρ`` the gyro's rotation
     from ``t₀`` to ``t₁``. A field read ``D`` late rotates as the gyro did ``D`` earlier; to first order the
-    prediction error over a window is ``e = m₁ − R(ρ)ᵀ m₀ ≈ D g`` with ``g = ω₁ × R(ρ)ᵀ m₀ − R(ρ)ᵀ (ω₀ × m₀)``
-    (``ω₀``, ``ω₁`` the rates at the window's ends). ``D`` is the least-squares fit of ``e`` on ``g`` over
-    windows of :data:`WINDOW` s with exponential forgetting (:data:`DELAY_TAU`), both normalised by ``|m|²``
-    and started from a prior (the ``mag_delay`` parameter, weight :data:`DELAY_PRIOR`). Windows carry
-    information only while the rate changes, so at rest the estimate holds. Noise in the field enters ``e``
-    and ``g`` in ways that cancel in ``e·g`` (``n · (ω × n) = 0``), so the fit is unbiased by it; a constant
-    hard-iron residual adds a term uncorrelated with ``g`` on average. Windows with a disturbed field are not
-    used (the model needs a constant world field).
+    prediction error over a window is ``e = m₁ − R(ρ)ᵀ m₀ ≈ D g + (I − R(ρ)ᵀ) b`` with ``g = ω₁ × R(ρ)ᵀ m₀ −
+    R(ρ)ᵀ (ω₀ × m₀)`` (``ω₀``, ``ω₁`` the rates at the window's ends) and ``b`` what is left of a hard iron in the
+    field it is given (a magnetometer not calibrated yet: ``b`` is tens of µT, and over the short windows its term
+    is correlated with ``g``, so a fit of ``D`` alone would take it for latency). ``D`` and ``b`` are the joint
+    least-squares fit over windows of :data:`WINDOW` s with exponential forgetting (:data:`DELAY_TAU`), each
+    window normalised by its ``|m₀|``, started from a prior (the ``mag_delay`` parameter, weight
+    :data:`DELAY_PRIOR`; ``b``: zero, the calibration's prior σ per axis,
+    :data:`~riann_ros.magcal.records.HARD_IRON_PRIOR_SD_T`). Windows carry information only while the rate
+    changes, so at rest the estimate holds. Noise in the field enters ``e`` and ``g`` in ways that cancel in ``e·g``
+    (``n · (ω × n) = 0``), so the fit is unbiased by it. Windows with a disturbed field are not used (the model
+    needs a constant world field). :meth:`sd` is the fit's standard deviation: the windows' normalised noise is
+    the one :data:`DELAY_PRIOR` weighs :data:`DELAY_PRIOR_SD` with.
     """
 
     def __init__(self) -> None:
@@ -42,13 +54,31 @@ class LatencyEstimator:
         self.w0 = self.w = (0.0, 0.0, 0.0)  # rate at the window's start, newest rate (rad/s)
         self.rho: Quat = IDENTITY  # gyro rotation since the window's start
         self.t = 0.0  # s since the window's start
-        self.num = self.den = 0.0  # Σ e·g, Σ g·g (normalised, forgotten)
+        self.normal = np.zeros((4, 4))  # Σ AᵀA of the windows (forgotten), A = [g, I − R(ρ)ᵀ] / |m₀|
+        self.rhs = np.zeros(4)  # Σ Aᵀe
         self.windows = 0
+        self._fit_for: tuple[float, int] | None = None  # (prior, windows) of the cached solution
+        self._d = self._var = 0.0
 
     def delay(self, start: float) -> float:
         """The latency to compensate (s): the fit with ``start`` as its prior, within [0, MAX_DELAY]."""
-        d = (DELAY_PRIOR * start + self.num) / (DELAY_PRIOR + self.den)
-        return min(max(d, 0.0), MAX_DELAY)
+        if self._fit_for != (start, self.windows):
+            self._solve(start)
+        return min(max(self._d, 0.0), MAX_DELAY)
+
+    def sd(self, floor: float) -> float:
+        """s; the standard deviation of :meth:`delay` (class docstring): :data:`DELAY_PRIOR_SD` while no window has
+        informed it, never below ``floor`` (what the fit cannot resolve: a sample's rounding, the sensor's filter)."""
+        if self._fit_for is None or self._fit_for[1] != self.windows:
+            self._solve(0.0 if self._fit_for is None else self._fit_for[0])
+        return math.hypot(floor, math.sqrt(self._var))
+
+    def _solve(self, start: float) -> None:
+        prior = np.diag([DELAY_PRIOR, _B_PRIOR, _B_PRIOR, _B_PRIOR])
+        cov = np.linalg.inv(self.normal + prior)
+        x = cov @ (self.rhs + prior[:, 0] * start)
+        self._d, self._var = float(x[0]), _NOISE2 * float(cov[0, 0])
+        self._fit_for = (start, self.windows)
 
     def add(self, delta: Quat, rv: Vec, dt: float,
             mag: Vec | None) -> None:
@@ -75,11 +105,15 @@ class LatencyEstimator:
         w0, w1 = self.w0, self.w
         c0 = rotate(rc, cross(w0, m0))
         c1 = cross(w1, p)
-        g = (c1[0] - c0[0], c1[1] - c0[1], c1[2] - c0[2])
-        n2 = m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2]
-        if n2 <= 0.0:
+        n = math.sqrt(m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2])
+        if n <= 0.0:
             return
+        a = np.empty((3, 4))
+        a[:, 0] = [(c1[i] - c0[i]) / n for i in range(3)]
+        a[:, 1:] = (np.eye(3) - np.column_stack([rotate(rc, e) for e in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
+                                                                         (0.0, 0.0, 1.0))])) / n
+        e = np.array([(m1[i] - p[i]) / n for i in range(3)])
         f = math.exp(-self.t / DELAY_TAU)
-        self.num = f * self.num + ((m1[0] - p[0]) * g[0] + (m1[1] - p[1]) * g[1] + (m1[2] - p[2]) * g[2]) / n2
-        self.den = f * self.den + (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]) / n2
+        self.normal = f * self.normal + a.T @ a
+        self.rhs = f * self.rhs + a.T @ e
         self.windows += 1

@@ -25,7 +25,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.magcal.records import (
-    DELAY_SD_S,
     FIELD_CHANGE_RATE_UT_S,
     FIELD_CHANGE_SD_UT,
     GYRO_BIAS_RESIDUAL_SD_RAD_S,
@@ -138,7 +137,7 @@ class CalModel:
         g2 = float(np.sum(a * a)) / 3.0
         b2 = np.sum((ws.m1_ut @ a.T - c) ** 2, axis=1)
         phi2 = ((GYRO_BIAS_RESIDUAL_SD_RAD_S * ws.duration_s) ** 2 + (GYRO_SCALE_SD * ws.angle_rad) ** 2
-                + DELAY_SD_S ** 2 * (ws.rate0_rad_s ** 2 + ws.rate1_rad_s ** 2))
+                + ws.delay_sd_s ** 2 * (ws.rate0_rad_s ** 2 + ws.rate1_rad_s ** 2))
         env2 = FIELD_CHANGE_SD_UT ** 2 + (FIELD_CHANGE_RATE_UT_S * ws.duration_s) ** 2
         return 2.0 * g2 * MAG_NOISE_SD_UT ** 2 + env2 + phi2 * b2
 

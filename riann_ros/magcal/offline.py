@@ -34,6 +34,7 @@ from riann_ros.magcal.records import (
     CALIBRATED,
     CALIBRATED_SD_RAD,
     CONVERGING,
+    DELAY_SD_S,
     GATE_CHI2,
     MAX_STEP_S,
     STATE_HEADINGS,
@@ -138,7 +139,7 @@ def windows_of(gyr: ArrayLike, dt: ArrayLike, mag_t: ArrayLike, delay_s: float =
     rot = quat.normalize(quat.multiply(quat.conjugate(qd[j]), qd[k]))
     rot = np.where(rot[:, :1] < 0, -rot, rot)
     ws = WindowSet(m[j] / UT, m[k] / UT, rot, t[k] - t[j], 2.0 * np.arccos(np.clip(rot[:, 0], -1.0, 1.0)),
-                   rate[j], rate[k])
+                   rate[j], rate[k], np.full(len(j), DELAY_SD_S))
     span = np.zeros(n + 1)
     np.add.at(span, j, 1.0)
     np.add.at(span, k, -1.0)

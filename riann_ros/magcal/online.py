@@ -34,6 +34,7 @@ from riann_ros.magcal.records import (
     CALIBRATED,
     CALIBRATED_SD_RAD,
     CONVERGING,
+    DELAY_SD_S,
     REFRESH_ANGLE_RAD,
     STATE_HEADINGS,
     SWITCH_WINDOWS,
@@ -85,12 +86,13 @@ class OnlineMagCalibrator:
         self._set_state()
 
     # -------------------------------------------------------------------------------------------------- per sample
-    def update(self, delta: Quat, dt: float, mag_t: Vec | None, delay_s: float = 0.0, q: Quat | None = None
-               ) -> Vec | None:
+    def update(self, delta: Quat, dt: float, mag_t: Vec | None, delay_s: float = 0.0, q: Quat | None = None,
+               delay_sd_s: float = DELAY_SD_S) -> Vec | None:
         """One sample: ``delta`` the bias-corrected gyro increment (sensor frame), ``dt`` its step (s), ``mag_t``
         the raw field (T; a reading that is not finite or outside riann_ros.mag's plausible 1 µT–1 mT counts as
-        none) or None, ``delay_s`` the magnetometer's latency (s), ``q`` the attitude (sensor →
-        world; only its tilt matters) when known. Returns the calibrated field (T) or None."""
+        none) or None, ``delay_s`` the magnetometer's latency (s) and ``delay_sd_s`` its standard deviation,
+        ``q`` the attitude (sensor → world; only its tilt matters) when known. Returns the calibrated field (T) or
+        None."""
         if q is not None:
             self.q = q
         m = None
@@ -99,7 +101,7 @@ class OnlineMagCalibrator:
             n2 = m[0] * m[0] + m[1] * m[1] + m[2] * m[2]
             if not _MIN2_UT <= n2 <= _MAX2_UT:  # not finite (NaN fails too), dead or saturated: no reading
                 m = None
-        w = self.windower.add(delta, dt, m, delay_s)
+        w = self.windower.add(delta, dt, m, delay_s, delay_sd_s)
         if w is not None:
             self._add_window(w)
         if m is None:

@@ -25,7 +25,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from riann_ros.magcal.records import MAX_DELAY_S, MAX_STEP_S, WINDOW_ANGLE_RAD, WINDOW_MAX_S, WINDOW_MIN_ANGLE_RAD
+from riann_ros.magcal.records import (
+    DELAY_SD_S,
+    MAX_DELAY_S,
+    MAX_STEP_S,
+    WINDOW_ANGLE_RAD,
+    WINDOW_MAX_S,
+    WINDOW_MIN_ANGLE_RAD,
+)
 from riann_ros.rotations import IDENTITY, Quat, Vec, conj, normalized, qmul
 
 _COS_HALF = math.cos(0.5 * WINDOW_ANGLE_RAD)
@@ -38,7 +45,8 @@ TURN_BACK_RAD = 5.0 * math.pi / 180.0
 @dataclass(frozen=True)
 class Window:
     """One window's constraint data: the raw readings at its ends (µT), the gyro rotation between them
-    (``q_end = q_start ⊗ rot``), its length (s), angle (rad) and the rotation rates at its ends (rad/s)."""
+    (``q_end = q_start ⊗ rot``), its length (s), angle (rad), the rotation rates at its ends (rad/s) and the
+    standard deviation of the latency its ends were taken at (s)."""
 
     m0_ut: Vec
     m1_ut: Vec
@@ -47,6 +55,7 @@ class Window:
     angle_rad: float
     rate0_rad_s: float
     rate1_rad_s: float
+    delay_sd_s: float = DELAY_SD_S
 
 
 @dataclass(frozen=True)
@@ -60,6 +69,7 @@ class WindowSet:
     angle_rad: NDArray[np.float64]
     rate0_rad_s: NDArray[np.float64]
     rate1_rad_s: NDArray[np.float64]
+    delay_sd_s: NDArray[np.float64]
 
     @classmethod
     def of(cls, windows: list[Window]) -> WindowSet:
@@ -67,7 +77,7 @@ class WindowSet:
             return np.array([getattr(w, name) for w in windows], dtype=float)
 
         return cls(col("m0_ut").reshape(-1, 3), col("m1_ut").reshape(-1, 3), col("rot").reshape(-1, 4),
-                   col("duration_s"), col("angle_rad"), col("rate0_rad_s"), col("rate1_rad_s"))
+                   col("duration_s"), col("angle_rad"), col("rate0_rad_s"), col("rate1_rad_s"), col("delay_sd_s"))
 
     def __len__(self) -> int:
         return len(self.duration_s)
@@ -95,6 +105,7 @@ class Windower:
         self.qa: Quat = IDENTITY  # the attitude at the window's first sample (for the angle test)
         self.t0 = 0.0
         self.rate0 = 0.0
+        self.delay_sd = self.delay_sd0 = DELAY_SD_S  # s; the latency's σ now, and at the open window's start
         self.best_angle = 0.0  # rad; the farthest reading of the open window from its start
         self.best: tuple[Vec, Quat, float, float] | None = None  # its (reading, attitude it saw, t, rate)
 
@@ -116,10 +127,12 @@ class Windower:
                 return normalized(tuple(a + f * (b - a) for a, b in zip(qa, qb, strict=True)))  # type: ignore[arg-type]
         return h[0][1]
 
-    def add(self, delta: Quat, dt: float, mag_ut: Vec | None, delay_s: float = 0.0) -> Window | None:
+    def add(self, delta: Quat, dt: float, mag_ut: Vec | None, delay_s: float = 0.0,
+            delay_sd_s: float = DELAY_SD_S) -> Window | None:
         """One sample: ``delta`` its bias-corrected gyro increment (sensor frame, ``q_k = q_{k−1} ⊗ delta``), ``dt``
-        its step (s), ``mag_ut`` its raw reading (µT, finite) or None, ``delay_s`` the magnetometer's latency.
-        Returns the window this sample closes, or None."""
+        its step (s), ``mag_ut`` its raw reading (µT, finite) or None, ``delay_s`` the magnetometer's latency and
+        ``delay_sd_s`` its standard deviation. Returns the window this sample closes, or None."""
+        self.delay_sd = delay_sd_s
         if not 0.0 < dt <= MAX_STEP_S:
             self.restart()
             return None
@@ -173,13 +186,15 @@ class Windower:
         self.q0 = self._reading_attitude(delay_s)
         self.t0 = self.t
         self.rate0 = _rate(delta, dt)
+        self.delay_sd0 = self.delay_sd
         self.best_angle, self.best = 0.0, None
 
     def _close(self, m: Vec, q1: Quat, rate1: float, t1: float | None = None) -> Window:
         """The window from the start to the reading ``m`` (the attitude ``q1`` it saw, the rate ``rate1`` then, at
         time ``t1``: now when None)."""
         rot = normalized(qmul(conj(self.q0), q1))
-        w = Window(self.m0, m, rot, (self.t if t1 is None else t1) - self.t0, _angle(rot), self.rate0, rate1)
+        w = Window(self.m0, m, rot, (self.t if t1 is None else t1) - self.t0, _angle(rot), self.rate0, rate1,
+                   max(self.delay_sd0, self.delay_sd))
         self.open = False
         self.q = normalized(self.q)
         return w

@@ -32,7 +32,7 @@ from riann_ros.constants import DEG
 from riann_ros.defaults import MAG_HEADING_SD_DEG
 from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
-from riann_ros.magcal.records import GYRO_BIAS_RESIDUAL_SD_RAD_S
+from riann_ros.magcal.records import DELAY_SD_S, GYRO_BIAS_RESIDUAL_SD_RAD_S
 from riann_ros.rotations import IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
 
 # VQF's defaults (vqf 2.1.2 VQFParams): magnetic disturbance rejection
@@ -209,7 +209,8 @@ class MagHeading:
         """The sample through the online calibration (every sample: its gyro extends the open window); the calibrated
         field or None. When its prior is rejected the next field sets the heading anew."""
         assert self.cal is not None
-        out = self.cal.update(delta, dt, mag, self.delay, q)
+        sd = self.latency.sd(DELAY_SD_S) if self.estimate_delay else DELAY_SD_S
+        out = self.cal.update(delta, dt, mag, self.delay, q, sd)
         if self.trusted != self.cal.trusted:  # rejected, or (a changed magnetic situation) restored
             self.trusted, self.cal_sd, self.switch = self.cal.trusted, 0.0, True
         return out
