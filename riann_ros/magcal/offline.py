@@ -7,8 +7,13 @@ same recording: the windows that fail the online gate against its final estimate
 another magnetic situation: BROAD trial 33 has a magnet attached for 55 of its 125 s of motion, more windows than
 the rest; the fit, like the online calibration, is the situation at the recording's end). At the robust solution the
 weighted normal equations are solved once more with the online rule (only directions the windows observe at least
-as well as the prior move, :func:`~.model.posterior`); for the covariance their information is divided by the
-variance of unit weight (when above 1) and by the windows' overlap (:func:`windows_of`), so it is not overstated.
+as well as the prior move, :func:`~.model.posterior`), their information divided by the variance of unit weight (when
+above 1) and by how many windows share each one's noise, measured from their residuals (:func:`shared_noise`); for
+the covariance it is divided by the variance of unit weight and by the windows' overlap (:func:`windows_of`, the
+most that can share a reading or a gyro path), so it is not overstated. The misalignment's prior (1°) is tight: a
+non-symmetric soft iron of a few degrees is observed about as well as the prior knows it when the information is
+divided by the overlap (~100 windows cover each stretch of rich rotation), only a few windows share one another's
+noise, and a misalignment held at the prior biases the hard iron by about a µT.
 
 Why not the ``magyc`` package (MAGYC, Rodríguez-Martínez et al. 2024): its 1.0.0 wheel requires ``numpy < 2``
 (this project pins numpy 2.4) and pulls gtsam, jax, jaxlib, navlib, lcm and pyproj; its batch least-squares
