@@ -7,8 +7,13 @@ same recording: the windows that fail the online gate against its final estimate
 another magnetic situation: BROAD trial 33 has a magnet attached for 55 of its 125 s of motion, more windows than
 the rest; the fit, like the online calibration, is the situation at the recording's end). At the robust solution the
 weighted normal equations are solved once more with the online rule (only directions the windows observe at least
-as well as the prior move, :func:`~.model.posterior`); for the covariance their information is divided by the
-variance of unit weight (when above 1) and by the windows' overlap (:func:`windows_of`), so it is not overstated.
+as well as the prior move, :func:`~.model.posterior`), their information divided by the variance of unit weight (when
+above 1) and by how many windows share each one's noise, measured from their residuals (:func:`shared_noise`); for
+the covariance it is divided by the variance of unit weight and by the windows' overlap (:func:`windows_of`, the
+most that can share a reading or a gyro path), so it is not overstated. The misalignment's prior (1°) is tight: a
+non-symmetric soft iron of a few degrees is observed about as well as the prior knows it when the information is
+divided by the overlap (~100 windows cover each stretch of rich rotation), only a few windows share one another's
+noise, and a misalignment held at the prior biases the hard iron by about a µT.
 
 Why not the ``magyc`` package (MAGYC, Rodríguez-Martínez et al. 2024): its 1.0.0 wheel requires ``numpy < 2``
 (this project pins numpy 2.4) and pulls gtsam, jax, jaxlib, navlib, lcm and pyproj; its batch least-squares
@@ -52,6 +57,9 @@ from riann_ros.magcal.windows import WindowSet
 ROBUST_SCALE = 2.0  # the Cauchy loss bends at this many robust standard deviations of the whitened residuals
 MAD_TO_SD = 1.4826  # a normal distribution's standard deviation per median absolute deviation
 MAX_WINDOWS = 20_000  # windows of one fit at most (the stacked system is 3 rows per window: a few MB)
+#: the autocorrelation's sum runs over lags up to this many times its running value (Sokal's automatic window: long
+#: enough to hold the correlation, short enough that the estimate's noise stays small)
+CORRELATION_WINDOW = 5.0
 
 
 @dataclass(frozen=True)
@@ -165,6 +173,27 @@ def _consistent(model: CalModel, ws: WindowSet, theta: Array, cov: Array) -> NDA
     return d2 <= GATE_CHI2
 
 
+def shared_noise(z: Array, overlap: float) -> float:
+    """How many windows share each window's noise: the integrated autocorrelation time of the windows' whitened
+    residuals ``z`` (3 per window) in the order the windows start, summed over lags up to
+    :data:`CORRELATION_WINDOW` times its running value; between 1 and ``overlap`` (windows that share no stretch of
+    rotation share no reading and no gyro path: independent, as online)."""
+    x = z.reshape(-1, 3)
+    x = x - x.mean(axis=0)
+    w = len(x)
+    var = float(np.sum(x * x))
+    if w < 2 or var <= 0.0:
+        return 1.0
+    size = 1 << (2 * w - 1).bit_length()
+    f = np.fft.rfft(x, n=size, axis=0)
+    acf = np.fft.irfft(np.sum(f * np.conj(f), axis=1), n=size)[:w] / var  # Σ over lag-l pairs, per component
+    tau = 2.0 * np.cumsum(acf) - 1.0  # 1 + 2 Σ_{l=1..L} ρ_l
+    lag = np.arange(w)
+    inside = lag < CORRELATION_WINDOW * tau
+    end = int(np.argmin(inside)) if not inside.all() else w - 1
+    return float(min(max(tau[end], 1.0), max(overlap, 1.0)))
+
+
 def fit_windows(ws: WindowSet, overlap: float = 1.0, prior: MagCalPrior | None = None,
                 soft_iron_model: SoftIronModel = "full", start: tuple[Array, Array] | None = None
                 ) -> tuple[CalModel, Array, Array, Array, int]:
@@ -204,12 +233,15 @@ def fit_windows(ws: WindowSet, overlap: float = 1.0, prior: MagCalPrior | None =
     wts = 1.0 / (1.0 + (z / fs) ** 2)  # the Cauchy loss's weight per residual
     unit = max(1.0, float(np.sum(wts * z * z) / max(len(z) - model.n, 1)))
     # the robust weights' normal equations with the online rule (only directions the windows observe move): the
-    # estimate from all windows, its covariance from their information divided by the variance of unit weight and
-    # their overlap (shared noise is not independent information)
+    # estimate from all windows, moving the directions whose information, divided by the variance of unit weight and
+    # by how many windows share each one's noise (their residuals' correlation), is at least the prior's; the
+    # covariance from their information divided by the variance of unit weight and by the windows covering each
+    # stretch of rotation (the most that can share a reading or a gyro path: it also covers a systematic error the
+    # residuals do not show, as a latency error the hard iron absorbs)
     jw = j * wts[:, None]
-    k = unit * overlap
     lam_d, eta_d = jw.T @ j, -(jw.T @ r0)
-    theta = posterior(lam0, theta0, lam_d, eta_d, overstated=k)[0]
+    theta = posterior(lam0, theta0, lam_d, eta_d, overstated=unit * shared_noise(z * np.sqrt(wts), overlap))[0]
+    k = unit * overlap
     cov = model.with_floor(posterior(lam0, theta0, lam_d / k, eta_d / k)[1])
     outliers = left_out + int(np.count_nonzero((wts.reshape(-1, 3) < 0.5).any(axis=1)))
     return model, theta, cov, z, outliers
