@@ -24,6 +24,8 @@ MAX_DELAY = 0.1  # s; the largest latency compensated
 #: standard deviation of a uniform distribution over it). DELAY_PRIOR is the weight of this much doubt.
 DELAY_PRIOR_SD = MAX_DELAY / math.sqrt(12.0)
 _NOISE2 = DELAY_PRIOR * DELAY_PRIOR_SD * DELAY_PRIOR_SD  # a window's normalised noise variance (class docstring)
+#: degrees of freedom the prior's noise variance weighs as in the windows' own (their residuals, forgotten alike)
+NOISE_PRIOR_DOF = 30.0
 _B_PRIOR = _NOISE2 / (HARD_IRON_PRIOR_SD_T * HARD_IRON_PRIOR_SD_T)  # the weight of b's prior (b in T)
 
 
@@ -32,9 +34,9 @@ class LatencyEstimator:
 
     A constant world field seen by a rotating sensor obeys ``m(t₁) = R(ρ)ᵀ m(t₀)``, ``ρ`` the gyro's rotation
     from ``t₀`` to ``t₁``. A field read ``D`` late rotates as the gyro did ``D`` earlier; to first order the
-    prediction error over a window is ``e = m₁ − R(ρ)ᵀ m₀ ≈ D g + (I − R(ρ)ᵀ) b`` with ``g = ω₁ × R(ρ)ᵀ m₀ −
-    R(ρ)ᵀ (ω₀ × m₀)`` (``ω₀``, ``ω₁`` the rates at the window's ends) and ``b`` what is left of a hard iron in the
-    field it is given (a magnetometer not calibrated yet: ``b`` is tens of µT, and over the short windows its term
+    prediction error over a window is ``e = m₁ − R(ρ)ᵀ m₀ ≈ D g + (I − R(ρ)ᵀ) b`` with ``g = ω₁ × R(ρ)ᵀ u₀ −
+    R(ρ)ᵀ (ω₀ × u₀)`` (``ω₀``, ``ω₁`` the rates at the window's ends, ``u₀ = m₀ − b`` with the last fit's ``b``) and
+    ``b`` what is left of a hard iron in the field it is given (a magnetometer not calibrated yet: ``b`` is tens of µT, and over the short windows its term
     is correlated with ``g``, so a fit of ``D`` alone would take it for latency). ``D`` and ``b`` are the joint
     least-squares fit over windows of :data:`WINDOW` s with exponential forgetting (:data:`DELAY_TAU`), each
     window normalised by its ``|m₀|``, started from a prior (the ``mag_delay`` parameter, weight
@@ -42,8 +44,9 @@ class LatencyEstimator:
     :data:`~riann_ros.magcal.records.HARD_IRON_PRIOR_SD_T`). Windows carry information only while the rate
     changes, so at rest the estimate holds. Noise in the field enters ``e`` and ``g`` in ways that cancel in ``e·g``
     (``n · (ω × n) = 0``), so the fit is unbiased by it. Windows with a disturbed field are not used (the model
-    needs a constant world field). :meth:`sd` is the fit's standard deviation: the windows' normalised noise is
-    the one :data:`DELAY_PRIOR` weighs :data:`DELAY_PRIOR_SD` with.
+    needs a constant world field). :meth:`sd` is the fit's standard deviation, with the windows' normalised noise
+    variance measured from their residuals (started from the one :data:`DELAY_PRIOR` weighs :data:`DELAY_PRIOR_SD`
+    with, worth :data:`NOISE_PRIOR_DOF` degrees of freedom).
     """
 
     def __init__(self) -> None:
@@ -56,9 +59,11 @@ class LatencyEstimator:
         self.t = 0.0  # s since the window's start
         self.normal = np.zeros((4, 4))  # Σ AᵀA of the windows (forgotten), A = [g, I − R(ρ)ᵀ] / |m₀|
         self.rhs = np.zeros(4)  # Σ Aᵀe
+        self.see = self.count = 0.0  # Σ eᵀe, Σ 1 (the residuals' scale)
         self.windows = 0
         self._fit_for: tuple[float, int] | None = None  # (prior, windows) of the cached solution
         self._d = self._var = 0.0
+        self._b = (0.0, 0.0, 0.0)  # T; the hard iron of the last solution
 
     def delay(self, start: float) -> float:
         """The latency to compensate (s): the fit with ``start`` as its prior, within [0, MAX_DELAY]."""
@@ -77,7 +82,10 @@ class LatencyEstimator:
         prior = np.diag([DELAY_PRIOR, _B_PRIOR, _B_PRIOR, _B_PRIOR])
         cov = np.linalg.inv(self.normal + prior)
         x = cov @ (self.rhs + prior[:, 0] * start)
-        self._d, self._var = float(x[0]), _NOISE2 * float(cov[0, 0])
+        rss = max(self.see - 2.0 * float(x @ self.rhs) + float(x @ self.normal @ x), 0.0)
+        noise2 = (_NOISE2 * NOISE_PRIOR_DOF + rss) / (NOISE_PRIOR_DOF + max(3.0 * self.count - 4.0, 0.0))
+        self._d, self._var = float(x[0]), noise2 * float(cov[0, 0])
+        self._b = (float(x[1]), float(x[2]), float(x[3]))
         self._fit_for = (start, self.windows)
 
     def add(self, delta: Quat, rv: Vec, dt: float,
@@ -102,10 +110,14 @@ class LatencyEstimator:
         assert m0 is not None
         rc = (self.rho[0], -self.rho[1], -self.rho[2], -self.rho[3])
         p = rotate(rc, m0)
+        if self._fit_for is None or self._fit_for[1] != self.windows:
+            self._solve(0.0 if self._fit_for is None else self._fit_for[0])
+        b = self._b
+        u0 = (m0[0] - b[0], m0[1] - b[1], m0[2] - b[2])  # the field the latency delays: without the hard iron
         w0, w1 = self.w0, self.w
-        c0 = rotate(rc, cross(w0, m0))
-        c1 = cross(w1, p)
-        n = math.sqrt(m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2])
+        c0 = rotate(rc, cross(w0, u0))
+        c1 = cross(w1, rotate(rc, u0))
+        n = math.sqrt(u0[0] * u0[0] + u0[1] * u0[1] + u0[2] * u0[2])
         if n <= 0.0:
             return
         a = np.empty((3, 4))
@@ -116,4 +128,6 @@ class LatencyEstimator:
         f = math.exp(-self.t / DELAY_TAU)
         self.normal = f * self.normal + a.T @ a
         self.rhs = f * self.rhs + a.T @ e
+        self.see = f * self.see + float(e @ e)
+        self.count = f * self.count + 1.0
         self.windows += 1
