@@ -9,14 +9,16 @@ motion is rich, and not the common scale of ``(A, c)`` (the field's strength), w
 
 **Online** (:class:`~.online.OnlineMagCalibrator`). Per sample, in plain floats: the gyro increment extends the open
 window (one quaternion product) and the reading is calibrated with the current estimate. A window closes once the
-sensor has turned 45° (or, after 5 s, 15°; less is dropped: no information), so nothing moves at rest or in
-straight motion. Per window, in numpy: its innovation is gated (χ², 3 degrees of freedom, 99.9 %) against its
-noise (readings, the field's change along the path, the gyro's bias residual, scale error and the latency's
-uncertainty times the field) plus the estimate's own uncertainty; a passing window is added to the information-form
+sensor has turned 45°, or at the farthest reading of a swing that comes back before (or of 5 s) if that is at least
+15° (less is dropped: no information), so nothing moves at rest or in straight motion. Per window, in numpy: its
+innovation is gated (χ², 3 degrees of freedom, 99.9 %) against its noise (readings, the field's change along the
+path, the gyro's bias residual, scale error and the latency fit's σ times the rate and the field) plus the
+estimate's own uncertainty; a passing window is added to the information-form
 least squares that started from the prior (the configured or saved calibration), keeping the data only in the
 directions it knows at least as well as the prior, so a direction the motion does not observe stays at its prior
 (the hard iron along a ground robot's vertical). Nothing is forgotten. Twenty consecutive rejected windows that agree
-with one another replace the estimate (a magnet added or removed). Soft-iron models: ``full`` (default: includes
+with one another replace the estimate (a magnet added or removed), or restore a rejected prior when they agree with
+it. Soft-iron models: ``full`` (default: includes
 the magnetometer's misalignment to the gyro, which the constraint observes; prior 1°), ``symmetric``, ``none``.
 
 **What it knows.** The posterior covariance (scaled up by the variance of unit weight, with a systematic floor of
