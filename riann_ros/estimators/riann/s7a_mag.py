@@ -184,7 +184,7 @@ class MagHeading:
         w = to_rotvec(delta)
         rate = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / dt if dt > 0.0 else 0.0
         self.gyr_lp += dt / (GYR_LP_TAU + dt) * (rate - self.gyr_lp)
-        if self.estimate_delay:
+        if self.estimate_delay or self.cal is not None:  # (the calibration's windows use the estimate either way)
             self.latency.add(delta, w, dt, None if self.disturbed else mag)
         if self.estimate_delay or self.mag_delay > 0.0:
             r = self._delay_rotation(delta, dt)
@@ -209,8 +209,8 @@ class MagHeading:
         """The sample through the online calibration (every sample: its gyro extends the open window); the calibrated
         field or None. When its prior is rejected the next field sets the heading anew."""
         assert self.cal is not None
-        sd = self.latency.sd(DELAY_SD_S) if self.estimate_delay else DELAY_SD_S
-        out = self.cal.update(delta, dt, mag, self.delay, q, sd)
+        lat = self.latency  # the windows' ends at the estimated latency, whether the heading compensates it or not
+        out = self.cal.update(delta, dt, mag, lat.delay(self.mag_delay), q, lat.sd(DELAY_SD_S))
         if self.trusted != self.cal.trusted:  # rejected, or (a changed magnetic situation) restored
             self.trusted, self.cal_sd, self.switch = self.cal.trusted, 0.0, True
         return out
