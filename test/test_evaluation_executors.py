@@ -1,8 +1,8 @@
 """Where riann-bag-eval's unit of work runs (riann_ros.evaluation.executors): on a real Dask cluster — a scheduler
 and two workers started with the venv's ``dask scheduler`` / ``dask worker`` over TCP on localhost — the results
-equal ``--jobs 2``'s row by row; a worker killed mid-run loses only its input, which runs again on the other; an input
-the workers cannot see fails at once, naming the worker; ``local:N``; without Dask, ``--scheduler`` says how to
-install it."""
+equal ``--jobs 2``'s row by row, in 9D, with the inputs in reverse order; a worker killed mid-run loses only its
+input, which runs again on the other; an input the workers cannot see fails at once, naming the worker; ``local:N``;
+without Dask, ``--scheduler`` says how to install it."""
 
 from __future__ import annotations
 
