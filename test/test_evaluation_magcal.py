@@ -62,3 +62,27 @@ def test_score_from_is_a_command_line_option():
 
     args = build_parser().parse_args(["x.mcap", "--score-from", "60"])
     assert args.score_from == 60.0
+
+
+def test_an_inputs_results_do_not_depend_on_the_inputs_evaluated_before_it_in_the_process():
+    """A worker (--jobs, Dask) evaluates one input after another: each run's estimators start afresh (a reset keeps
+    what belongs to the robot, e.g. the calibration front end's fit of the magnetometer's latency), so an input's
+    rows are those it gets alone, whichever inputs the worker ran before."""
+    rec = robot_with_field()
+    other = robot_with_field()
+    late = 5  # samples (50 ms): the other input's magnetometer lags the gyro, which its latency fit learns
+    other.mag = np.vstack([np.repeat(other.mag[:1], late, axis=0), other.mag[:-late]])
+    settings = ev.EvalSettings(estimators=ev.parse_estimators("madgwick,mahony,vqf"), scenarios=[ev.AS_RECORDED],
+                               conditions=[ev.parse_condition("magnetic:offset:15,-10,5")])
+    alone = ev.evaluate_source("a.mcap", settings, recording=rec)
+    assert ev.evaluate_source("b.mcap", settings, recording=other).error is None
+    after = ev.evaluate_source("a.mcap", settings, recording=rec)
+    assert alone.error is None and after.error is None and len(alone.rows) == 3
+    for a, b in zip(alone.rows, after.rows, strict=True):
+        ra, rb = a.to_dict(), b.to_dict()
+        assert ra["sensors"] == "9D" and np.isfinite(ra["yaw_nees"])
+        for k in ra.keys() - {"seconds", "cpu_seconds"}:
+            if isinstance(ra[k], float):
+                assert ra[k] == pytest.approx(rb[k], rel=1e-12, abs=1e-12, nan_ok=True), (ra["estimator"], k)
+            else:
+                assert ra[k] == rb[k], (ra["estimator"], k)

@@ -39,18 +39,14 @@ class Runner(Protocol):
     def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run: ...
 
 
-_ESTIMATORS: dict[tuple[EstimatorSpec, int], AttitudeEstimator] = {}  # reused across sequences in a worker
-
-
 class _OfflineRun:
-    def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int, use_mag: str = "auto") -> None:
-        self.streams = []
-        for spec in specs:
-            est = _ESTIMATORS.get((spec, slot))
-            if est is None:
-                est = _ESTIMATORS[(spec, slot)] = spec.create()
-            est.reset()
-            self.streams.append(EstimatorStream(est, gate, MagConfig(use_mag=use_mag)))
+    """Each estimator created anew for the run, so that a run's results depend on its input alone, whatever ran
+    before it in the process (executors.py: every executor gives the same results). A reset would not do: it keeps
+    what belongs to the robot rather than to a run of the filter, e.g. the online magnetometer calibration's latency
+    fit (:class:`~riann_ros.estimators.magcal_slot.MagCalSlot`). Creating one costs little (RIANN: ~20 ms)."""
+
+    def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, use_mag: str = "auto") -> None:
+        self.streams = [EstimatorStream(spec.create(), gate, MagConfig(use_mag=use_mag)) for spec in specs]
         self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
         self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimator (N, 3): σ, state
 
@@ -100,7 +96,7 @@ class OfflineRunner:
         self.use_mag = use_mag
 
     def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
-        return _OfflineRun(specs, gate, slot, self.use_mag)
+        return _OfflineRun(specs, gate, self.use_mag)
 
 
 class _RecordedRun:
