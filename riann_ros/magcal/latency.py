@@ -36,11 +36,11 @@ class LatencyEstimator:
     from ``t₀`` to ``t₁``. A field read ``D`` late rotates as the gyro did ``D`` earlier; to first order the
     prediction error over a window is ``e = m₁ − R(ρ)ᵀ m₀ ≈ D g + (I − R(ρ)ᵀ) b`` with ``g = ω₁ × R(ρ)ᵀ u₀ −
     R(ρ)ᵀ (ω₀ × u₀)`` (``ω₀``, ``ω₁`` the rates at the window's ends, ``u₀ = m₀ − b`` with the last fit's ``b``) and
-    ``b`` what is left of a hard iron in the field it is given (a magnetometer not calibrated yet: ``b`` is tens of µT, and over the short windows its term
-    is correlated with ``g``, so a fit of ``D`` alone would take it for latency). ``D`` and ``b`` are the joint
-    least-squares fit over windows of :data:`WINDOW` s with exponential forgetting (:data:`DELAY_TAU`), each
-    window normalised by its ``|m₀|``, started from a prior (the ``mag_delay`` parameter, weight
-    :data:`DELAY_PRIOR`; ``b``: zero, the calibration's prior σ per axis,
+    ``b`` what is left of a hard iron in the field it is given (a magnetometer not calibrated yet: ``b`` is tens of
+    µT, and over the short windows its term is correlated with ``g``, so a fit of ``D`` alone would take it for
+    latency). ``D`` and ``b`` are the joint least-squares fit over windows of :data:`WINDOW` s with exponential
+    forgetting (:data:`DELAY_TAU`), each window normalised by its ``|m₀|``, started from a prior (the ``mag_delay``
+    parameter, weight :data:`DELAY_PRIOR`; ``b``: zero, the calibration's prior σ per axis,
     :data:`~riann_ros.magcal.records.HARD_IRON_PRIOR_SD_T`). Windows carry information only while the rate
     changes, so at rest the estimate holds. Noise in the field enters ``e`` and ``g`` in ways that cancel in ``e·g``
     (``n · (ω × n) = 0``), so the fit is unbiased by it. Windows with a disturbed field are not used (the model
