@@ -303,3 +303,17 @@ def test_a_swing_closes_its_window_at_its_farthest_reading():
     assert w.m1_ut[0] == pytest.approx(200.0, abs=2.0)  # the reading at the swing's end (t = 2 s)
     assert 200 < i < 300 and np.degrees(TURN_BACK_RAD) < 20.0  # closed once the sensor came back, not at the timeout
     assert windows(10.0) == []
+
+
+def test_a_slow_steady_turn_closes_its_window_at_the_timeout():
+    """Turning at 6 °/s (45° would take 7.5 s): the window closes at WINDOW_MAX_S with the 30° turned by then."""
+    from riann_ros.magcal.records import WINDOW_MAX_S
+    from riann_ros.magcal.windows import Windower
+
+    w = Windower()
+    d = tuple(quat.from_rotvec(np.array([[0.0, 0.0, np.radians(6.0) * 0.01]]))[0])
+    got = [(i, x) for i in range(1200) if (x := w.add(d, 0.01, (40.0, 0.0, 0.0))) is not None]
+    assert len(got) >= 2
+    first = got[0][1]
+    assert first.duration_s == pytest.approx(WINDOW_MAX_S, abs=0.02)
+    assert np.degrees(first.angle_rad) == pytest.approx(30.0, abs=0.2)

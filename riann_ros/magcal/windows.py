@@ -162,10 +162,12 @@ class Windower:
         if c <= _COS_HALF:
             return self._close(mag_ut, self._reading_attitude(delay_s), _rate(delta, dt))
         angle = 2.0 * math.acos(min(1.0, c))
-        if angle > self.best_angle:
+        if angle > self.best_angle:  # still turning away from the start
             self.best_angle = angle
             if angle >= WINDOW_MIN_ANGLE_RAD:
                 self.best = (mag_ut, self._reading_attitude(delay_s), self.t, _rate(delta, dt))
+                if timed:  # a slow turn: the window closes here, the next reading starts the next one
+                    return self._close(*self.best[:2], self.best[3])
         elif self.best is not None and (timed or angle <= self.best_angle - TURN_BACK_RAD):
             m, q1, t1, rate1 = self.best  # the swing's end: the window closes there, the next one starts here
             w = self._close(m, q1, rate1, t1)
