@@ -126,3 +126,20 @@ def test_windows_that_observe_nothing_of_the_difference_do_not_restore_a_rejecte
     feed_wobble(cal, inc, q, np.full(len(t), 0.01), distort(q, h * UT, noise_t=0.4e-6, seed=3))
     assert not cal.trusted
     assert np.abs(np.array(cal.calibration().hard_iron_t) / UT - h).max() < 1.5
+
+
+def test_the_estimate_is_used_as_soon_as_the_windows_make_the_configured_calibration_the_less_probable():
+    """A wrong configured calibration: the readings get the estimate from the window that makes it the less probable
+    hypothesis on, before the test has rejected it for good (which waits for evidence beyond the two windows that
+    contradict it most); a right one keeps being used."""
+    rec = recording()
+    raw = distort(rec.quat_ref, H_UT * UT, noise_t=0.4e-6, seed=1)
+    cal = OnlineMagCalibrator()
+    states = []
+    inc = quat.from_rotvec(rec.gyr * rec.dt[:, None]).tolist()
+    for d, dt, m, q in zip(inc, rec.dt.tolist(), raw.tolist(), rec.quat_ref.tolist(), strict=True):
+        cal.update(tuple(d), dt, tuple(m), 0.0, tuple(q))
+        states.append((cal.trusted, cal.test.holds, cal.test.p_holds))
+    first = next(i for i, s in enumerate(states) if not s[0])
+    assert states[first][1] and states[first][2] < 0.5  # in use: the estimate; rejected for good: not yet
+    assert not states[-1][1]

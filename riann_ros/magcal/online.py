@@ -125,14 +125,14 @@ class OnlineMagCalibrator:
         while the last window contradicted the estimate (the field disturbed, or the magnetic situation changed:
         nothing is known of the calibration until a window agrees again or a new estimate replaces it). While the
         prior holds: the share of the doubt about it (:mod:`.hypothesis`)."""
-        doubt = 1.0 - self.test.p_holds if self.test.holds else 1.0
+        doubt = 1.0 - self.test.p_holds if self.trusted else 1.0
         if doubt < UNDOUBTED:
             return 0.0
         fx, fy = field_world_t[0], field_world_t[1]
         fh = math.sqrt(fx * fx + fy * fy)
         if fh <= 0.0:
             return math.pi
-        if self.test.holds:  # the field calibrated as configured: the mixture's share (riann_ros.magcal.hypothesis)
+        if self.trusted:  # the field calibrated as configured: the mixture's share (riann_ros.magcal.hypothesis)
             s1 = self._heading_sd(q, fx / fh, fy / fh, fh)
             d = 0.0 if self.m_last is None else heading_gap(self._est_a, self._est_c, self.m_last, q, field_world_t)
             return min(math.sqrt(doubt * (s1 * s1 + d * d)), math.pi)
@@ -153,7 +153,7 @@ class OnlineMagCalibrator:
         """T; the calibrated field's σ in its worst direction for the current orientation: how far its norm and
         dip can be off through the calibration alone (a disturbance test against a learned reference should widen
         its band by a few of these while the calibration converges); 0 while the prior holds."""
-        if self.test.holds:
+        if self.trusted:
             return 0.0
         self._maybe_refresh()
         return self.field_sd_ut * UT
@@ -205,8 +205,10 @@ class OnlineMagCalibrator:
 
     @property
     def trusted(self) -> bool:
-        """The prior still holds: the readings are calibrated with it as configured (module docstring)."""
-        return self.test.holds
+        """The readings are calibrated with the prior as configured: it holds, and the windows so far make it the
+        more probable hypothesis (:attr:`~.hypothesis.PriorTest.p_holds` at least ½); otherwise with the estimate,
+        which takes over for good once the test rejects the prior."""
+        return self.test.holds and self.test.p_holds >= 0.5
 
     def _candidate(self, j: Array, r0: Array, ws: WindowSet) -> None:
         """A rejected window goes to the candidate (restarted from the prior when it does not fit the candidate
@@ -251,7 +253,7 @@ class OnlineMagCalibrator:
         return self.model.with_floor(self.est.cov * max(1.0, self.unit_weight))
 
     def _cache(self) -> None:
-        theta = self.theta0 if self.test.holds else self.theta  # the calibration the readings get
+        theta = self.theta0 if self.trusted else self.theta  # the calibration the readings get
         a = self.model.soft_iron(theta)
         self._a = tuple(float(v) for v in a.reshape(9))
         self._c = tuple(float(v) for v in theta[self.model.p:])
