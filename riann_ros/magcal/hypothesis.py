@@ -6,9 +6,10 @@ motors, battery and frame add tens of µT nobody measured). The windows' gyro-ai
 the two apart: under ``H₀`` ("``θ₀`` is right") each window's residual at ``θ₀`` is the window's noise plus what
 the tolerance allows; under ``H₁`` ("``θ`` is unknown, the prior's σ") the windows point to another ``θ``.
 
-While ``H₀`` holds the field is used as configured and the calibration adds nothing to the heading's σ (the
-heading is that of a calibrated sensor); once the windows reject it, the calibration's own estimate and σ take over
-for the rest of the robot's run (the decision is kept over a reset and a hole: the sensor is the same).
+While ``H₀`` holds and is the more probable hypothesis (:attr:`PriorTest.p_holds` ≥ ½) the field is used as
+configured, with the doubt the windows leave in the heading's σ; while the windows make it the less probable one,
+the calibration's own estimate and σ are used; once the test rejects it, they take over for the rest of the robot's
+run (the decision is kept over a reset and a hole: the sensor is the same).
 
 The test (:meth:`PriorTest.add`) is the generalised likelihood ratio of ``H₀`` against ``H₁`` on the windows the
 estimate holds: ``D² = δᵀ Λ_d (I + C_tol Λ_d)⁻¹ δ`` with ``δ = θ̂ − θ₀``, ``Λ_d`` the windows' information and

@@ -17,8 +17,9 @@ current tilt is at most :data:`CALIBRATED_SD_RAD`, *uncalibrated* while no windo
 in between.
 
 The prior as a hypothesis (:mod:`.hypothesis`): while the windows are consistent with the configured (or saved)
-calibration, the readings are calibrated with it as it is and :meth:`heading_sd_rad` adds nothing (the heading is a
-calibrated sensor's); once they reject it (:attr:`trusted` False, for good), the estimate and its σ take over.
+calibration and make it the more probable hypothesis, the readings are calibrated with it as it is and
+:meth:`heading_sd_rad` adds only the doubt they leave (:attr:`trusted`); otherwise with the estimate and its σ, for
+good once the test rejects the prior.
 """
 
 from __future__ import annotations
