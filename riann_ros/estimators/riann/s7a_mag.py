@@ -14,14 +14,14 @@ correction is a rotation about the world vertical: the inclination is never chan
 With the online calibration (:attr:`MagHeading.cal`, :mod:`riann_ros.magcal`) the raw field goes to it first, and
 all of the above sees the calibrated field. While the configured calibration is used (it holds the gyro-aided test,
 :mod:`riann_ros.magcal.hypothesis`, as the more probable hypothesis) nothing else changes. Once the estimate is used
-instead the heading starts over from the next field (the one it has was set by a field calibrated wrongly), and each field heading counts as much as the
-calibration knows it: its weight is ``1/(σ_m² + σ_c²)`` (``σ_c`` the heading σ the calibration adds at this sample,
-``σ_m`` the field heading's own, stage 8's MAG_SD): the gain is ``dt/tau_mag · σ_m²/(σ_m² + σ_c²)``, and the start's
-inverse-variance mean stays open while ``σ_c > σ_m``; the disturbance test widens its norm and dip bands by three
-of the calibrated field's σ. While the configured calibration is used its gains are today's: no other source of
-heading exists that the field could be weighed against (the gyro's heading came from the same field); the doubt
-the windows leave about it goes to stage 8's σ (:attr:`MagHeading.doubt_sd`). docs/magnetometer.md has the
-physics.
+instead the heading starts over from the next field (the one it has was set by a field calibrated otherwise), and
+each field heading counts as much as the calibration knows it: its weight is ``1/(σ_m² + σ_c²)`` (``σ_c`` the
+heading σ the calibration adds at this sample, ``σ_m`` the field heading's own, stage 8's MAG_SD): the gain is
+``dt/tau_mag · σ_m²/(σ_m² + σ_c²)``, and the start's inverse-variance mean stays open while ``σ_c > σ_m``; the
+disturbance test widens its norm and dip bands by three of the calibrated field's σ. While the configured
+calibration is used its gains are the usual ones: no other source of heading exists that the field could be weighed
+against (the gyro's heading came from the same field); the doubt the windows leave about it goes to stage 8's σ
+(:attr:`MagHeading.doubt_sd`). docs/magnetometer.md has the physics.
 """
 
 from __future__ import annotations
