@@ -121,11 +121,10 @@ class OnlineMagCalibrator:
         self.windower.restart()
 
     def heading_sd_rad(self, q: Quat, field_world_t: Vec) -> float:
-        """rad; the σ the calibration adds to the heading of this sample: ``q`` its attitude (sensor → world),
-        ``field_world_t`` its calibrated field in the world frame (``R(q) m``, T). π when the field is vertical, and
-        while the last window contradicted the estimate (the field disturbed, or the magnetic situation changed:
-        nothing is known of the calibration until a window agrees again or a new estimate replaces it). While the
-        prior holds: the share of the doubt about it (:mod:`.hypothesis`)."""
+        """rad; the σ the calibration adds to the heading of this sample (``q`` its attitude, sensor → world;
+        ``field_world_t`` its calibrated field, world frame, T): π with a vertical field, and while the last window
+        contradicted the estimate (disturbed, or a changed magnetic situation); while the prior is used, the share of
+        the doubt about it (:mod:`.hypothesis`)."""
         doubt = 1.0 - self.test.p_holds if self.trusted else 1.0
         if doubt < UNDOUBTED:
             return 0.0
@@ -206,9 +205,8 @@ class OnlineMagCalibrator:
 
     @property
     def trusted(self) -> bool:
-        """The readings are calibrated with the prior as configured: it holds, and the windows so far make it the
-        more probable hypothesis (:attr:`~.hypothesis.PriorTest.p_holds` at least ½); otherwise with the estimate,
-        which takes over for good once the test rejects the prior."""
+        """The readings get the prior as configured: it holds and is the more probable hypothesis (else the
+        estimate)."""
         return self.test.holds and self.test.p_holds >= 0.5
 
     def _candidate(self, j: Array, r0: Array, ws: WindowSet) -> None:
