@@ -205,8 +205,7 @@ class OnlineMagCalibrator:
 
     @property
     def trusted(self) -> bool:
-        """The readings get the prior as configured: it holds and is the more probable hypothesis (else the
-        estimate)."""
+        """The readings get the prior as configured: it holds, as the more probable hypothesis (else: the estimate)."""
         return self.test.holds and self.test.p_holds >= 0.5
 
     def _candidate(self, j: Array, r0: Array, ws: WindowSet) -> None:
