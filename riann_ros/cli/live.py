@@ -32,7 +32,7 @@ from riann_ros.gate import GateConfig
 from riann_ros.recording import Recording
 
 LIVE_NS = "/riann_eval"
-LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt), besides the ~/reset call
+LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt), besides the ~/restart call
 IDLE_S = 5.0  # give up waiting for outputs after this long without a new one
 
 # stamp_ns, w, x, y, z and the orientation variances about x, y, z (rad²; NaN: the topic carries no covariance),
@@ -66,7 +66,8 @@ def call_service(client: Any, request: Any, timeout: float, resend_every: float 
 
     The request is sent again every ``resend_every`` s: with Fast DDS, ``wait_for_service`` can return
     before the server has matched the client's response reader, and the first answer is then lost (seen
-    once in a few hundred CI runs). Use it for idempotent requests only (``~/reset``, set_parameters).
+    once in a few hundred CI runs). Use it for idempotent requests only (``~/reset``, ``~/restart``,
+    set_parameters).
     """
     futures = [client.call_async(request)]
     end = time.monotonic() + timeout
@@ -103,8 +104,9 @@ class LiveRunner:
     Without ``topics`` the runner starts ``<name>_node`` per spec (input remapped to
     ``/riann_eval/imu/data_raw``, output to ``/riann_eval/e<i>/attitude``, reliable QoS) with the
     sequence's rate as ``nominal_rate``; with ``topics`` they name the attitude topics of nodes already
-    running on ``input_topic``. Before each replay the started nodes' ``~/reset`` is called, so every
-    replay starts the estimators afresh, as offline; replays are also separated by a stamp gap larger
+    running on ``input_topic``. Before each replay the started nodes' ``~/restart`` is called, so every
+    replay starts the estimators as freshly built, as offline (``~/reset`` would keep the robot's magnetometer
+    calibration and latency fit from the replays before); replays are also separated by a stamp gap larger
     than the nodes' ``max_dt`` (all that separates them for external nodes). Publishing is paced at ``speed``
     × real time (0: as fast as the slowest node keeps up) with at most ``window`` samples in flight.
     One replay at a time: a pass over the input per scenario (``interleaved = False``).
@@ -240,25 +242,26 @@ class LiveRunner:
         self._thread.join(2)
 
     # -- runs -----------------------------------------------------------------------------------
-    def _reset_nodes(self, specs: list[EstimatorSpec], timeout: float = 10.0) -> None:
-        """Call every started node's ``~/reset``: each replay starts them afresh, as offline (a stamp gap
-        alone would not: RIANN keeps its gyro-bias estimate across gaps)."""
+    def _restart_nodes(self, specs: list[EstimatorSpec], timeout: float = 10.0) -> None:
+        """Call every started node's ``~/restart``: each replay starts its estimator as freshly built, as the
+        offline run does (a stamp gap alone would not: RIANN keeps its gyro-bias estimate across gaps; nor would
+        ``~/reset``: it keeps the robot's magnetometer calibration and latency fit)."""
         from std_srvs.srv import Trigger
 
         for i, spec in enumerate(specs):
-            client = self.node.create_client(Trigger, f"/riann_eval_{i}_{spec.name}/reset")
+            client = self.node.create_client(Trigger, f"/riann_eval_{i}_{spec.name}/restart")
             try:
                 if not client.wait_for_service(timeout_sec=timeout):
-                    raise EvalError(f"--live: {spec.name}_node offers no ~/reset service")
+                    raise EvalError(f"--live: {spec.name}_node offers no ~/restart service")
                 if call_service(client, Trigger.Request(), timeout) is None:
-                    raise EvalError(f"--live: {spec.name}_node did not answer ~/reset")
+                    raise EvalError(f"--live: {spec.name}_node did not answer ~/restart")
             finally:
                 self.node.destroy_client(client)
 
     def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> _LiveRun:
         self._ensure_nodes(specs, gate.nominal_rate)
         if self.external is None:
-            self._reset_nodes(specs)
+            self._restart_nodes(specs)
         for box in self.got:
             box.clear()
         return _LiveRun(self)
