@@ -32,7 +32,8 @@ def check_help(node: str, text: str) -> None:
     """``text`` is ``node``'s help: usage, ROS arguments, topics, every parameter with default and description."""
     assert text.startswith(f"usage: {node} [-h] [--ros-args"), text[:200]
     flat = " ".join(text.split())
-    for part in ("-r FROM:=TO", "-p NAME:=VALUE", "--params-file FILE", "imu/data_raw", "/diagnostics", "~/reset"):
+    for part in ("-r FROM:=TO", "-p NAME:=VALUE", "--params-file FILE", "imu/data_raw", "/diagnostics", "~/reset",
+                 "~/restart"):
         assert part in text, part
     specs = (*NODE_PARAMS, *estimator_class(node.removesuffix("_node")).PARAMS)
     for s in specs:

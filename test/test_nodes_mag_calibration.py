@@ -1,7 +1,8 @@
 """The saved magnetometer calibration over real DDS (riann_ros.nodes.mag_calibration): ``~/save_mag_calibration``
 writes the online calibration atomically to ``mag_calibration_file`` and the next start loads it (the node equal to
 the offline estimator within 1e-4 with the calibration on, before and after); a bad file is refused with one clear
-message and the node runs on its parameters, and the service never replaces it; /diagnostics shows the state."""
+message and the node runs on its parameters, and the service never replaces it; /diagnostics shows the state.
+``~/reset`` keeps the calibration the node learned (the robot's); ``~/restart`` builds the estimator as at start."""
 
 from __future__ import annotations
 
@@ -60,13 +61,17 @@ def diag_values(messages, node_name: str) -> tuple[int, dict[str, str]]:
     return s.level, {kv.key: kv.value for kv in s.values}
 
 
-def save(ros, node_name: str) -> Trigger.Response:
-    client = ros.node.create_client(Trigger, f"/{node_name}/{SAVE_SERVICE.removeprefix('~/')}")
+def trigger(ros, node_name: str, service: str) -> Trigger.Response:
+    client = ros.node.create_client(Trigger, f"/{node_name}/{service.removeprefix('~/')}")
     assert client.wait_for_service(timeout_sec=10)
     res = call_service(client, Trigger.Request(), 10)
     ros.node.destroy_client(client)
-    assert res is not None, f"no answer from {SAVE_SERVICE}"
+    assert res is not None, f"no answer from {service}"
     return res
+
+
+def save(ros, node_name: str) -> Trigger.Response:
+    return trigger(ros, node_name, SAVE_SERVICE)
 
 
 def equal_quats(a: np.ndarray, b: np.ndarray, tol: float = 1e-4) -> None:
@@ -129,3 +134,41 @@ def test_a_bad_file_is_refused_and_never_replaced(ros, start_node, tmp_path):
     res = save(ros, "vqf_node")
     assert not res.success and "not a magnetometer calibration file" in res.message
     assert path.read_text() == text
+
+
+@pytest.mark.parametrize("name", ["riann", "vqf"])
+def test_reset_keeps_the_calibration_restart_starts_as_at_start(ros, start_node, name):
+    """After a run that taught the online calibration the hard iron, ``~/reset`` keeps it (the next run equals an
+    estimator that ran both, reset between) and ``~/restart`` forgets it (the next run equals a fresh estimator)."""
+    node_name = f"{name}_node"
+    node = start_node(node_name, "-p", "input_qos:=reliable", "-p", f"nominal_rate:={RATE}")
+    first = run_node(ros, node, name, 8.0, seed=1)
+    res = trigger(ros, node_name, "~/reset")
+    assert res.success, res.message
+    after_reset = run_node(ros, node, name, 3.0, seed=2, t0_shift=2 * 10**12)
+    res = trigger(ros, node_name, "~/restart")
+    assert res.success and "built anew" in res.message, res.message
+    after_restart = run_node(ros, node, name, 3.0, seed=2, t0_shift=3 * 10**12)
+    assert "restart requested" in node.output()
+    assert node.stop() == 0
+    fresh = run_node(ros, start_node(node_name, "-p", "input_qos:=reliable", "-p", f"nominal_rate:={RATE}"), name,
+                     3.0, seed=2, t0_shift=3 * 10**12)
+
+    def fields(run):
+        stamps, acc, gyr, raw, sent = run[:5]
+        return stamps, acc, gyr, pair_fields(stamps, stamps[sent], raw[sent], MagConfig().timeout_ns)
+
+    kept = EstimatorStream(create(name), GateConfig(nominal_rate=RATE))
+    kept.process_batch(*fields(first))
+    cal = kept.estimator.mag_calibration()
+    assert cal is not None and cal.windows > 0  # it learned the hard iron
+    kept.reset()
+    q_kept, ok = kept.process_batch(*fields(after_reset))
+    assert ok.all()
+    q_fresh = offline(name, *after_restart[:5], MagConfig(), None)
+    equal_quats(after_reset[5], q_kept)
+    equal_quats(after_restart[5], fresh[5], tol=1e-6)  # as a node just started, on the same input
+    equal_quats(after_restart[5], q_fresh)
+    # and the test tells the two apart: what the calibration learned moves the heading of the run after it
+    d = np.minimum(np.abs(q_kept - q_fresh).max(axis=1), np.abs(q_kept + q_fresh).max(axis=1))
+    assert d.max() > 1e-2, d.max()

@@ -140,7 +140,7 @@ def _runner(args: argparse.Namespace) -> AbstractContextManager[Runner | None]:
     except ImportError as exc:
         raise ev.EvalError(f"--live needs rclpy and the ROS message packages: {exc}") from exc
     topics = args.live_topics.split(",") if args.live_topics else None
-    return LiveRunner(speed=args.speed, input_topic=args.live_input, topics=topics)
+    return LiveRunner(speed=args.speed, input_topic=args.live_input, topics=topics, use_mag=args.use_mag)
 
 
 def _hooks(args: argparse.Namespace, n_sources: int) -> session.Hooks:

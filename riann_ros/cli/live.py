@@ -17,6 +17,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ from numpy.typing import NDArray
 
 from riann_ros import stamps
 from riann_ros.bagio.topics import sigmas_of_variances
+from riann_ros.estimators import estimator_class
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.results import RunStats
 from riann_ros.evaluation.specs import EstimatorSpec
@@ -32,8 +34,10 @@ from riann_ros.gate import GateConfig
 from riann_ros.recording import Recording
 
 LIVE_NS = "/riann_eval"
-LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt), besides the ~/reset call
+LIVE_MAG_TOPIC = f"{LIVE_NS}/imu/mag"
+LIVE_GAP_NS = 2_000_000_000  # stamp gap between replays (> the nodes' max_dt), besides the ~/restart call
 IDLE_S = 5.0  # give up waiting for outputs after this long without a new one
+MAG_LEAD = 2  # a sample's field is published this many IMU messages ahead of it (there when its IMU message is)
 
 # stamp_ns, w, x, y, z and the orientation variances about x, y, z (rad²; NaN: the topic carries no covariance),
 # turned into σ once per piece (sigmas_of_variances), not in the callback
@@ -66,7 +70,8 @@ def call_service(client: Any, request: Any, timeout: float, resend_every: float 
 
     The request is sent again every ``resend_every`` s: with Fast DDS, ``wait_for_service`` can return
     before the server has matched the client's response reader, and the first answer is then lost (seen
-    once in a few hundred CI runs). Use it for idempotent requests only (``~/reset``, set_parameters).
+    once in a few hundred CI runs). Use it for idempotent requests only (``~/reset``, ``~/restart``,
+    set_parameters).
     """
     futures = [client.call_async(request)]
     end = time.monotonic() + timeout
@@ -103,9 +108,13 @@ class LiveRunner:
     Without ``topics`` the runner starts ``<name>_node`` per spec (input remapped to
     ``/riann_eval/imu/data_raw``, output to ``/riann_eval/e<i>/attitude``, reliable QoS) with the
     sequence's rate as ``nominal_rate``; with ``topics`` they name the attitude topics of nodes already
-    running on ``input_topic``. Before each replay the started nodes' ``~/reset`` is called, so every
-    replay starts the estimators afresh, as offline; replays are also separated by a stamp gap larger
-    than the nodes' ``max_dt`` (all that separates them for external nodes). Publishing is paced at ``speed``
+    running on ``input_topic``. Before each replay the started nodes' ``~/restart`` is called, so every
+    replay starts the estimators as freshly built, as offline (``~/reset`` would keep the robot's magnetometer
+    calibration and latency fit from the replays before); replays are also separated by a stamp gap larger
+    than the nodes' ``max_dt`` (all that separates them for external nodes). With a magnetometer in the sequence
+    (and ``use_mag`` not ``false``, passed to the started nodes), the field paired with each sample is published on
+    ``/riann_eval/imu/mag`` at the sample's stamp (NaN where none is fresh), so the started nodes pair each sample
+    with the field the offline run gives it. Publishing is paced at ``speed``
     × real time (0: as fast as the slowest node keeps up) with at most ``window`` samples in flight.
     One replay at a time: a pass over the input per scenario (``interleaved = False``).
     """
@@ -114,12 +123,12 @@ class LiveRunner:
     interleaved = False
 
     def __init__(self, speed: float = 1.0, window: int = 200, input_topic: str | None = None,
-                 topics: list[str] | None = None, log_dir: Path | None = None) -> None:
+                 topics: list[str] | None = None, log_dir: Path | None = None, use_mag: str = "auto") -> None:
         import rclpy
         from geometry_msgs.msg import QuaternionStamped
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-        from sensor_msgs.msg import Imu
+        from sensor_msgs.msg import Imu, MagneticField
 
         self.speed = speed
         self.window = window
@@ -132,6 +141,11 @@ class LiveRunner:
         rclpy.init(context=self._ctx)
         self.node = rclpy.create_node("riann_bag_eval_live", context=self._ctx)
         self.pub = self.node.create_publisher(Imu, self.input_topic, self._qos)
+        self.use_mag = use_mag
+        self._Mag = MagneticField
+        # the field for the started nodes (external ones subscribe to a magnetometer topic of their own)
+        self.mag_pub = (self.node.create_publisher(MagneticField, LIVE_MAG_TOPIC, self._qos)
+                        if topics is None and use_mag != "false" else None)
         self._exec = SingleThreadedExecutor(context=self._ctx)
         self._exec.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, daemon=True)
@@ -141,6 +155,7 @@ class LiveRunner:
         self.got: list[list[Output]] = []  # per estimator, outputs received and not yet collected
         self.next_stamp = 1_000_000_000
         self._started_for: tuple | None = None
+        self.reads_mag: list[bool] = []  # per started node: it reads the published field (its estimator uses one)
 
     def _spin(self) -> None:
         with contextlib.suppress(Exception):
@@ -179,9 +194,9 @@ class LiveRunner:
     def _node_command(self, i: int, spec: EstimatorSpec, rate: float) -> list[str]:
         att_topic, imu_topic = node_topics(spec.name)
         remaps = {"__node": f"riann_eval_{i}_{spec.name}", "imu/data_raw": self.input_topic,
-                  att_topic: f"{LIVE_NS}/e{i}/attitude", imu_topic: f"{LIVE_NS}/e{i}/imu"}
+                  "imu/mag": LIVE_MAG_TOPIC, att_topic: f"{LIVE_NS}/e{i}/attitude", imu_topic: f"{LIVE_NS}/e{i}/imu"}
         params = {"input_qos": "reliable", "input_depth": 1000, "output_depth": 1000, "nominal_rate": float(rate),
-                  **spec.kwargs}
+                  "use_mag": self.use_mag, **spec.kwargs}
         return [node_executable(spec.name), "--ros-args",
                 *(a for k, v in remaps.items() for a in ("-r", f"{k}:={v}")),
                 *(a for k, v in params.items() for a in ("-p", f"{k}:={ros_param(v)}"))]
@@ -194,6 +209,7 @@ class LiveRunner:
             if len(self.external) != len(specs):
                 raise EvalError(f"--live-topics gives {len(self.external)} topics for {len(specs)} estimators")
             if self._started_for is None:
+                self.reads_mag = [False] * len(specs)
                 self._subscribe(self.external)
                 self._wait_connected()
             self._started_for = key
@@ -204,14 +220,19 @@ class LiveRunner:
                 self._procs.append(subprocess.Popen(self._node_command(i, spec, rate), stdout=log,
                                                     stderr=subprocess.STDOUT))
         self._subscribe([f"{LIVE_NS}/e{i}/imu" for i in range(len(specs))], imu=True)
-        self._wait_connected()
+        self.reads_mag = [self.mag_pub is not None and estimator_class(spec.name).USES_MAG for spec in specs]
+        self._wait_connected(sum(self.reads_mag))
         self._started_for = key
 
-    def _wait_connected(self, timeout: float = 60.0) -> None:
+    def _wait_connected(self, mag_readers: int = 0, timeout: float = 60.0) -> None:
+        """Until every node reads the input (and ``mag_readers`` of them the field) and publishes its output."""
         end = time.monotonic() + timeout
         n = len(self._subs)
+        mag_pub = self.mag_pub
         while time.monotonic() < end:
-            if self.pub.get_subscription_count() >= n and all(s.get_publisher_count() > 0 for s in self._subs):
+            if (self.pub.get_subscription_count() >= n
+                    and (mag_pub is None or mag_pub.get_subscription_count() >= mag_readers)
+                    and all(s.get_publisher_count() > 0 for s in self._subs)):
                 time.sleep(0.3)  # let discovery settle in both directions
                 return
             if any(p.poll() is not None for p in self._procs):
@@ -240,25 +261,26 @@ class LiveRunner:
         self._thread.join(2)
 
     # -- runs -----------------------------------------------------------------------------------
-    def _reset_nodes(self, specs: list[EstimatorSpec], timeout: float = 10.0) -> None:
-        """Call every started node's ``~/reset``: each replay starts them afresh, as offline (a stamp gap
-        alone would not: RIANN keeps its gyro-bias estimate across gaps)."""
+    def _restart_nodes(self, specs: list[EstimatorSpec], timeout: float = 10.0) -> None:
+        """Call every started node's ``~/restart``: each replay starts its estimator as freshly built, as the
+        offline run does (a stamp gap alone would not: RIANN keeps its gyro-bias estimate across gaps; nor would
+        ``~/reset``: it keeps the robot's magnetometer calibration and latency fit)."""
         from std_srvs.srv import Trigger
 
         for i, spec in enumerate(specs):
-            client = self.node.create_client(Trigger, f"/riann_eval_{i}_{spec.name}/reset")
+            client = self.node.create_client(Trigger, f"/riann_eval_{i}_{spec.name}/restart")
             try:
                 if not client.wait_for_service(timeout_sec=timeout):
-                    raise EvalError(f"--live: {spec.name}_node offers no ~/reset service")
+                    raise EvalError(f"--live: {spec.name}_node offers no ~/restart service")
                 if call_service(client, Trigger.Request(), timeout) is None:
-                    raise EvalError(f"--live: {spec.name}_node did not answer ~/reset")
+                    raise EvalError(f"--live: {spec.name}_node did not answer ~/restart")
             finally:
                 self.node.destroy_client(client)
 
     def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> _LiveRun:
         self._ensure_nodes(specs, gate.nominal_rate)
         if self.external is None:
-            self._reset_nodes(specs)
+            self._restart_nodes(specs)
         for box in self.got:
             box.clear()
         return _LiveRun(self)
@@ -273,6 +295,7 @@ class _LiveRun:
         self.t0 = 0.0
         self.first_ns = self.last_ns = runner.next_stamp
         self.published = 0
+        self.mag_samples = 0  # samples published with a field (what offline's RunStats.mag_samples counts)
         self.received = [0] * len(runner.got)
         self.unexpected = [0] * len(runner.got)
         self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimator (N, 2)
@@ -284,7 +307,10 @@ class _LiveRun:
         msg.orientation_covariance[0] = -1.0
         la, av = msg.linear_acceleration, msg.angular_velocity
         rel = (st - self.first_ns) * 1e-9
+        fields = self._fields(st, rec)
         for i, (s, a, g) in enumerate(zip(st.tolist(), rec.acc.tolist(), rec.gyr.tolist(), strict=True)):
+            if fields is not None:
+                fields(i)
             if r.speed > 0:
                 delay = self.t0 + rel[i] / r.speed - time.monotonic()
                 if delay > 0:
@@ -297,6 +323,29 @@ class _LiveRun:
             av.x, av.y, av.z = g
             r.pub.publish(msg)
         self.published += len(st)
+
+    def _fields(self, st: NDArray[np.int64], rec: Recording) -> Callable[[int], None] | None:
+        """Publishes the fields up to ``MAG_LEAD`` samples ahead of sample i, each at its sample's stamp (None: no
+        field to publish)."""
+        pub = self.r.mag_pub
+        if pub is None or rec.mag is None:
+            return None
+        msg = self.r._Mag()
+        msg.header.frame_id = rec.frame_id
+        mf = msg.magnetic_field
+        stamp_list, field_list = st.tolist(), rec.mag.tolist()
+        done = 0
+
+        def publish_to(i: int) -> None:
+            nonlocal done
+            for j in range(done, min(i + MAG_LEAD + 1, len(stamp_list))):
+                stamps.set_ns(msg.header.stamp, stamp_list[j])
+                mf.x, mf.y, mf.z = field_list[j]
+                self.mag_samples += all(map(math.isfinite, field_list[j]))
+                pub.publish(msg)
+            done = max(done, i + MAG_LEAD + 1)
+
+        return publish_to
 
     def _wait(self, last: int) -> None:
         got = self.r.got
@@ -341,6 +390,7 @@ class _LiveRun:
         wall = time.monotonic() - self.t0
         n = self.published
         return [
-            RunStats(seconds=wall, live={"published": n, "received": rec, "lost": n - rec, "unexpected": unexp})
-            for rec, unexp in zip(self.received, self.unexpected, strict=True)
+            RunStats(seconds=wall, live={"published": n, "received": rec, "lost": n - rec, "unexpected": unexp},
+                     mag_samples=self.mag_samples if reads else 0)
+            for rec, unexp, reads in zip(self.received, self.unexpected, self.r.reads_mag, strict=True)
         ]

@@ -1,7 +1,8 @@
 """The one ROS 2 node base behind riann_node, madgwick_node, mahony_node and vqf_node.
 
 It owns the ROS side of one estimator: the ``imu/data_raw`` and ``imu/mag`` subscriptions and their QoS,
-the parameters (:mod:`riann_ros.nodes.parameters`), the ``~/reset`` service, the saved magnetometer calibration
+the parameters (:mod:`riann_ros.nodes.parameters`), the ``~/reset`` and ``~/restart`` services, the saved magnetometer
+calibration
 (``mag_calibration_file``, ``~/save_mag_calibration``: :mod:`riann_ros.nodes.mag_calibration`), the outputs
 (:mod:`riann_ros.nodes.outputs`) and ``/diagnostics`` (:mod:`riann_ros.nodes.diagnostics`). What to do
 with a sample (dt from stamps, input checks, resets) is decided by the ROS-free
@@ -33,6 +34,7 @@ from riann_ros import mag as mg
 from riann_ros import stamps
 from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
+from riann_ros.magcal.records import MagCalPrior
 from riann_ros.nodes import ros_args, usage
 from riann_ros.nodes.diagnostics import Diagnostics
 from riann_ros.nodes.mag_calibration import SAVE_SERVICE, CalibrationFile
@@ -74,10 +76,7 @@ class EstimatorNode(Node):
         self.mag_file = self._load_mag_file(p)
         self._values = p
         self._est_names = {s.name for s in est_specs}
-        self.stream = st.EstimatorStream(create(self.ESTIMATOR, **{k: p[k] for k in self._est_names}),
-                                         gt.GateConfig(**{s.name: p[s.name] for s in gt.GATE_PARAMS}),
-                                         mg.MagConfig(**{s.name: p[s.name] for s in mg.MAG_PARAMS}),
-                                         mag_prior=self.mag_file.prior)
+        self.stream = self._new_stream(self.mag_file.prior)
         self.add_pre_set_parameters_callback(self._params.coerce_sets)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -91,6 +90,7 @@ class EstimatorNode(Node):
         uses_mag = p["use_mag"] != "false" and self.stream.estimator.USES_MAG
         self._mag_sub = self.create_subscription(MagneticField, MAG_TOPIC, self._on_mag, qos) if uses_mag else None
         self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(Trigger, "~/restart", self._on_restart)
         if self.stream.estimator.USES_MAG:
             self.create_service(Trigger, SAVE_SERVICE, self._on_save_mag_calibration)
         self.diag = Diagnostics(self, self.stream, self.ESTIMATOR, INPUT_TOPIC, MAG_TOPIC,
@@ -127,6 +127,14 @@ class EstimatorNode(Node):
             log.warning(text)
             warnings.append(text)
         self.diag.config_warnings = warnings  # WARN in /diagnostics too: values written but not applied
+
+    def _new_stream(self, mag_prior: MagCalPrior | None) -> st.EstimatorStream:
+        """The estimator behind its gate as built at start, from the current parameters; its online magnetometer
+        calibration starts at ``mag_prior`` (None: the ``mag_hard_iron`` / ``mag_soft_iron`` parameters)."""
+        p = self._values
+        return st.EstimatorStream(create(self.ESTIMATOR, **{k: p[k] for k in self._est_names}),
+                                  gt.GateConfig(**{s.name: p[s.name] for s in gt.GATE_PARAMS}),
+                                  mg.MagConfig(**{s.name: p[s.name] for s in mg.MAG_PARAMS}), mag_prior=mag_prior)
 
     def _load_mag_file(self, p: dict[str, Any]) -> CalibrationFile:
         """Read ``mag_calibration_file``: a usable file's hard and soft iron replace the parameters of those names
@@ -270,6 +278,19 @@ class EstimatorNode(Node):
         response.message = f"{self.ESTIMATOR} estimator reset; re-initialising from the next sample"
         return response
 
+    def _on_restart(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """The estimator built anew, as at start with the current parameters: unlike ``~/reset`` this also forgets
+        what belongs to the robot (the online magnetometer calibration, which starts again where it started, from
+        ``mag_calibration_file`` as read at start or from ``mag_hard_iron`` / ``mag_soft_iron`` set since; the
+        magnetometer's latency fit; the gate's counts)."""
+        self.stream = self.diag.stream = self._new_stream(self.stream.mag_prior)
+        self._mag.clear()
+        self._mag_state, self._acc_in_g = "", False
+        self.get_logger().info("restart requested: estimator built anew, as at start (calibration included)")
+        response.success = True
+        response.message = (f"{self.ESTIMATOR} estimator built anew with the current parameters, its magnetometer "
+                            "calibration as at start; initialising from the next sample")
+        return response
 
     def _on_save_mag_calibration(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         response.success, response.message = self.mag_file.save(self.stream.estimator.mag_calibration())
@@ -290,7 +311,8 @@ def help_text(node_cls: type[EstimatorNode]) -> str:
         ("out", rpy_topic(node_cls.ATTITUDE_TOPIC), "geometry_msgs/Vector3Stamped: roll, pitch, yaw, ° (publish_rpy)"),
         ("out", "/tf", "tf2_msgs/TFMessage: fixed_frame → sensor frame (publish_tf)"),
         ("out", "/diagnostics", "diagnostic_msgs/DiagnosticArray: rates, rejections, warnings"),
-        ("srv", "~/reset", "std_srvs/Trigger: clear the estimator state"),
+        ("srv", "~/reset", "std_srvs/Trigger: clear the estimator state (keeps the robot's magnetometer calibration)"),
+        ("srv", "~/restart", "std_srvs/Trigger: build the estimator anew, as at start (calibration included)"),
     ]
     if est.USES_MAG:
         topics.append(("srv", SAVE_SERVICE, "std_srvs/Trigger: write the magnetometer calibration to "
