@@ -307,7 +307,7 @@ class OnlineMagCalibrator:
         return MagCalStatus(state=self.state, hard_iron_t=cal.hard_iron_t, hard_iron_sd_t=cal.hard_iron_sd_t,
                             heading_sd_bound_rad=self.bound, windows=self.windows, rejected=self.rejected,
                             unit_weight=self.unit_weight, converged_after_s=self.converged_after_s,
-                            prior_holds=self.test.holds)
+                            prior_holds=self.trusted)
 
 
 def heading_gap(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat, field_world_t: Vec) -> float:

@@ -181,7 +181,8 @@ class MagCalStatus:
     """What the node's ``/diagnostics`` shows, once per window: the state, the estimate and its uncertainty, the
     bound of the heading error it can add at the current tilt (rad), the windows used and rejected as disturbed,
     the residual scale (the variance of unit weight; ≈ 1 when the noise model fits), and whether the configured
-    (or saved) calibration still holds (:mod:`~riann_ros.magcal.hypothesis`: the field is then used as configured)."""
+    (or saved) calibration is in use (:mod:`~riann_ros.magcal.hypothesis`: it holds, as the more probable
+    hypothesis)."""
 
     state: CalState
     hard_iron_t: tuple[float, float, float]

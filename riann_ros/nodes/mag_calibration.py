@@ -93,7 +93,7 @@ def status_values(status: MagCalStatus | None, file: CalibrationFile) -> dict[st
         conv = status.converged_after_s
         out.update({
             "mag calibration": status.state,
-            "mag calibration in use": ("the configured or saved one (the gyro-aided test agrees with it)"
+            "mag calibration in use": ("the configured or saved one (the gyro-aided test finds it the more probable)"
                                        if status.prior_holds else "the online estimate"),
             "mag hard iron (uT)": _vector_ut(status.hard_iron_t),
             "mag hard iron sd (uT)": ", ".join(f"{s / UT:.2f}" for s in status.hard_iron_sd_t),
