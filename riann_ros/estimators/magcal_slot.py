@@ -26,7 +26,10 @@ from numpy.typing import NDArray
 from riann_ros.magcal.latency import LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.magcal.records import DELAY_SD_S, MagCalibration, MagCalPrior, MagCalStatus
-from riann_ros.rotations import Quat, from_rotvec, rotate
+from riann_ros.rotations import Quat, from_rotvec, normalized, qmul, rotate
+
+#: s; the time constant with which the calibration's attitude follows the accelerometer (VQF's tauAcc default)
+TILT_TAU_S = 3.0
 
 
 class MagCalSlot:
@@ -38,6 +41,7 @@ class MagCalSlot:
         self.hard_iron_sd_t = float(params["mag_hard_iron_sd"])
         self.cal: OnlineMagCalibrator | None = None
         self.latency = LatencyEstimator()  # the windows' ends need the field's latency behind the gyro (stage 7b's fit)
+        self.q: Quat | None = None  # the calibration's attitude (:meth:`_tilt`)
         # per sample of the last calibrate(): the heading σ the calibration adds (rad)
         self.sd_rad: NDArray[np.float64] = np.zeros(0)
         self.set_prior(MagCalPrior())
@@ -50,7 +54,8 @@ class MagCalSlot:
         self.cal = OnlineMagCalibrator(prior, self.model) if self.on else None
 
     def restart(self) -> None:
-        """A reset, a gap or a hole: the open window is dropped, the estimate kept."""
+        """A reset, a gap or a hole: the open window is dropped, the estimate kept; the attitude starts anew."""
+        self.q = None
         if self.cal is not None:
             self.cal.restart()
 
@@ -72,7 +77,6 @@ class MagCalSlot:
         sd = []
         lat = self.latency
         for (ax, ay, az), (gx, gy, gz), h, m in zip(acc, gyr, dt, mag, strict=True):
-            q = _tilt(ax, ay, az)
             field = None if m is None or not (m[0] or m[1] or m[2]) else (m[0], m[1], m[2])
             rv = (gx * h, gy * h, gz * h)
             if not math.isfinite(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]):
@@ -81,6 +85,7 @@ class MagCalSlot:
                 sd.append(0.0)
                 continue
             delta = from_rotvec(*rv)
+            q = self._tilt(delta, h, ax, ay, az)
             u = cal.update(delta, h, field, lat.delay(0.0), q, lat.sd(DELAY_SD_S))
             lat.add(delta, rv, h, u)
             s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
@@ -90,6 +95,27 @@ class MagCalSlot:
             sd.append(s)
         self.sd_rad = np.asarray(sd, dtype=float)
         return out
+
+    def _tilt(self, delta: Quat, dt: float, ax: float, ay: float, az: float) -> Quat | None:
+        """The calibration's attitude (only its tilt matters): the gyro carries it and the accelerometer pulls it
+        toward gravity with the time constant :data:`TILT_TAU_S` (a linear acceleration, a tap, does not tilt it;
+        the accelerometer alone does not know gravity while the sensor accelerates); the first accelerometer sample
+        sets it."""
+        n = math.sqrt(ax * ax + ay * ay + az * az)
+        if self.q is None:
+            self.q = _tilt(ax, ay, az)
+            return self.q
+        q = normalized(qmul(self.q, delta))
+        if 0.0 < n < math.inf:
+            ux, uy, uz = rotate(q, (ax / n, ay / n, az / n))  # the measured "up" in the world frame
+            k = min(dt / TILT_TAU_S, 1.0)  # rotate it toward +z by this share of the angle between them
+            c = max(-1.0, min(1.0, uz))
+            s = math.sqrt(ux * ux + uy * uy)
+            if s > 0.0:
+                angle = k * math.atan2(s, c)
+                q = normalized(qmul(from_rotvec(uy / s * angle, -ux / s * angle, 0.0), q))
+        self.q = q
+        return q
 
 
 def _tilt(ax: float, ay: float, az: float) -> Quat | None:
