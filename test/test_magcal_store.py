@@ -154,3 +154,20 @@ def test_a_second_run_from_the_saved_file_starts_converged(tmp_path: Path):
     err3 = _feed(cal3, second, raw2)
     assert rmse(err3) > rmse(err2) + 1.0
     os.remove(path)
+
+
+def test_a_saved_calibration_still_learns_a_changed_magnetic_situation():
+    """A saved calibration is the hypothesis of the next run, its covariance widening the test's tolerance; should
+    the robot's magnetics change (a payload, a magnet mounted 25 µT strong), the windows reject it and the estimate,
+    which learns from the broad prior (not from the saved calibration's tight σ), finds the new hard iron."""
+    first = generate(duration=120, rate=100, motion="rotation", bias=0.0, gyr_noise=0.002, seed=11)
+    cal1 = OnlineMagCalibrator(soft_iron_model="symmetric")
+    _feed(cal1, first, distort(first.quat_ref, H_TRUE * UT, noise_t=0.3e-6, seed=1))
+    saved = MagCalPrior.from_calibration(cal1.calibration())
+    second = generate(duration=90, rate=100, motion="rotation", bias=0.0, gyr_noise=0.002, seed=12)
+    changed = H_TRUE + np.array([0.0, 25.0, 0.0])
+    cal2 = OnlineMagCalibrator(saved, soft_iron_model="symmetric")
+    err = _feed(cal2, second, distort(second.quat_ref, changed * UT, noise_t=0.3e-6, seed=2))
+    assert not cal2.trusted
+    assert np.abs(np.array(cal2.calibration().hard_iron_t) / UT - changed).max() < 1.0
+    assert math.degrees(math.sqrt(float(np.mean(err[-2000:] ** 2)))) < 2.0  # the last 20 s: calibrated again

@@ -48,9 +48,9 @@ class MagCalSlot:
 
     def set_prior(self, prior: MagCalPrior) -> None:
         """Start the calibration anew from ``prior`` (the configured ``mag_hard_iron`` / ``mag_soft_iron``, or a
-        saved calibration); without a covariance its hard iron's σ is the ``mag_hard_iron_sd`` parameter."""
-        if prior.covariance is None:
-            prior = dataclasses.replace(prior, hard_iron_sd_t=self.hard_iron_sd_t)
+        saved calibration, whose covariance widens the test's tolerance); the hard iron's σ should the prior be
+        wrong is the ``mag_hard_iron_sd`` parameter."""
+        prior = dataclasses.replace(prior, hard_iron_sd_t=self.hard_iron_sd_t)
         self.cal = OnlineMagCalibrator(prior, self.model) if self.on else None
 
     def restart(self) -> None:

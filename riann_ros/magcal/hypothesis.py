@@ -55,9 +55,10 @@ _TAN_TOL = math.tan(FIELD_HEADING_SD_RAD)
 class PriorTest:
     """Whether the prior ``θ₀`` still holds (module docstring); :meth:`add` once per window the estimate takes."""
 
-    def __init__(self, model: CalModel, theta0: Array) -> None:
+    def __init__(self, model: CalModel, theta0: Array, saved: Array | None = None) -> None:
         self.model = model
         self.theta0 = theta0
+        self.saved = np.zeros((model.n, model.n)) if saved is None else saved  # a saved calibration's covariance
         self.holds = True
         self.failed = 0  # windows that failed H₀ on their own (diagnostics)
         self.d2 = 0.0  # the last test's D² (diagnostics)
@@ -68,10 +69,11 @@ class PriorTest:
     def tolerance(self, u_ut: Array, horizontal_ut: float) -> Array:
         """``C_tol`` (n, n) in θ: per axis of the hard iron the offset whose heading error, across a horizontal
         field of ``horizontal_ut``, is :data:`~.records.FIELD_HEADING_SD_RAD`; per soft-iron direction the same
-        error at the field ``u_ut``'s strength."""
+        error at the field ``u_ut``'s strength; plus a saved calibration's own covariance (its uncertainty when the
+        magnetic situation is the one it was estimated in)."""
         tol_h = _TAN_TOL * horizontal_ut
         tol_s = tol_h / max(float(np.linalg.norm(u_ut)), 1e-9)
-        return np.diag(np.r_[np.full(self.model.p, tol_s * tol_s), np.full(3, tol_h * tol_h)])
+        return np.diag(np.r_[np.full(self.model.p, tol_s * tol_s), np.full(3, tol_h * tol_h)]) + self.saved
 
     def tolerance_at(self, m_ut: Array, q: tuple[float, float, float, float] | None) -> Array:
         """:meth:`tolerance` for the raw reading ``m_ut`` calibrated with θ₀, its horizontal part at the attitude

@@ -24,6 +24,7 @@ good once the test rejects the prior.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -66,9 +67,10 @@ class OnlineMagCalibrator:
     def __init__(self, prior: MagCalPrior | None = None, soft_iron_model: SoftIronModel = "full") -> None:
         prior = prior or MagCalPrior()
         self.model = CalModel(soft_iron_model, np.asarray(prior.soft_iron).reshape(3, 3))
-        self.lam0, self.theta0 = self.model.prior(prior)
+        self.lam0, self.theta0 = self.model.prior(dataclasses.replace(prior, covariance=None))  # the estimate's: broad
         self.est = InfoEstimate(self.model, self.lam0, self.theta0)
-        self.test = PriorTest(self.model, self.theta0)  # does the prior still hold?
+        saved = None if prior.covariance is None else np.linalg.inv(self.model.prior(prior)[0])  # a saved one's σ
+        self.test = PriorTest(self.model, self.theta0, saved)  # does the prior still hold?
         self.agree = 0  # consecutive windows that agree with a rejected prior
         self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
         self.switches = 0  # times a candidate replaced the estimate
@@ -246,9 +248,16 @@ class OnlineMagCalibrator:
 
     @property
     def covariance(self) -> Array:
-        """θ's covariance: ``Λ⁻¹`` scaled up by the variance of unit weight when it exceeds 1, with the systematic
-        floor of the hard iron (:data:`~.records.SYSTEMATIC_SD_UT`)."""
+        """The covariance of the calibration in use (:attr:`in_use`): a saved prior's while it is used, else ``Λ⁻¹``
+        scaled up by the variance of unit weight above 1; with the hard iron's floor (``SYSTEMATIC_SD_UT``)."""
+        if self.trusted and self.test.saved.any():
+            return self.model.with_floor(self.test.saved)
         return self.model.with_floor(self.est.cov * max(1.0, self.unit_weight))
+
+    @property
+    def in_use(self) -> Array:
+        """The calibration the state and the saved file describe: a saved prior while it is used, else the estimate."""
+        return self.theta0 if self.trusted and self.test.saved.any() else self.theta
 
     def _cache(self) -> None:
         theta = self.theta0 if self.trusted else self.theta  # the calibration the readings get
@@ -280,7 +289,7 @@ class OnlineMagCalibrator:
             self.bound = math.sqrt(float(np.linalg.eigvalsh(su)[-1])) / max(float(np.linalg.norm(u)), 1e-9)
         else:
             u = np.asarray(self._a).reshape(3, 3) @ np.asarray(self.m_last) - np.asarray(self._c)
-            self.bound = heading_sd_bound(self.model, self.theta, self.covariance, self.q, u, STATE_HEADINGS)
+            self.bound = heading_sd_bound(self.model, self.in_use, self.covariance, self.q, u, STATE_HEADINGS)
         if self.bound <= CALIBRATED_SD_RAD:
             self.state = CALIBRATED
             if self.converged_after_s is None:
@@ -290,16 +299,8 @@ class OnlineMagCalibrator:
 
     # -------------------------------------------------------------------------------------------------- outputs
     def calibration(self) -> MagCalibration:
-        """The current estimate as a record (for the saved file and the node)."""
-        a, h = self.model.split(self.theta)
-        cov = self.model.output_covariance(self.theta, self.covariance)
-        scale = np.r_[np.ones(9), np.full(3, UT)]
-        cov = cov * np.outer(scale, scale)
-        return MagCalibration(hard_iron_t=tuple(float(v) * UT for v in h),  # type: ignore[arg-type]
-                              soft_iron=tuple(float(v) for v in a.reshape(9)),
-                              covariance=tuple(float(v) for v in cov.reshape(144)), state=self.state,
-                              windows=self.windows, converged_after_s=self.converged_after_s,
-                              soft_iron_model=self.model.model)
+        """The calibration :attr:`in_use` as a record (for the saved file and the node)."""
+        return _record(self)
 
     def status(self) -> MagCalStatus:
         """The diagnostics record (module docstring)."""
@@ -308,6 +309,19 @@ class OnlineMagCalibrator:
                             heading_sd_bound_rad=self.bound, windows=self.windows, rejected=self.rejected,
                             unit_weight=self.unit_weight, converged_after_s=self.converged_after_s,
                             prior_holds=self.trusted)
+
+
+def _record(cal: OnlineMagCalibrator) -> MagCalibration:
+    """:meth:`OnlineMagCalibrator.calibration`."""
+    a, h = cal.model.split(cal.in_use)
+    cov = cal.model.output_covariance(cal.in_use, cal.covariance)
+    scale = np.r_[np.ones(9), np.full(3, UT)]
+    cov = cov * np.outer(scale, scale)
+    return MagCalibration(hard_iron_t=tuple(float(v) * UT for v in h),  # type: ignore[arg-type]
+                          soft_iron=tuple(float(v) for v in a.reshape(9)),
+                          covariance=tuple(float(v) for v in cov.reshape(144)), state=cal.state,
+                          windows=cal.windows, converged_after_s=cal.converged_after_s,
+                          soft_iron_model=cal.model.model)
 
 
 def heading_gap(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat, field_world_t: Vec) -> float:
