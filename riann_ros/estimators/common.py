@@ -122,10 +122,13 @@ def loop_rows(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | No
 
 def calibrated_field(acc: Array, gyr: Array, dt: Array, mag: ArrayLike | None, magcal: MagCalSlot | None
                      ) -> ArrayLike | None:
-    """``mag`` calibrated online by ``magcal`` when it is on (NaN rows: no field; sanitised inputs), else as given."""
-    if magcal is None or not magcal.on or mag is None:
+    """``mag`` calibrated online by ``magcal`` when it is on (NaN rows: no field; sanitised inputs), else as given.
+    Once a field was seen, the calibration gets every sample, with a field or without (its windows and tilt need
+    the gyro of each), so one sample at a time and a batch give it the same samples."""
+    if magcal is None or not magcal.on or (mag is None and not magcal.seen):
         return mag
-    rows = magcal.calibrate(acc.tolist(), gyr.tolist(), dt.tolist(), sanitize_mag(mag, len(acc)))
+    rows = magcal.calibrate(acc.tolist(), gyr.tolist(), dt.tolist(),
+                            [None] * len(acc) if mag is None else sanitize_mag(mag, len(acc)))
     return np.array([(math.nan,) * 3 if u is None else u for u in rows], dtype=float).reshape(-1, 3)
 
 

@@ -42,6 +42,7 @@ class MagCalSlot:
         self.cal: OnlineMagCalibrator | None = None
         self.latency = LatencyEstimator()  # the windows' ends need the field's latency behind the gyro (stage 7b's fit)
         self.q: Quat | None = None  # the calibration's attitude (:meth:`_tilt`)
+        self.seen = False  # a field has come: from then on every sample goes to the calibration
         # per sample of the last calibrate(): the heading σ the calibration adds (rad)
         self.sd_rad: NDArray[np.float64] = np.zeros(0)
         self.set_prior(MagCalPrior())
@@ -78,6 +79,11 @@ class MagCalSlot:
         lat = self.latency
         for (ax, ay, az), (gx, gy, gz), h, m in zip(acc, gyr, dt, mag, strict=True):
             field = None if m is None or not (m[0] or m[1] or m[2]) else (m[0], m[1], m[2])
+            self.seen = self.seen or field is not None
+            if not self.seen:  # nothing before the first field (a filter fed one sample at a time does not call it)
+                out.append(None)
+                sd.append(0.0)
+                continue
             rv = (gx * h, gy * h, gz * h)
             if not math.isfinite(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]):
                 cal.restart()  # a turn no window can hold (a degenerate gyro sample): the open window goes
