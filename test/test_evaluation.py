@@ -234,7 +234,7 @@ def test_offline_runner_is_the_node_stream():
     rec, _ = ev.scenario_recording(synthetic(), ev.REALISTIC)
     specs = ev.parse_estimators("riann")
     gate = GateConfig(nominal_rate=rec.rate_hz)
-    run = ev.OfflineRunner().start(specs, gate, 0)
+    run = ev.OfflineRunner().start(specs, gate)
     (q,) = run.feed(rec)
     (stats,) = run.finish()
     q2, acc2 = EstimatorStream(create("riann"), gate).process_batch(rec.stamps_ns, rec.acc, rec.gyr)
@@ -242,7 +242,7 @@ def test_offline_runner_is_the_node_stream():
     np.testing.assert_allclose(q, q2, atol=1e-6)
     assert stats.resets == {"start": 1}
     # a second run starts from scratch (reset) and gives the same numbers
-    (q3,) = ev.OfflineRunner().start(specs, gate, 0).feed(rec)
+    (q3,) = ev.OfflineRunner().start(specs, gate).feed(rec)
     np.testing.assert_allclose(q, q3, atol=1e-6)
 
 

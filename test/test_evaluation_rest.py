@@ -144,7 +144,7 @@ def test_moving_before_the_scored_part_removes_no_bias_and_madgwick_stays_accura
     s.rest = wrong
     plan = ev.ScenarioPlan(ev.RESTRICTIVE, s)
     r = plan.apply(rec, 0)
-    run = ev.OfflineRunner().start(settings.estimators, plan.gate, 0)
+    run = ev.OfflineRunner().start(settings.estimators, plan.gate)
     (q,) = run.feed(r)
     assert ev.score(r, q).rmse_deg > 10.0
 

@@ -277,7 +277,7 @@ class LiveRunner:
             finally:
                 self.node.destroy_client(client)
 
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> _LiveRun:
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig) -> _LiveRun:
         self._ensure_nodes(specs, gate.nominal_rate)
         if self.external is None:
             self._restart_nodes(specs)

@@ -63,12 +63,11 @@ def _plan_runs(summary: Summary, settings: EvalSettings, name: str, native: bool
     runs = []
     for c, condition in enumerate(settings.conditions):
         for s, scn in enumerate(scenarios):
-            slot = c * len(scenarios) + s
             # recorded estimates exist for the recording as it is only: as-recorded, unperturbed, own rate
             served = recorded if native and scn == AS_RECORDED and not condition.parts else []
-            runs.append(ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, slot, settings, name,
+            runs.append(ScenarioRun(ScenarioPlan(scn, summary, settings.seed), condition, settings, name,
                                     want_series and (plotted is None or condition.label in plotted),
-                                    native and settings.keep_estimates and slot == 0,
+                                    native and settings.keep_estimates and c == s == 0,
                                     served, offsets=scn == offset_scenario, free=free))
     return [r for r in runs if r.specs]
 

@@ -36,7 +36,7 @@ class Runner(Protocol):
     mode: str
     interleaved: bool  # whether several runs may be fed alternately (one pass serves all scenarios)
 
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run: ...
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig) -> Run: ...
 
 
 class _OfflineRun:
@@ -95,7 +95,7 @@ class OfflineRunner:
     def __init__(self, use_mag: str = "auto") -> None:
         self.use_mag = use_mag
 
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig) -> Run:
         return _OfflineRun(specs, gate, self.use_mag)
 
 
@@ -125,7 +125,7 @@ class RecordedRunner:
     mode = RECORDED
     interleaved = True
 
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig, slot: int) -> Run:
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig) -> Run:
         return _RecordedRun(specs)
 
 

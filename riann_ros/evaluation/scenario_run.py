@@ -40,12 +40,11 @@ class ScenarioRun:
     """One condition × scenario of one sequence at one rate: the scenario plan, the condition's transforms, the
     runner's run and one accumulator per estimator (``free``: the input has no reference: agreement instead)."""
 
-    def __init__(self, plan: ScenarioPlan, condition: Condition, slot: int, settings: EvalSettings, name: str,
+    def __init__(self, plan: ScenarioPlan, condition: Condition, settings: EvalSettings, name: str,
                  series: bool, estimates: bool, recorded: list[EstimatorSpec] | None = None,
                  offsets: bool = False, free: bool = False) -> None:
         self.plan = plan
         self.condition = condition
-        self.slot = slot
         self.own = settings.estimators  # run by the runner
         self.recorded = recorded or []  # served from the bag
         self.specs = [*self.own, *self.recorded]
@@ -79,8 +78,8 @@ class ScenarioRun:
         return self.agreement is not None
 
     def begin(self, runner: Runner) -> None:
-        runs = [runner.start(self.own, self.gate, self.slot)] if self.own else []
-        runs += [RecordedRunner().start(self.recorded, self.gate, self.slot)] if self.recorded else []
+        runs = [runner.start(self.own, self.gate)] if self.own else []
+        runs += [RecordedRunner().start(self.recorded, self.gate)] if self.recorded else []
         self.run = runs[0] if len(runs) == 1 else Joined(runs)
 
     def feed(self, chunk: Recording, offset: int) -> None:
