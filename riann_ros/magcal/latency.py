@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from riann_ros.magcal.model import rotation_matrix
 from riann_ros.magcal.records import HARD_IRON_PRIOR_SD_T
 from riann_ros.rotations import IDENTITY, Quat, Vec, cross, qmul, rotate
 
@@ -74,9 +75,13 @@ class LatencyEstimator:
     def sd(self, floor: float) -> float:
         """s; the standard deviation of :meth:`delay` (class docstring): :data:`DELAY_PRIOR_SD` while no window has
         informed it, never below ``floor`` (what the fit cannot resolve: a sample's rounding, the sensor's filter)."""
+        self._fresh()
+        return math.hypot(floor, math.sqrt(self._var))
+
+    def _fresh(self) -> None:
+        """The solution up to date with the windows (with the prior :meth:`delay` was last asked with)."""
         if self._fit_for is None or self._fit_for[1] != self.windows:
             self._solve(0.0 if self._fit_for is None else self._fit_for[0])
-        return math.hypot(floor, math.sqrt(self._var))
 
     def _solve(self, start: float) -> None:
         prior = np.diag([DELAY_PRIOR, _B_PRIOR, _B_PRIOR, _B_PRIOR])
@@ -110,8 +115,7 @@ class LatencyEstimator:
         assert m0 is not None
         rc = (self.rho[0], -self.rho[1], -self.rho[2], -self.rho[3])
         p = rotate(rc, m0)
-        if self._fit_for is None or self._fit_for[1] != self.windows:
-            self._solve(0.0 if self._fit_for is None else self._fit_for[0])
+        self._fresh()
         b = self._b
         u0 = (m0[0] - b[0], m0[1] - b[1], m0[2] - b[2])  # the field the latency delays: without the hard iron
         w0, w1 = self.w0, self.w
@@ -122,8 +126,7 @@ class LatencyEstimator:
             return
         a = np.empty((3, 4))
         a[:, 0] = [(c1[i] - c0[i]) / n for i in range(3)]
-        a[:, 1:] = (np.eye(3) - np.column_stack([rotate(rc, e) for e in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
-                                                                         (0.0, 0.0, 1.0))])) / n
+        a[:, 1:] = (np.eye(3) - rotation_matrix(rc)) / n
         e = np.array([(m1[i] - p[i]) / n for i in range(3)])
         f = math.exp(-self.t / DELAY_TAU)
         self.normal = f * self.normal + a.T @ a
