@@ -58,7 +58,7 @@ class PriorTest:
     def __init__(self, model: CalModel, theta0: Array, saved: Array | None = None) -> None:
         self.model = model
         self.theta0 = theta0
-        self.saved = np.zeros((model.n, model.n)) if saved is None else saved  # a saved calibration's covariance
+        self.saved = saved  # a saved calibration's covariance (None: a configured one)
         self.holds = True
         self.failed = 0  # windows that failed H₀ on their own (diagnostics)
         self.d2 = 0.0  # the last test's D² (diagnostics)
@@ -73,7 +73,8 @@ class PriorTest:
         magnetic situation is the one it was estimated in)."""
         tol_h = _TAN_TOL * horizontal_ut
         tol_s = tol_h / max(float(np.linalg.norm(u_ut)), 1e-9)
-        return np.diag(np.r_[np.full(self.model.p, tol_s * tol_s), np.full(3, tol_h * tol_h)]) + self.saved
+        tol = np.diag(np.r_[np.full(self.model.p, tol_s * tol_s), np.full(3, tol_h * tol_h)])
+        return tol if self.saved is None else tol + self.saved
 
     def tolerance_at(self, m_ut: Array, q: tuple[float, float, float, float] | None) -> Array:
         """:meth:`tolerance` for the raw reading ``m_ut`` calibrated with θ₀, its horizontal part at the attitude

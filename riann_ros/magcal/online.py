@@ -250,14 +250,14 @@ class OnlineMagCalibrator:
     def covariance(self) -> Array:
         """The covariance of the calibration in use (:attr:`in_use`): a saved prior's while it is used, else ``Λ⁻¹``
         scaled up by the variance of unit weight above 1; with the hard iron's floor (``SYSTEMATIC_SD_UT``)."""
-        if self.trusted and self.test.saved.any():
+        if self.trusted and self.test.saved is not None:
             return self.model.with_floor(self.test.saved)
         return self.model.with_floor(self.est.cov * max(1.0, self.unit_weight))
 
     @property
     def in_use(self) -> Array:
         """The calibration the state and the saved file describe: a saved prior while it is used, else the estimate."""
-        return self.theta0 if self.trusted and self.test.saved.any() else self.theta
+        return self.theta0 if self.trusted and self.test.saved is not None else self.theta
 
     def _cache(self) -> None:
         theta = self.theta0 if self.trusted else self.theta  # the calibration the readings get
@@ -313,8 +313,9 @@ class OnlineMagCalibrator:
 
 def _record(cal: OnlineMagCalibrator) -> MagCalibration:
     """:meth:`OnlineMagCalibrator.calibration`."""
-    a, h = cal.model.split(cal.in_use)
-    cov = cal.model.output_covariance(cal.in_use, cal.covariance)
+    theta = cal.in_use
+    a, h = cal.model.split(theta)
+    cov = cal.model.output_covariance(theta, cal.covariance)
     scale = np.r_[np.ones(9), np.full(3, UT)]
     cov = cov * np.outer(scale, scale)
     return MagCalibration(hard_iron_t=tuple(float(v) * UT for v in h),  # type: ignore[arg-type]
