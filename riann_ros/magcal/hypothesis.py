@@ -60,7 +60,6 @@ class PriorTest:
         self.theta0 = theta0
         self.saved = saved  # a saved calibration's covariance (None: a configured one)
         self.holds = True
-        self.failed = 0  # windows that failed H₀ on their own (diagnostics)
         self.d2 = 0.0  # the last test's D² (diagnostics)
         self.p_holds = 0.5  # the posterior probability of H₀ (module docstring)
         #: the ROBUST_WINDOWS windows that contradict H₀ the most: (their distance², Λ_i, η_i)
@@ -99,9 +98,7 @@ class PriorTest:
         (once rejected, never again)."""
         if not self.holds:
             return False
-        d2_w = self.window_d2(j, r0, var, tol)
-        self.failed += int(d2_w > GATE_CHI2)
-        self._keep_worst(d2_w, (j.T @ j) / var, -(j.T @ r0) / var)
+        self._keep_worst(self.window_d2(j, r0, var, tol), (j.T @ j) / var, -(j.T @ r0) / var)
         k = max(1.0, est.unit_weight)
         self.p_holds = self._posterior(est.lam0, est.lam / k, (est.eta - est.lam @ self.theta0) / k, tol)
         self.d2 = self._distance(est.theta, est.lam, k, tol)
