@@ -115,7 +115,7 @@ def loop_rows(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | No
     a, g, h = sanitize_arrays(acc, gyr, dt)
     m = [None] * len(a) if mag is None else sanitize_mag(mag, len(a))
     al, gl, hl = a.tolist(), front_end.debias(a, g, h).tolist(), h.tolist()
-    if magcal is not None and magcal.on:
+    if magcal is not None and magcal.takes(mag):
         m = magcal.calibrate(al, gl, hl, m)
     return Rows(al, gl, m, hl)
 
@@ -125,7 +125,7 @@ def calibrated_field(acc: Array, gyr: Array, dt: Array, mag: ArrayLike | None, m
     """``mag`` calibrated online by ``magcal`` when it is on (NaN rows: no field; sanitised inputs), else as given.
     Once a field was seen, the calibration gets every sample, with a field or without (its windows and tilt need
     the gyro of each), so one sample at a time and a batch give it the same samples."""
-    if magcal is None or not magcal.on or (mag is None and not magcal.seen):
+    if magcal is None or not magcal.takes(mag):
         return mag
     rows = magcal.calibrate(acc.tolist(), gyr.tolist(), dt.tolist(),
                             [None] * len(acc) if mag is None else sanitize_mag(mag, len(acc)))

@@ -66,6 +66,11 @@ class MagCalSlot:
     def status(self) -> MagCalStatus | None:
         return self.cal.status() if self.cal is not None else None
 
+    def takes(self, mag: object) -> bool:
+        """Whether a batch goes to the calibration: it is on, and the batch has a field or one came before (until the
+        first field it would pass every sample by)."""
+        return self.on and (mag is not None or self.seen)
+
     def calibrate(self, acc: list, gyr: list, dt: list, mag: list) -> list:
         """The classical filters' front end: ``acc``, ``gyr`` (bias-corrected where the filter corrects it), ``dt``
         and the raw ``mag`` rows (a zero row or None: no field) → the calibrated rows (None: no field, and none
