@@ -1,11 +1,10 @@
 """The one ROS 2 node base behind riann_node, madgwick_node, mahony_node and vqf_node.
 
-It owns the ROS side of one estimator: the ``imu/data_raw`` and ``imu/mag`` subscriptions and their QoS,
-the parameters (:mod:`riann_ros.nodes.parameters`), the ``~/reset`` and ``~/restart`` services, the saved magnetometer
-calibration
-(``mag_calibration_file``, ``~/save_mag_calibration``: :mod:`riann_ros.nodes.mag_calibration`), the outputs
-(:mod:`riann_ros.nodes.outputs`) and ``/diagnostics`` (:mod:`riann_ros.nodes.diagnostics`). What to do
-with a sample (dt from stamps, input checks, resets) is decided by the ROS-free
+It owns the ROS side of one estimator: the ``imu/data_raw`` and ``imu/mag`` subscriptions and their QoS, the
+parameters (:mod:`riann_ros.nodes.parameters`), the ``~/reset`` and ``~/restart`` services, the saved magnetometer
+calibration (``mag_calibration_file``, ``~/save_mag_calibration``: :mod:`riann_ros.nodes.mag_calibration`), the
+outputs (:mod:`riann_ros.nodes.outputs`) and ``/diagnostics`` (:mod:`riann_ros.nodes.diagnostics`). What to do with
+a sample (dt from stamps, input checks, resets) is decided by the ROS-free
 :class:`~riann_ros.stream.EstimatorStream`, the same code the offline evaluator runs.
 
 A concrete node only names its estimator and its default output topics.
