@@ -104,7 +104,9 @@ def _delayed(q: Array, t: Array, delay_s: float) -> Array:
 def windows_of(gyr: ArrayLike, dt: ArrayLike, mag_t: ArrayLike, delay_s: float = 0.0,
                max_windows: int = MAX_WINDOWS) -> tuple[WindowSet, float]:
     """All windows of a recording, one starting at every reading (every few when there are more than
-    ``max_windows``), each closed as online (:class:`~.windows.Windower`); and their overlap: how many of them
+    ``max_windows``), each closed once it has turned 45°, or after :data:`~.records.WINDOW_MAX_S` if it turned 15°
+    (the online :class:`~.windows.Windower` also closes one at a swing's end: here a window starts at every reading,
+    so the swing's end starts windows of its own); and their overlap: how many of them
     share each stretch of rotation (the factor their information is overstated by, as their noises are not
     independent). ``gyr`` (N, 3) bias-corrected rad/s, ``dt`` (N,) s (a step outside (0, MAX_STEP_S] breaks the
     windows across it), ``mag_t`` (N, 3) raw T (NaN rows: none)."""
