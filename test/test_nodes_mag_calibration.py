@@ -2,7 +2,8 @@
 writes the online calibration atomically to ``mag_calibration_file`` and the next start loads it (the node equal to
 the offline estimator within 1e-4 with the calibration on, before and after); a bad file is refused with one clear
 message and the node runs on its parameters, and the service never replaces it; /diagnostics shows the state.
-``~/reset`` keeps the calibration the node learned (the robot's); ``~/restart`` builds the estimator as at start."""
+``~/reset`` keeps the calibration the node learned (the robot's); ``~/restart`` builds the estimator as at start: its
+calibration starts again from the file read at start (which it leaves as it is), or from ``mag_hard_iron`` set since."""
 
 from __future__ import annotations
 
@@ -13,15 +14,17 @@ from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu, MagneticField
 from std_srvs.srv import Trigger
 from test_nodes_node_base import RATE, motion, send
+from test_nodes_parameters import set_param
 
 from conftest import wait_for, wait_matched
 from helpers_ros import quats, stamp_ns
 from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
 from riann_ros.mag import MagConfig, pair_fields
-from riann_ros.magcal.records import STATES, UT, MagCalPrior
-from riann_ros.magcal.store import load_calibration
+from riann_ros.magcal.records import CALIBRATED, IDENTITY_9, STATES, UT, MagCalibration, MagCalPrior
+from riann_ros.magcal.store import load_calibration, save_calibration
 from riann_ros.nodes.mag_calibration import SAVE_SERVICE
+from riann_ros.nodes.vqf_node import VqfNode
 from riann_ros.stream import EstimatorStream, GateConfig
 
 pytestmark = pytest.mark.ros
@@ -29,16 +32,23 @@ H_UT = np.array([20.0, 0.0, -10.0])  # the robot's hard iron, in the raw field t
 
 
 def offline(name: str, stamps, acc, gyr, raw, sent, config: MagConfig, prior: MagCalPrior | None) -> np.ndarray:
+    return offline_run(name, stamps, acc, gyr, raw, sent, config, prior)[0]
+
+
+def offline_run(name: str, stamps, acc, gyr, raw, sent, config: MagConfig,
+                prior: MagCalPrior | None) -> tuple[np.ndarray, EstimatorStream]:
+    """The offline estimates and the stream after them (its ``batch_sigma``)."""
     fields = pair_fields(stamps, stamps[sent], raw[sent], config.timeout_ns)
     stream = EstimatorStream(create(name), GateConfig(nominal_rate=RATE), config, mag_prior=prior)
     assert stream.estimator.calibrates_mag()
     q, ok = stream.process_batch(stamps, acc, gyr, fields)
     assert ok.all()
-    return q
+    return q, stream
 
 
-def run_node(ros, node, name: str, seconds: float, seed: int, t0_shift: int = 0):
-    """Feed ``seconds`` of motion with a 100 Hz raw field; (stamps, acc, gyr, raw, sent, outputs, diagnostics)."""
+def run_node(ros, node, name: str, seconds: float, seed: int, t0_shift: int = 0, hard_iron_ut=H_UT):
+    """Feed ``seconds`` of motion with a 100 Hz raw field (hard iron ``hard_iron_ut``); (stamps, acc, gyr, raw, sent,
+    outputs, diagnostics)."""
     pub_imu, pub_mag = ros.publisher(Imu, "imu/data_raw"), ros.publisher(MagneticField, "imu/mag")
     att = ros.collect(QuaternionStamped, "imu/attitude" if name == "riann" else f"imu/{name}/attitude")
     diags = ros.collect(DiagnosticArray, "/diagnostics")
@@ -46,7 +56,7 @@ def run_node(ros, node, name: str, seconds: float, seed: int, t0_shift: int = 0)
     n = int(seconds * RATE)
     stamps, acc, gyr, mag = motion(n, seed)
     stamps = stamps + t0_shift
-    raw = mag + H_UT * UT
+    raw = mag + hard_iron_ut * UT
     sent = send(ros, pub_imu, pub_mag, att, stamps, acc, gyr, raw, mag_until=n)
     wait_for(lambda: len(att.messages) >= n, 30, f"all outputs ({len(att.messages)} of {n}; log: {node.output()})")
     wait_for(lambda: len(diags.messages) >= 2, 10, "diagnostics")
@@ -172,3 +182,76 @@ def test_reset_keeps_the_calibration_restart_starts_as_at_start(ros, start_node,
     # and the test tells the two apart: what the calibration learned moves the heading of the run after it
     d = np.minimum(np.abs(q_kept - q_fresh).max(axis=1), np.abs(q_kept + q_fresh).max(axis=1))
     assert d.max() > 1e-2, d.max()
+
+
+def saved(path, hard_iron_ut: np.ndarray) -> MagCalibration:
+    """A calibration file (riann_ros.magcal.store) holding ``hard_iron_ut`` known to 0.5 µT, 12 windows."""
+    cov = np.diag(np.r_[np.full(9, 1e-4), np.full(3, (0.5 * UT) ** 2)])
+    save_calibration(path, MagCalibration(hard_iron_t=tuple(hard_iron_ut * UT), soft_iron=IDENTITY_9,
+                                          covariance=tuple(cov.reshape(144)), state=CALIBRATED, windows=12,
+                                          converged_after_s=41.5, soft_iron_model="full"))
+    return load_calibration(path)
+
+
+def quat_distance(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.minimum(np.abs(a - b).max(axis=1), np.abs(a + b).max(axis=1)).max())
+
+
+def test_restart_starts_the_calibration_again_from_the_file_read_at_start(ros, start_node, tmp_path):
+    """Started with ``mag_calibration_file``: after a run, ``~/restart`` and the next run equal an estimator started
+    from that file (its hard and soft iron and how well it knows them: its imu/data's heading σ is the file's from the
+    first field, not the wide one of the parameters alone); the file is left as it is."""
+    folder = tmp_path / "cal"
+    folder.mkdir()
+    path = folder / "mag.yaml"
+    cal = saved(path, H_UT)
+    before = path.read_bytes(), path.stat().st_mtime_ns
+    node = start_node("vqf_node", "-p", "input_qos:=reliable", "-p", f"nominal_rate:={RATE}",
+                      "-p", f"mag_calibration_file:={path}")
+    run_node(ros, node, "vqf", 6.0, seed=1)
+    res = trigger(ros, "vqf_node", "~/restart")
+    assert res.success, res.message
+    imu_out = ros.collect(Imu, VqfNode.IMU_TOPIC)
+    wait_matched([], [imu_out], VqfNode.IMU_TOPIC)
+    stamps, acc, gyr, raw, sent, q_node, _ = run_node(ros, node, "vqf", 3.0, seed=2, t0_shift=3 * 10**12)
+    wait_for(lambda: len(imu_out.messages) >= len(stamps), 10, VqfNode.IMU_TOPIC)
+    assert (path.read_bytes(), path.stat().st_mtime_ns) == before and [p.name for p in folder.iterdir()] == [
+        "mag.yaml"]
+    config = MagConfig(mag_hard_iron=cal.hard_iron_t, mag_soft_iron=cal.soft_iron)
+    q_file, stream = offline_run("vqf", stamps, acc, gyr, raw, sent, config, MagCalPrior.from_calibration(cal))
+    equal_quats(q_node, q_file)
+    cov = np.array([m.orientation_covariance for m in imu_out.messages[-len(stamps):]])
+    sigma = stream.batch_sigma
+    np.testing.assert_allclose(cov[:, [0, 4, 8]], np.column_stack([sigma[:, 0], sigma[:, 0], sigma[:, 1]]) ** 2,
+                               rtol=1e-4, atol=1e-6)
+    # and the test tells the starts apart: the parameters without the file (another heading); the file's hard and
+    # soft iron as parameters alone (the heading σ of the parameters' wide prior, not the file's)
+    assert quat_distance(q_file, offline("vqf", stamps, acc, gyr, raw, sent, MagConfig(), None)) > 1e-2
+    from_params = offline_run("vqf", stamps, acc, gyr, raw, sent, config, None)[1]
+    assert np.degrees(np.abs(from_params.batch_sigma[:, 1] - sigma[:, 1])).max() > 10.0
+
+
+def test_restart_starts_the_calibration_again_from_mag_hard_iron_set_since(ros, start_node, tmp_path):
+    """The robot's hard iron moved (H2) since its file was saved (H_UT) and ``mag_hard_iron`` is set to H2 at run
+    time: after a run, ``~/restart`` and the next run equal an estimator started from H2 (not from the file, which
+    is also the value at start)."""
+    h2_ut = np.array([-15.0, 10.0, 5.0])
+    folder = tmp_path / "cal"
+    folder.mkdir()
+    cal = saved(folder / "mag.yaml", H_UT)
+    node = start_node("vqf_node", "-p", "input_qos:=reliable", "-p", f"nominal_rate:={RATE}",
+                      "-p", f"mag_calibration_file:={folder / 'mag.yaml'}")
+    assert set_param(ros, "/vqf_node", "mag_hard_iron", tuple(h2_ut * UT)) == (True, "")
+    config = MagConfig(mag_hard_iron=tuple(h2_ut * UT), mag_soft_iron=cal.soft_iron)
+    first = run_node(ros, node, "vqf", 3.0, seed=1, hard_iron_ut=h2_ut)
+    equal_quats(first[5], offline("vqf", *first[:5], config, None))  # the set restarted the calibration from H2
+    res = trigger(ros, "vqf_node", "~/restart")
+    assert res.success, res.message
+    stamps, acc, gyr, raw, sent, q_node, _ = run_node(ros, node, "vqf", 3.0, seed=2, t0_shift=3 * 10**12,
+                                                      hard_iron_ut=h2_ut)
+    q_h2 = offline("vqf", stamps, acc, gyr, raw, sent, config, None)
+    equal_quats(q_node, q_h2)
+    # and the test tells it from the file's start (the value at start)
+    at_start = MagConfig(mag_hard_iron=cal.hard_iron_t, mag_soft_iron=cal.soft_iron)
+    q_file = offline("vqf", stamps, acc, gyr, raw, sent, at_start, MagCalPrior.from_calibration(cal))
+    assert quat_distance(q_h2, q_file) > 1e-2

@@ -85,6 +85,8 @@ def set_param(ros, node: str, name: str, value) -> tuple[bool, str]:
         v.type, v.string_value = ParameterType.PARAMETER_STRING, value
     elif isinstance(value, int):
         v.type, v.integer_value = ParameterType.PARAMETER_INTEGER, value
+    elif isinstance(value, tuple):
+        v.type, v.double_array_value = ParameterType.PARAMETER_DOUBLE_ARRAY, [float(x) for x in value]
     else:
         v.type, v.double_value = ParameterType.PARAMETER_DOUBLE, value
     c = client(ros, SetParameters, node, "set_parameters")
