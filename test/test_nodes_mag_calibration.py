@@ -215,8 +215,8 @@ def test_restart_starts_the_calibration_again_from_the_file_read_at_start(ros, s
     wait_matched([], [imu_out], VqfNode.IMU_TOPIC)
     stamps, acc, gyr, raw, sent, q_node, _ = run_node(ros, node, "vqf", 3.0, seed=2, t0_shift=3 * 10**12)
     wait_for(lambda: len(imu_out.messages) >= len(stamps), 10, VqfNode.IMU_TOPIC)
-    assert (path.read_bytes(), path.stat().st_mtime_ns) == before and [p.name for p in folder.iterdir()] == [
-        "mag.yaml"]
+    assert (path.read_bytes(), path.stat().st_mtime_ns) == before  # restart leaves the file as it is
+    assert [p.name for p in folder.iterdir()] == ["mag.yaml"]
     config = MagConfig(mag_hard_iron=cal.hard_iron_t, mag_soft_iron=cal.soft_iron)
     q_file, stream = offline_run("vqf", stamps, acc, gyr, raw, sent, config, MagCalPrior.from_calibration(cal))
     equal_quats(q_node, q_file)
@@ -233,8 +233,8 @@ def test_restart_starts_the_calibration_again_from_the_file_read_at_start(ros, s
 
 def test_restart_starts_the_calibration_again_from_mag_hard_iron_set_since(ros, start_node, tmp_path):
     """The robot's hard iron moved (H2) since its file was saved (H_UT) and ``mag_hard_iron`` is set to H2 at run
-    time: after a run, ``~/restart`` and the next run equal an estimator started from H2 (not from the file, which
-    is also the value at start)."""
+    time: after a run, ``~/restart`` and the next run equal an estimator started from H2 (not from the file, whose
+    values replaced the parameters at start, nor from the parameter as given)."""
     h2_ut = np.array([-15.0, 10.0, 5.0])
     folder = tmp_path / "cal"
     folder.mkdir()
@@ -251,7 +251,9 @@ def test_restart_starts_the_calibration_again_from_mag_hard_iron_set_since(ros, 
                                                       hard_iron_ut=h2_ut)
     q_h2 = offline("vqf", stamps, acc, gyr, raw, sent, config, None)
     equal_quats(q_node, q_h2)
-    # and the test tells it from the file's start (the value at start)
+    # and the test tells it from the file's start (the values at start) and from the parameter as given (the default,
+    # which the file replaced)
     at_start = MagConfig(mag_hard_iron=cal.hard_iron_t, mag_soft_iron=cal.soft_iron)
     q_file = offline("vqf", stamps, acc, gyr, raw, sent, at_start, MagCalPrior.from_calibration(cal))
     assert quat_distance(q_h2, q_file) > 1e-2
+    assert quat_distance(q_h2, offline("vqf", stamps, acc, gyr, raw, sent, MagConfig(), None)) > 1e-2
