@@ -7,7 +7,9 @@ for their plain-float loops (:class:`Rows`).
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import numpy as np
@@ -17,7 +19,7 @@ from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
 from riann_ros.estimators.bias import FrontEndSlot
 from riann_ros.estimators.magcal_slot import MagCalSlot
-from riann_ros.rotations import Quat, rotate
+from riann_ros.rotations import Quat, Vec, rotate
 
 BIAS_KEY = "gyro bias estimate (deg/s)"
 
@@ -74,15 +76,21 @@ def has_field(mx: float, my: float, mz: float) -> bool:
 def initial_attitude_marg(ax: float, ay: float, az: float, mx: float, my: float, mz: float) -> Quat | None:
     """Sensor → ENU attitude from one accelerometer and one magnetometer sample, or None (no usable acc).
 
-    The zero-heading attitude of :func:`initial_attitude`, then a rotation about world z that puts the
-    horizontal part of the tilt-compensated field ``R(q) m`` on +y (magnetic north). Without a field (zero,
-    non-finite, or vertical) the heading stays zero, as in :func:`initial_attitude`.
+    The zero-heading attitude of :func:`initial_attitude`, then :func:`align_heading` to the field. Without a field
+    (zero, non-finite, or vertical) the heading stays zero, as in :func:`initial_attitude`.
     """
     q = initial_attitude(ax, ay, az)
     if q is None or not has_field(mx, my, mz):
         return q
+    return align_heading(q, (mx, my, mz))
+
+
+def align_heading(q: Quat, m: Vec) -> Quat:
+    """The attitude ``q`` (sensor → ENU) turned about world z so that the horizontal part of the tilt-compensated
+    field ``R(q) m`` lies on +y (magnetic north); ``q`` itself when that part is zero or not finite. The tilt is
+    kept: only the heading comes from the field."""
     w, x, y, z = q
-    hx, hy, _ = rotate(q, (mx, my, mz))
+    hx, hy, _ = rotate(q, m)
     if not (0.0 < hx * hx + hy * hy < math.inf):
         return q
     psi = math.atan2(hx, hy)  # angle of the horizontal field from +y toward +x
@@ -96,40 +104,59 @@ def initial_attitude_marg(ax: float, ay: float, az: float, mx: float, my: float,
 
 class Rows(NamedTuple):
     """One batch as the plain-float loops take it: nested lists of Python floats, degenerate values neutralised
-    (:func:`sanitize_arrays`, :func:`sanitize_mag`); a ``mag`` row that is None or zeros has no field."""
+    (:func:`sanitize_arrays`, :func:`sanitize_mag`); a ``mag`` row that is None or zeros has no field. ``realign``:
+    the rows before which the filter's heading is set anew from the row's field, as at its start, the online
+    calibration having given the field another calibration (:attr:`~.magcal_slot.MagCalSlot.realign`)."""
 
     acc: list
     gyr: list
     mag: list
     dt: list
+    realign: tuple[int, ...] = ()
 
     def tail(self, i: int) -> Rows:
         """The samples from index ``i`` on."""
-        return Rows(self.acc[i:], self.gyr[i:], self.mag[i:], self.dt[i:])
+        return self.part(i, len(self.acc))
+
+    def part(self, a: int, b: int) -> Rows:
+        """The samples ``a`` to ``b − 1``."""
+        return Rows(self.acc[a:b], self.gyr[a:b], self.mag[a:b], self.dt[a:b],
+                    tuple(k - a for k in self.realign if a <= k < b))
+
+    def pieces(self) -> Iterator[tuple[Rows, bool]]:
+        """The batch cut before each :attr:`realign` row: each piece, and whether its first row is one."""
+        cuts = [0, *(k for k in self.realign if k > 0), len(self.acc)]
+        for a, b in itertools.pairwise(cuts):
+            if b > a:
+                yield self.part(a, b), a in self.realign
 
 
 def loop_rows(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None, front_end: FrontEndSlot,
               magcal: MagCalSlot | None = None) -> Rows:
     """The batch for a loop: sanitised, the gyro debiased by ``front_end``; without ``mag`` every row is None; with
-    ``magcal`` on, the field calibrated online (:meth:`MagCalSlot.calibrate`, a row without a field is None)."""
+    ``magcal`` on, the field calibrated online (:meth:`MagCalSlot.calibrate`, a row without a field is None) and the
+    rows where the calibration changed (:attr:`Rows.realign`)."""
     a, g, h = sanitize_arrays(acc, gyr, dt)
     m = [None] * len(a) if mag is None else sanitize_mag(mag, len(a))
     al, gl, hl = a.tolist(), front_end.debias(a, g, h).tolist(), h.tolist()
     if magcal is not None and magcal.takes(mag):
         m = magcal.calibrate(al, gl, hl, m)
+        return Rows(al, gl, m, hl, magcal.realign)
     return Rows(al, gl, m, hl)
 
 
 def calibrated_field(acc: Array, gyr: Array, dt: Array, mag: ArrayLike | None, magcal: MagCalSlot | None
-                     ) -> ArrayLike | None:
-    """``mag`` calibrated online by ``magcal`` when it is on (NaN rows: no field; sanitised inputs), else as given.
-    Once a field was seen, the calibration gets every sample, with a field or without (its windows and tilt need
-    the gyro of each), so one sample at a time and a batch give it the same samples."""
+                     ) -> tuple[ArrayLike | None, tuple[int, ...]]:
+    """``mag`` calibrated online by ``magcal`` when it is on (NaN rows: no field; sanitised inputs), else as given;
+    and the rows where the calibration the field gets changed (:attr:`Rows.realign`). Once a field was seen, the
+    calibration gets every sample, with a field or without (its windows and tilt need the gyro of each), so one
+    sample at a time and a batch give it the same samples."""
     if magcal is None or not magcal.takes(mag):
-        return mag
+        return mag, ()
     rows = magcal.calibrate(acc.tolist(), gyr.tolist(), dt.tolist(),
                             [None] * len(acc) if mag is None else sanitize_mag(mag, len(acc)))
-    return np.array([(math.nan,) * 3 if u is None else u for u in rows], dtype=float).reshape(-1, 3)
+    field = np.array([(math.nan,) * 3 if u is None else u for u in rows], dtype=float).reshape(-1, 3)
+    return field, magcal.realign
 
 
 def initialise(rows: Rows, out: list) -> tuple[Quat | None, Rows, bool]:

@@ -54,7 +54,16 @@ from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows
+from riann_ros.estimators.common import (
+    BIAS_KEY,
+    Quat,
+    Rows,
+    align_heading,
+    as_array,
+    bias_text,
+    initialise,
+    loop_rows,
+)
 from riann_ros.mag import MAG_CAL_PARAMS
 
 #: ahrs 0.4.0 ``Madgwick`` default ``gain_imu`` (IMU/6D mode); Madgwick's report gives β = √(3/4)·ω̃ with
@@ -74,6 +83,12 @@ def enu_to_nwu(q: Quat) -> Quat:
     return _C * (w + z), _C * (x + y), _C * (y - x), _C * (z - w)
 
 
+def nwu_to_enu(q: Quat) -> Quat:
+    """``C ⊗ q`` (:data:`C_NWU_TO_ENU`): a sensor → NWU attitude as sensor → ENU."""
+    w, x, y, z = q
+    return _C * (w - z), _C * (x - y), _C * (y + x), _C * (z + w)
+
+
 def _madgwick_loop(q: Quat, used: bool, rows: Rows, beta: float, beta_marg: float,
                    nwu: bool) -> tuple[Quat, bool, list]:
     """The filter from the attitude ``q`` (sensor → NWU when ``nwu``, else sensor → ENU) over the samples: the MARG
@@ -86,7 +101,7 @@ def _madgwick_loop(q: Quat, used: bool, rows: Rows, beta: float, beta_marg: floa
     inf = math.inf
     c = _C
     qw, qx, qy, qz = q
-    for (ax, ay, az), (gx, gy, gz), m, h in zip(*rows, strict=True):
+    for (ax, ay, az), (gx, gy, gz), m, h in zip(rows.acc, rows.gyr, rows.mag, rows.dt, strict=True):
         # rate of change from the gyroscope: ½ q ⊗ [0, ω]
         dw, dx = 0.5 * (-qx * gx - qy * gy - qz * gz), 0.5 * (qw * gx + qy * gz - qz * gy)
         dy, dz = 0.5 * (qw * gy - qx * gz + qz * gx), 0.5 * (qw * gz + qx * gy - qy * gx)
@@ -186,8 +201,11 @@ class MadgwickEstimator(AttitudeEstimator):
             state = enu_to_nwu(q0) if nine and q0 is not None else q0
         if state is not None:
             beta, beta_marg = float(self.params["beta"]), float(self.params["beta_marg"])
-            state, used, filtered = _madgwick_loop(state, used, rows, beta, beta_marg, nine)
-            out += filtered
+            for piece, realign in rows.pieces():
+                if realign:  # the field got another calibration: its heading as at the start (the state is NWU)
+                    state = enu_to_nwu(align_heading(nwu_to_enu(state), piece.mag[0]))
+                state, used, filtered = _madgwick_loop(state, used, piece, beta, beta_marg, nine)
+                out += filtered
             self._q = out[-1] if out else self._q
             self._marg = (self._q, state) if nine and self._q is not None else None
         self._observed = used

@@ -45,6 +45,11 @@ class MagCalSlot:
         self.seen = False  # a field has come: from then on every sample goes to the calibration
         # per sample of the last calibrate(): the heading σ the calibration adds (rad)
         self.sd_rad: NDArray[np.float64] = np.zeros(0)
+        #: the rows of the last calibrate() before which the filter's heading is set anew from the row's field: the
+        #: first row with a field after the calibration the field gets changed (module docstring)
+        self.realign: tuple[int, ...] = ()
+        self._changes = 0  # the calibrator's change count the filter's heading follows
+        self._pending = False  # a change not yet followed (no field since)
         self.set_prior(MagCalPrior())
 
     def set_prior(self, prior: MagCalPrior) -> None:
@@ -53,6 +58,7 @@ class MagCalSlot:
         wrong is the ``mag_hard_iron_sd`` parameter."""
         prior = dataclasses.replace(prior, hard_iron_sd_t=self.hard_iron_sd_t)
         self.cal = OnlineMagCalibrator(prior, self.model) if self.on else None
+        self._changes, self._pending = 0, False
 
     def restart(self) -> None:
         """A reset, a gap or a hole: the open window is dropped, the estimate kept; the attitude starts anew."""
@@ -76,13 +82,14 @@ class MagCalSlot:
         and the raw ``mag`` rows (a zero row or None: no field) → the calibrated rows (None: no field, and none
         while the calibration says the field's heading is unknown: the filter's gyro holds it); the heading σ the
         calibration adds per sample (the doubt about the configured calibration while it is used) into
-        :attr:`sd_rad`."""
+        :attr:`sd_rad`; the rows where the filter's heading is set anew into :attr:`realign`."""
         cal = self.cal
         assert cal is not None
         out: list = []
         sd = []
+        realign = []
         lat = self.latency
-        for (ax, ay, az), (gx, gy, gz), h, m in zip(acc, gyr, dt, mag, strict=True):
+        for i, ((ax, ay, az), (gx, gy, gz), h, m) in enumerate(zip(acc, gyr, dt, mag, strict=True)):
             field = None if m is None or not (m[0] or m[1] or m[2]) else (m[0], m[1], m[2])
             self.seen = self.seen or field is not None
             if not self.seen:  # nothing before the first field (a filter fed one sample at a time does not call it)
@@ -102,9 +109,15 @@ class MagCalSlot:
             s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
             if s >= math.pi:  # the field's heading is unknown (the last window contradicted the estimate)
                 u, s = None, 0.0
+            if cal.changes != self._changes:
+                self._changes, self._pending = cal.changes, True
+            if self._pending and u is not None:
+                realign.append(i)
+                self._pending = False
             out.append(u)
             sd.append(s)
         self.sd_rad = np.asarray(sd, dtype=float)
+        self.realign = tuple(realign)
         return out
 
     def _tilt(self, delta: Quat, dt: float, ax: float, ay: float, az: float) -> Quat | None:

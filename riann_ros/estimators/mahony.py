@@ -40,7 +40,16 @@ from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows
+from riann_ros.estimators.common import (
+    BIAS_KEY,
+    Quat,
+    Rows,
+    align_heading,
+    as_array,
+    bias_text,
+    initialise,
+    loop_rows,
+)
 from riann_ros.mag import MAG_CAL_PARAMS
 from riann_ros.rotations import Vec
 
@@ -59,7 +68,7 @@ def _mahony_loop(q: Quat, b: Vec, used: bool, rows: Rows, kp: float, ki: float) 
     inf = math.inf
     qw, qx, qy, qz = q
     bx, by, bz = b
-    for (ax, ay, az), (gx, gy, gz), m, h in zip(*rows, strict=True):
+    for (ax, ay, az), (gx, gy, gz), m, h in zip(rows.acc, rows.gyr, rows.mag, rows.dt, strict=True):
         used = False
         an = sqrt(ax * ax + ay * ay + az * az)
         if an > 0.0:
@@ -156,7 +165,11 @@ class MahonyEstimator(AttitudeEstimator):
             q, rows, used = initialise(rows, out)
         if q is not None:
             kp, ki = float(self.params["kp"]), float(self.params["ki"])
-            self._q, self._b, used, filtered = _mahony_loop(q, self._b, used, rows, kp, ki)
-            out += filtered
+            for piece, realign in rows.pieces():
+                if realign:  # the field got another calibration: its heading as at the start
+                    q = align_heading(q, piece.mag[0])
+                q, self._b, used, filtered = _mahony_loop(q, self._b, used, piece, kp, ki)
+                out += filtered
+            self._q = q
         self._observed = used
         return as_array(out)

@@ -38,6 +38,8 @@ The C++ implementation of the ``vqf`` package (MIT) does the work; this class on
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from numpy.typing import ArrayLike
 from vqf import VQF
@@ -55,6 +57,10 @@ DEFAULT_BIAS_CLIP = 2.0  # °/s
 DEFAULT_TAU_MAG = 9.0  # s
 DEFAULT_MAG_DIST_REJECTION = True
 TESLA_TO_UT = 1e6
+#: VQF's state of its heading correction: its initialisation gain and the disturbance rejection's field reference
+_VQF_MAG_STATE = ("kMagInit", "lastMagDisAngle", "lastMagCorrAngularRate", "magDistDetected", "magRefNorm",
+                  "magRefDip", "magUndisturbedT", "magRejectT", "magCandidateNorm", "magCandidateDip",
+                  "magCandidateT", "magNormDip", "magNormDipLpState")
 
 
 class VqfEstimator(AttitudeEstimator):
@@ -157,9 +163,11 @@ class VqfEstimator(AttitudeEstimator):
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
         a, g, h = sanitize_arrays(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])
         v, ts = self._ensure(float(h[0]))
-        mag = calibrated_field(a, g, h, None if mag is None else np.reshape(mag, (1, 3)), self.magcal)
+        mag, realign = calibrated_field(a, g, h, None if mag is None else np.reshape(mag, (1, 3)), self.magcal)
         m = _field_ut(mag, 1)[0]
         self._mag_used = bool(m.any())
+        if realign:
+            self._restart_heading()
         if self._mag_used:
             v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]), m)
         else:
@@ -171,11 +179,30 @@ class VqfEstimator(AttitudeEstimator):
         if len(a) == 0:
             return np.empty((0, 4))
         v, ts = self._ensure(float(h[0]))
-        m = _field_ut(calibrated_field(a, g, h, mag, self.magcal), len(a))
+        field, realign = calibrated_field(a, g, h, mag, self.magcal)
+        m = _field_ut(field, len(a))
         g = np.ascontiguousarray(g * (h / ts)[:, None])  # zero rows: VQF skips updateMag
         self._mag_used = bool(m[-1].any())
-        out = v.updateBatch(g, np.ascontiguousarray(a), m)["quat9D"]
-        return np.array(out, dtype=float)
+        a = np.ascontiguousarray(a)
+        cuts = [0, *(k for k in realign if k > 0), len(a)]
+        out = []
+        for i, j in itertools.pairwise(cuts):
+            if i in realign:
+                self._restart_heading()
+            out.append(v.updateBatch(np.ascontiguousarray(g[i:j]), np.ascontiguousarray(a[i:j]),
+                                     np.ascontiguousarray(m[i:j]))["quat9D"])
+        return np.array(np.concatenate(out), dtype=float)
+
+    def _restart_heading(self) -> None:
+        """The online calibration gave the field another calibration: VQF's magnetic part starts as at its
+        construction (its heading initialisation over ``tau_mag``, a new field reference for the disturbance
+        rejection); its inclination, gyro bias and current heading are kept."""
+        v, ts = self._vqf, self._ts
+        assert v is not None and ts is not None
+        fresh = VQF(ts, tauMag=float(self.params["tau_mag"])).state
+        state = v.state
+        state.update({k: fresh[k] for k in _VQF_MAG_STATE})
+        v.state = state
 
 
 def _field_ut(mag: ArrayLike | None, n: int) -> Array:

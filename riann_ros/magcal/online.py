@@ -74,6 +74,10 @@ class OnlineMagCalibrator:
         self.agree = 0  # consecutive windows that agree with a rejected prior
         self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
         self.switches = 0  # times a candidate replaced the estimate
+        #: times the readings got another calibration by a decision (the prior found the less probable hypothesis or
+        #: restored, a candidate replacing the estimate in use): a filter's heading built on the one before is not
+        #: the field's
+        self.changes = 0
         self.windower = Windower()
         self.windows = prior.windows  # windows in the information (a saved calibration's included)
         self.rejected = 0  # windows rejected as disturbed in this run
@@ -166,6 +170,7 @@ class OnlineMagCalibrator:
         jw, rw = self.model.rows(ws)
         j, r0 = jw[0], rw[0]
         est = self.est
+        trusted = self.trusted
         var = float(self.model.window_var(ws, self.model.soft_iron(est.theta), est.theta[self.model.p:])[0])
         d2, k = est.window(j, r0, var)
         if est.passes(d2):
@@ -179,6 +184,8 @@ class OnlineMagCalibrator:
             if self.test.holds or not self._retest(w, j, r0, var):
                 self._candidate(j, r0, ws)
         self._cache()
+        if self.trusted != trusted or not (trusted or self.est is est):  # the readings get another calibration
+            self.changes += 1
         self._set_state()
 
     def _test(self, w: Window, j: Array, r0: Array, var: float) -> None:
