@@ -19,9 +19,13 @@ from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
 from riann_ros.estimators.bias import FrontEndSlot
 from riann_ros.estimators.magcal_slot import MagCalSlot
+from riann_ros.magcal.records import FIELD_HEADING_SD_RAD
 from riann_ros.rotations import Quat, Vec, rotate
 
 BIAS_KEY = "gyro bias estimate (deg/s)"
+#: a filter's heading is set anew from the field where the calibration changed only if the two differ by more than
+#: this many σ (:func:`field_disagrees`): a change the filter's heading already agrees with does not move it
+REALIGN_SIGMAS = 3.0
 
 
 def bias_text(bias_rad_s: ArrayLike) -> str:
@@ -105,14 +109,15 @@ def align_heading(q: Quat, m: Vec) -> Quat:
 class Rows(NamedTuple):
     """One batch as the plain-float loops take it: nested lists of Python floats, degenerate values neutralised
     (:func:`sanitize_arrays`, :func:`sanitize_mag`); a ``mag`` row that is None or zeros has no field. ``realign``:
-    the rows before which the filter's heading is set anew from the row's field, as at its start, the online
-    calibration having given the field another calibration (:attr:`~.magcal_slot.MagCalSlot.realign`)."""
+    ``(row, σ)`` where the online calibration changed the calibration the field gets and ``σ`` the heading σ it
+    adds at that row (rad): before it the filter's heading is set anew from the row's field if the two disagree
+    (:func:`realigned`, :attr:`~.magcal_slot.MagCalSlot.realign`)."""
 
     acc: list
     gyr: list
     mag: list
     dt: list
-    realign: tuple[int, ...] = ()
+    realign: tuple[tuple[int, float], ...] = ()
 
     def tail(self, i: int) -> Rows:
         """The samples from index ``i`` on."""
@@ -121,14 +126,31 @@ class Rows(NamedTuple):
     def part(self, a: int, b: int) -> Rows:
         """The samples ``a`` to ``b − 1``."""
         return Rows(self.acc[a:b], self.gyr[a:b], self.mag[a:b], self.dt[a:b],
-                    tuple(k - a for k in self.realign if a <= k < b))
+                    tuple((k - a, t) for k, t in self.realign if a <= k < b))
 
-    def pieces(self) -> Iterator[tuple[Rows, bool]]:
-        """The batch cut before each :attr:`realign` row: each piece, and whether its first row is one."""
-        cuts = [0, *(k for k in self.realign if k > 0), len(self.acc)]
+    def pieces(self) -> Iterator[tuple[Rows, float | None]]:
+        """The batch cut before each :attr:`realign` row: each piece, and the calibration's heading σ at its first
+        row when the heading is to be checked there (else None)."""
+        sds = dict(self.realign)
+        cuts = [0, *(k for k in sds if k > 0), len(self.acc)]
         for a, b in itertools.pairwise(cuts):
             if b > a:
-                yield self.part(a, b), a in self.realign
+                yield self.part(a, b), sds.get(a)
+
+
+def field_disagrees(q: Quat, m: Vec, sd_rad: float) -> bool:
+    """Whether the heading of the attitude ``q`` (sensor → ENU) and that of the field ``m`` (sensor frame) differ by
+    more than :data:`REALIGN_SIGMAS` times their σ: the calibration's ``sd_rad`` and the field heading's own."""
+    hx, hy, _ = rotate(q, m)
+    if not (0.0 < hx * hx + hy * hy < math.inf):
+        return False
+    return abs(math.atan2(hx, hy)) > REALIGN_SIGMAS * math.hypot(sd_rad, FIELD_HEADING_SD_RAD)
+
+
+def realigned(q: Quat, m: Vec, sd_rad: float) -> Quat:
+    """``q`` (sensor → ENU) with its heading set anew from the field ``m`` (:func:`align_heading`) if the two
+    disagree (:func:`field_disagrees`), else ``q``."""
+    return align_heading(q, m) if field_disagrees(q, m, sd_rad) else q
 
 
 def loop_rows(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None, front_end: FrontEndSlot,
@@ -146,7 +168,7 @@ def loop_rows(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | No
 
 
 def calibrated_field(acc: Array, gyr: Array, dt: Array, mag: ArrayLike | None, magcal: MagCalSlot | None
-                     ) -> tuple[ArrayLike | None, tuple[int, ...]]:
+                     ) -> tuple[ArrayLike | None, tuple[tuple[int, float], ...]]:
     """``mag`` calibrated online by ``magcal`` when it is on (NaN rows: no field; sanitised inputs), else as given;
     and the rows where the calibration the field gets changed (:attr:`Rows.realign`). Once a field was seen, the
     calibration gets every sample, with a field or without (its windows and tilt need the gyro of each), so one

@@ -58,11 +58,11 @@ from riann_ros.estimators.common import (
     BIAS_KEY,
     Quat,
     Rows,
-    align_heading,
     as_array,
     bias_text,
     initialise,
     loop_rows,
+    realigned,
 )
 from riann_ros.mag import MAG_CAL_PARAMS
 
@@ -201,9 +201,9 @@ class MadgwickEstimator(AttitudeEstimator):
             state = enu_to_nwu(q0) if nine and q0 is not None else q0
         if state is not None:
             beta, beta_marg = float(self.params["beta"]), float(self.params["beta_marg"])
-            for piece, realign in rows.pieces():
-                if realign:  # the field got another calibration: its heading as at the start (the state is NWU)
-                    state = enu_to_nwu(align_heading(nwu_to_enu(state), piece.mag[0]))
+            for piece, sd in rows.pieces():
+                if sd is not None:  # the calibration changed (the state is sensor → NWU)
+                    state = enu_to_nwu(realigned(nwu_to_enu(state), piece.mag[0], sd))
                 state, used, filtered = _madgwick_loop(state, used, piece, beta, beta_marg, nine)
                 out += filtered
             self._q = out[-1] if out else self._q

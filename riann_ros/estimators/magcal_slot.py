@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from riann_ros.magcal.latency import LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
-from riann_ros.magcal.records import DELAY_SD_S, MagCalibration, MagCalPrior, MagCalStatus
+from riann_ros.magcal.records import DELAY_SD_S, FIELD_HEADING_SD_RAD, MagCalibration, MagCalPrior, MagCalStatus
 from riann_ros.rotations import Quat, from_rotvec, normalized, qmul, rotate
 
 #: s; the time constant with which the calibration's attitude follows the accelerometer (VQF's tauAcc default)
@@ -47,9 +47,11 @@ class MagCalSlot:
         self.sd_rad: NDArray[np.float64] = np.zeros(0)
         #: the rows of the last calibrate() before which the filter's heading is set anew from the row's field: the
         #: first row with a field after the calibration the field gets changed (module docstring)
-        self.realign: tuple[int, ...] = ()
+        self.realign: tuple[tuple[int, float], ...] = ()
         self._changes = 0  # the calibrator's change count the filter's heading follows
         self._pending = False  # a change not yet followed (no field since)
+        self._unsettled = False  # the last check was made with a σ above the field heading's
+        self._closed = 0  # the calibrator's window count at the last check
         self.set_prior(MagCalPrior())
 
     def set_prior(self, prior: MagCalPrior) -> None:
@@ -58,7 +60,7 @@ class MagCalSlot:
         wrong is the ``mag_hard_iron_sd`` parameter."""
         prior = dataclasses.replace(prior, hard_iron_sd_t=self.hard_iron_sd_t)
         self.cal = OnlineMagCalibrator(prior, self.model) if self.on else None
-        self._changes, self._pending = 0, False
+        self._changes, self._pending, self._unsettled, self._closed = 0, False, False, 0
 
     def restart(self) -> None:
         """A reset, a gap or a hole: the open window is dropped, the estimate kept; the attitude starts anew."""
@@ -109,11 +111,12 @@ class MagCalSlot:
             s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
             if s >= math.pi:  # the field's heading is unknown (the last window contradicted the estimate)
                 u, s = None, 0.0
-            if cal.changes != self._changes:
-                self._changes, self._pending = cal.changes, True
+            if cal.changes != self._changes or (self._unsettled and cal.closed != self._closed):
+                self._changes, self._closed, self._pending = cal.changes, cal.closed, True
             if self._pending and u is not None:
-                realign.append(i)
+                realign.append((i, s))
                 self._pending = False
+                self._unsettled = s > FIELD_HEADING_SD_RAD  # checked again at each window until the σ allows
             out.append(u)
             sd.append(s)
         self.sd_rad = np.asarray(sd, dtype=float)

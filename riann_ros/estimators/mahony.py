@@ -44,11 +44,11 @@ from riann_ros.estimators.common import (
     BIAS_KEY,
     Quat,
     Rows,
-    align_heading,
     as_array,
     bias_text,
     initialise,
     loop_rows,
+    realigned,
 )
 from riann_ros.mag import MAG_CAL_PARAMS
 from riann_ros.rotations import Vec
@@ -165,9 +165,9 @@ class MahonyEstimator(AttitudeEstimator):
             q, rows, used = initialise(rows, out)
         if q is not None:
             kp, ki = float(self.params["kp"]), float(self.params["ki"])
-            for piece, realign in rows.pieces():
-                if realign:  # the field got another calibration: its heading as at the start
-                    q = align_heading(q, piece.mag[0])
+            for piece, sd in rows.pieces():
+                if sd is not None:  # the calibration changed
+                    q = realigned(q, piece.mag[0], sd)
                 q, self._b, used, filtered = _mahony_loop(q, self._b, used, piece, kp, ki)
                 out += filtered
             self._q = q

@@ -46,7 +46,7 @@ from vqf import VQF
 
 from riann_ros import defaults
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.common import BIAS_KEY, bias_text, calibrated_field, sanitize_arrays
+from riann_ros.estimators.common import BIAS_KEY, bias_text, calibrated_field, field_disagrees, sanitize_arrays
 from riann_ros.mag import MAG_CAL_PARAMS
 
 # defaults of vqf 2.1.2 (VQFParams)
@@ -167,7 +167,7 @@ class VqfEstimator(AttitudeEstimator):
         m = _field_ut(mag, 1)[0]
         self._mag_used = bool(m.any())
         if realign:
-            self._restart_heading()
+            self._restart_heading(realign[0][1], m)
         if self._mag_used:
             v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]), m)
         else:
@@ -184,21 +184,26 @@ class VqfEstimator(AttitudeEstimator):
         g = np.ascontiguousarray(g * (h / ts)[:, None])  # zero rows: VQF skips updateMag
         self._mag_used = bool(m[-1].any())
         a = np.ascontiguousarray(a)
-        cuts = [0, *(k for k in realign if k > 0), len(a)]
+        sds = dict(realign)
+        cuts = [0, *(k for k in sds if k > 0), len(a)]
         out = []
         for i, j in itertools.pairwise(cuts):
-            if i in realign:
-                self._restart_heading()
+            if i in sds:
+                self._restart_heading(sds[i], m[i])
             out.append(v.updateBatch(np.ascontiguousarray(g[i:j]), np.ascontiguousarray(a[i:j]),
                                      np.ascontiguousarray(m[i:j]))["quat9D"])
         return np.array(np.concatenate(out), dtype=float)
 
-    def _restart_heading(self) -> None:
-        """The online calibration gave the field another calibration: VQF's magnetic part starts as at its
-        construction (its heading initialisation over ``tau_mag``, a new field reference for the disturbance
-        rejection); its inclination, gyro bias and current heading are kept."""
+    def _restart_heading(self, sd_rad: float, m_ut: Array) -> None:
+        """The online calibration changed the calibration the field gets (``m_ut`` the row's field, ``sd_rad`` the
+        heading σ it adds): where VQF's heading disagrees with it (:func:`~.common.field_disagrees`) VQF's magnetic
+        part starts as at its construction (its heading initialisation over ``tau_mag``, a new field reference for
+        the disturbance rejection); its inclination, gyro bias and current heading are kept."""
         v, ts = self._vqf, self._ts
         assert v is not None and ts is not None
+        q = v.getQuat9D()
+        if not field_disagrees((q[0], q[1], q[2], q[3]), (m_ut[0], m_ut[1], m_ut[2]), sd_rad):
+            return
         fresh = VQF(ts, tauMag=float(self.params["tau_mag"])).state
         state = v.state
         state.update({k: fresh[k] for k in _VQF_MAG_STATE})

@@ -37,6 +37,7 @@ from riann_ros.magcal.records import (
     CALIBRATED_SD_RAD,
     CONVERGING,
     DELAY_SD_S,
+    FIELD_HEADING_SD_RAD,
     REFRESH_ANGLE_RAD,
     STATE_HEADINGS,
     SWITCH_WINDOWS,
@@ -78,6 +79,7 @@ class OnlineMagCalibrator:
         #: restored, a candidate replacing the estimate in use): a filter's heading built on the one before is not
         #: the field's
         self.changes = 0
+        self.closed = 0  # windows closed (taken or rejected)
         self.windower = Windower()
         self.windows = prior.windows  # windows in the information (a saved calibration's included)
         self.rejected = 0  # windows rejected as disturbed in this run
@@ -89,6 +91,7 @@ class OnlineMagCalibrator:
         self.bound = math.pi  # the last state bound (rad)
         self.field_sd_ut = math.inf  # the calibrated field's σ in its worst direction (µT; refreshed with su)
         self._cache()
+        self.aligned = (self._a, self._c)  # the calibration at the last change
         self.state: CalState = UNCALIBRATED
         self._set_state()
 
@@ -166,6 +169,7 @@ class OnlineMagCalibrator:
 
     # -------------------------------------------------------------------------------------------------- per window
     def _add_window(self, w: Window) -> None:
+        self.closed += 1
         ws = WindowSet.of([w])
         jw, rw = self.model.rows(ws)
         j, r0 = jw[0], rw[0]
@@ -177,16 +181,26 @@ class OnlineMagCalibrator:
             est.add(j, r0, var, d2, k)
             self.windows += 1
             self.cand = None
-            self.agree = 0
+            if self.test.holds or self.test.window_fails(j, r0, var, self._tolerance(w)):
+                self.agree = 0  # against a rejected prior (a window both explain is evidence for neither)
             self._test(w, j, r0, var)
         else:  # a disturbed field, or the magnetic situation changed: a candidate learns from the rejected windows
             self.rejected += 1
             if self.test.holds or not self._retest(w, j, r0, var):
                 self._candidate(j, r0, ws)
         self._cache()
-        if self.trusted != trusted or not (trusted or self.est is est):  # the readings get another calibration
-            self.changes += 1
+        if self.trusted != trusted or not (trusted or self.est is est) or abs(self._moved()) > FIELD_HEADING_SD_RAD:
+            self.changes += 1  # a decision (another calibration), or the one in use moved
+            self.aligned = (self._a, self._c)
         self._set_state()
+
+    def _moved(self) -> float:
+        """rad; how far the calibration the readings get turned the heading of the last reading, at the current
+        tilt, since the last change (0 without a reading or a tilt)."""
+        if self.q is None or self.m_last is None:
+            return 0.0
+        d = heading_of(self._a, self._c, self.m_last, self.q) - heading_of(*self.aligned, self.m_last, self.q)
+        return math.remainder(d, math.tau)
 
     def _test(self, w: Window, j: Array, r0: Array, var: float) -> None:
         """The prior's test (:mod:`.hypothesis`) after a window the estimate took."""
@@ -330,6 +344,16 @@ def _record(cal: OnlineMagCalibrator) -> MagCalibration:
                           covariance=tuple(float(v) for v in cov.reshape(144)), state=cal.state,
                           windows=cal.windows, converged_after_s=cal.converged_after_s,
                           soft_iron_model=cal.model.model)
+
+
+def heading_of(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat) -> float:
+    """rad; the heading of the raw reading ``m`` (µT) calibrated with ``(a, c)`` (row-major soft iron, ``c`` in µT)
+    at the attitude ``q`` (sensor → world): the angle of its horizontal part from +y toward +x."""
+    x, y, z = m
+    u = (a[0] * x + a[1] * y + a[2] * z - c[0], a[3] * x + a[4] * y + a[5] * z - c[1],
+         a[6] * x + a[7] * y + a[8] * z - c[2])
+    w = rotate(q, u)
+    return math.atan2(w[0], w[1])
 
 
 def heading_gap(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat, field_world_t: Vec) -> float:
