@@ -171,7 +171,7 @@ def test_no_drift_at_rest_and_straight():
     cal = OnlineMagCalibrator(prior)
     theta0 = cal.theta.copy()
     run(cal, rec, raw)
-    assert cal.windows == 0 and cal.added == 0
+    assert cal.windows == 0 and cal.est.added == 0
     assert np.array_equal(cal.theta, theta0)
     assert cal.state == UNCALIBRATED
 

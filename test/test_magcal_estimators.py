@@ -11,6 +11,7 @@ import pytest
 from helpers_mag import ESTIMATORS, per_sample
 
 from riann_ros import quaternion as quat
+from riann_ros.datasets.synthetic import generate
 from riann_ros.estimators import create
 from riann_ros.gate import GateConfig
 from riann_ros.mag import MagConfig, MagInput
@@ -71,6 +72,23 @@ def test_a_ground_robot_turning_about_the_vertical_calibrates_and_the_heading_co
     assert still is not None and before is not None
     moved = np.abs(np.asarray(still.hard_iron_t) - np.asarray(before.hard_iron_t)).max()
     assert moved < 1e-6 * UT or still.windows <= before.windows + 1  # at most the last turn's window closing
+
+
+@pytest.mark.parametrize("name", ["madgwick", "mahony", "vqf"])
+def test_the_classical_filters_heading_follows_the_calibration_that_takes_over(name):
+    """A wrong configured calibration (a 42 µT hard iron nobody measured): once the windows make the estimate the
+    calibration the field gets, the filter's heading is set from it as at the filter's start (VQF: its magnetic part
+    restarted), not left to the filter's own slow gain from where the wrong calibration took it (there it stays
+    15–30° off for ten seconds and more)."""
+    rec = generate(duration=90.0, rate=100.0, seed=0, bias=0.0, gyr_noise=0.002)  # its first 30 s
+    raw = distort(rec.quat_ref, np.array([30.0, 20.0, -20.0]) * UT, noise_t=0.4e-6, seed=2)
+    est = create(name)
+    q = np.vstack([est.update_batch(rec.acc[i:i + 100], rec.gyr[i:i + 100], rec.dt[i:i + 100], raw[i:i + 100])
+                   for i in range(0, 3000, 100)])
+    assert est.magcal is not None and est.magcal.cal is not None and est.magcal.cal.changes.count > 0
+    err = heading_error_deg(rec.quat_ref[:3000], q)
+    after = (rec.t[:3000] >= 10.0) & (rec.t[:3000] < 20.0)
+    assert np.sqrt(np.mean(err[after] ** 2)) < 8.0
 
 
 @pytest.mark.parametrize("name", ESTIMATORS)
@@ -144,6 +162,7 @@ def test_batch_and_per_sample_give_the_same_numbers_with_calibration(name):
     qb, _ = per_sample(b, rec.stamps_ns[:n], rec.acc[:n], rec.gyr[:n], raw[:n])
     np.testing.assert_allclose(qa, qb, atol=1e-5 if name == "riann" else 1e-9)
     np.testing.assert_allclose(a.batch_sigma[-1], b.sigma, atol=1e-6)
+    assert a.estimator.magcal.cal.changes.count > 0  # the estimate took over (a filter's heading checked there)
     assert a.estimator.mag_calibration() == b.estimator.mag_calibration() or math.isclose(
         a.estimator.mag_calibration().hard_iron_t[0], b.estimator.mag_calibration().hard_iron_t[0], abs_tol=1e-9)
 

@@ -143,3 +143,30 @@ def test_the_estimate_is_used_as_soon_as_the_windows_make_the_configured_calibra
     first = next(i for i, s in enumerate(states) if not s[0])
     assert states[first][1] and states[first][2] < 0.5  # in use: the estimate; rejected for good: not yet
     assert not states[-1][1]
+
+
+def swings(axes: list[np.ndarray], seconds_each: float = 2.0, amplitude_deg: float = 70.0, rate: float = 100.0):
+    """Swings out and back about each of ``axes`` in turn (sensor frame, from the level attitude): (increments,
+    attitudes, dt)."""
+    n = int(seconds_each * rate)
+    s = np.radians(amplitude_deg) * np.sin(np.pi * np.arange(n) / n)
+    rv = np.vstack([np.outer(s, a) for a in axes])
+    q = quat.from_rotvec(rv)
+    inc = np.vstack([[1.0, 0.0, 0.0, 0.0], quat.multiply(quat.conjugate(q[:-1]), q[1:])])
+    return inc, q, np.full(len(rv), 1.0 / rate)
+
+
+def test_windows_both_calibrations_explain_do_not_hold_back_the_restore():
+    """The magnet along x taken off, then swings about x (windows that observe nothing of it, explained by the
+    configured calibration and the estimate alike) between swings about y (windows that tell the two apart): the
+    swings about x are evidence for neither, so the ones about y restore the configured calibration."""
+    rec = recording()
+    h = np.array([20.0, 0.0, 0.0])
+    cal = OnlineMagCalibrator()
+    feed(cal, rec, distort(rec.quat_ref, h * UT, noise_t=0.4e-6, seed=1))
+    assert not cal.trusted and not cal.test.holds  # the magnet found
+    cal.restart()
+    x, y = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    inc, q, dt = swings([x, y] * (2 * SWITCH_WINDOWS))
+    feed_wobble(cal, inc, q, dt, distort(q, np.zeros(3), noise_t=0.4e-6, seed=3))  # the magnet is off
+    assert cal.trusted

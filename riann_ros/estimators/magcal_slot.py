@@ -111,8 +111,9 @@ class MagCalSlot:
             s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
             if s >= math.pi:  # the field's heading is unknown (the last window contradicted the estimate)
                 u, s = None, 0.0
-            if cal.changes != self._changes or (self._unsettled and cal.closed != self._closed):
-                self._changes, self._closed, self._pending = cal.changes, cal.closed, True
+            ch = cal.changes
+            if ch.count != self._changes or (self._unsettled and ch.closed != self._closed):
+                self._changes, self._closed, self._pending = ch.count, ch.closed, True
             if self._pending and u is not None:
                 realign.append((i, s))
                 self._pending = False

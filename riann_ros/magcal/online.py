@@ -75,11 +75,6 @@ class OnlineMagCalibrator:
         self.agree = 0  # consecutive windows that agree with a rejected prior
         self.cand: InfoEstimate | None = None  # learns from consecutive rejected windows
         self.switches = 0  # times a candidate replaced the estimate
-        #: times the readings got another calibration by a decision (the prior found the less probable hypothesis or
-        #: restored, a candidate replacing the estimate in use): a filter's heading built on the one before is not
-        #: the field's
-        self.changes = 0
-        self.closed = 0  # windows closed (taken or rejected)
         self.windower = Windower()
         self.windows = prior.windows  # windows in the information (a saved calibration's included)
         self.rejected = 0  # windows rejected as disturbed in this run
@@ -91,7 +86,7 @@ class OnlineMagCalibrator:
         self.bound = math.pi  # the last state bound (rad)
         self.field_sd_ut = math.inf  # the calibrated field's σ in its worst direction (µT; refreshed with su)
         self._cache()
-        self.aligned = (self._a, self._c)  # the calibration at the last change
+        self.changes = Changes((self._a, self._c))  # what a filter's heading built on the field must follow
         self.state: CalState = UNCALIBRATED
         self._set_state()
 
@@ -169,7 +164,6 @@ class OnlineMagCalibrator:
 
     # -------------------------------------------------------------------------------------------------- per window
     def _add_window(self, w: Window) -> None:
-        self.closed += 1
         ws = WindowSet.of([w])
         jw, rw = self.model.rows(ws)
         j, r0 = jw[0], rw[0]
@@ -181,32 +175,23 @@ class OnlineMagCalibrator:
             est.add(j, r0, var, d2, k)
             self.windows += 1
             self.cand = None
-            if self.test.holds or self.test.window_fails(j, r0, var, self._tolerance(w)):
-                self.agree = 0  # against a rejected prior (a window both explain is evidence for neither)
             self._test(w, j, r0, var)
         else:  # a disturbed field, or the magnetic situation changed: a candidate learns from the rejected windows
             self.rejected += 1
             if self.test.holds or not self._retest(w, j, r0, var):
                 self._candidate(j, r0, ws)
         self._cache()
-        if self.trusted != trusted or not (trusted or self.est is est) or abs(self._moved()) > FIELD_HEADING_SD_RAD:
-            self.changes += 1  # a decision (another calibration), or the one in use moved
-            self.aligned = (self._a, self._c)
+        self.changes.window(self.trusted != trusted or not (trusted or self.est is est), (self._a, self._c),
+                            self.m_last, self.q)
         self._set_state()
 
-    def _moved(self) -> float:
-        """rad; how far the calibration the readings get turned the heading of the last reading, at the current
-        tilt, since the last change (0 without a reading or a tilt)."""
-        if self.q is None or self.m_last is None:
-            return 0.0
-        d = heading_of(self._a, self._c, self.m_last, self.q) - heading_of(*self.aligned, self.m_last, self.q)
-        return math.remainder(d, math.tau)
-
     def _test(self, w: Window, j: Array, r0: Array, var: float) -> None:
-        """The prior's test (:mod:`.hypothesis`) after a window the estimate took."""
-        if not self.test.holds:
-            return
-        self.test.add(self.est, j, r0, var, self._tolerance(w))
+        """The prior's test (:mod:`.hypothesis`) after a window the estimate took; once rejected, such a window that
+        contradicts the prior too ends the windows that would restore it (one both explain is evidence for neither)."""
+        if self.test.holds:
+            self.test.add(self.est, j, r0, var, self._tolerance(w))
+        elif self.test.window_fails(j, r0, var, self._tolerance(w)):
+            self.agree = 0
 
     def _tolerance(self, w: Window) -> Array:
         return self.test.tolerance_at(np.asarray(w.m1_ut), self.q)
@@ -256,11 +241,6 @@ class OnlineMagCalibrator:
     def theta(self) -> Array:
         """The estimate θ (:mod:`.model`)."""
         return self.est.theta
-
-    @property
-    def added(self) -> int:
-        """Windows in the current estimate added in this run."""
-        return self.est.added
 
     @property
     def unit_weight(self) -> float:
@@ -344,6 +324,32 @@ def _record(cal: OnlineMagCalibrator) -> MagCalibration:
                           covariance=tuple(float(v) for v in cov.reshape(144)), state=cal.state,
                           windows=cal.windows, converged_after_s=cal.converged_after_s,
                           soft_iron_model=cal.model.model)
+
+
+class Changes:
+    """When the calibration the readings get changes under a filter whose heading was built on the one before
+    (:attr:`OnlineMagCalibrator.changes`; :class:`~riann_ros.estimators.magcal_slot.MagCalSlot` sets the filter's
+    heading anew there if it disagrees): :attr:`count` the changes, by a decision (another calibration: the prior
+    found the less probable hypothesis or restored, a candidate replacing the estimate in use) or because the one in
+    use turned the heading of the last reading, at the current tilt, by more than the field heading's own σ since the
+    last change; :attr:`closed` the windows closed."""
+
+    def __init__(self, in_use: tuple[tuple[float, ...], tuple[float, ...]]) -> None:
+        self.count = 0
+        self.closed = 0
+        self.aligned = in_use  # the calibration (row-major soft iron, hard iron in µT) at the last change
+
+    def window(self, decided: bool, in_use: tuple[tuple[float, ...], tuple[float, ...]], m: Vec | None,
+               q: Quat | None) -> None:
+        """After a window: ``decided`` whether the readings got another calibration, ``in_use`` the calibration they
+        get, ``m`` the last raw reading (µT) and ``q`` the attitude (sensor → world)."""
+        self.closed += 1
+        if not decided and m is not None and q is not None:
+            turn = heading_of(*in_use, m, q) - heading_of(*self.aligned, m, q)
+            decided = abs(math.remainder(turn, math.tau)) > FIELD_HEADING_SD_RAD
+        if decided:
+            self.count += 1
+            self.aligned = in_use
 
 
 def heading_of(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat) -> float:
