@@ -26,7 +26,9 @@ with ``beta`` (in the NWU frame; the 6D objective is invariant under rotations a
 the 6D filter up to round-off); ``ahrs`` instead calls ``updateIMU`` with its single gain and its
 default ``Dt``. Initialisation with a field: :func:`~riann_ros.estimators.common.initial_attitude_marg`
 (accelerometer attitude, heading from the tilt-compensated field: its horizontal part along +y).
-:meth:`MadgwickEstimator.heading_observed` is True iff the last sample's correction used a field.
+:meth:`MadgwickEstimator.heading_observed` is True iff the last sample's correction used a field. Where the online
+magnetometer calibration changes the calibration the field gets and the heading disagrees with the new one, the
+heading is set from the field as at the start (:mod:`~riann_ros.estimators.magcal_slot`).
 
 Conventions shared with :mod:`riann_ros.estimators.mahony`:
 

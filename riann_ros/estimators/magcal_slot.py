@@ -12,6 +12,19 @@ the calibrator (with the field's latency behind the gyro estimated as RIANN's st
 ends; the filters themselves use the field as it comes), the filter gets the calibrated field, and
 :attr:`MagCalSlot.sd_rad` holds the σ the calibration
 adds to each sample's heading (0 while the configured calibration holds), which their yaw σ includes.
+
+A filter's heading follows the field it was given with the filter's own gain (Madgwick's β, Mahony's k_P, VQF's
+``tau_mag``), from where the calibration before took it. When the calibration the field gets changes — a decision
+(the configured calibration found the less probable hypothesis, or restored; a candidate replacing the estimate) or
+the one in use turning the heading of the last reading by more than the field heading's σ
+(:class:`~riann_ros.magcal.online.Changes`) — the slot marks the next row with a field (:attr:`MagCalSlot.realign`,
+with the calibration's heading σ there), and the filter checks its heading against that row's field: if they differ
+by more than three times the calibration's and the field's own σ combined, the heading is set from the field as at
+the filter's start (Madgwick and Mahony: :func:`~.common.align_heading`, the filter's tilt kept; VQF: its magnetic
+part restarted as at its construction, so its heading initialises over ``tau_mag``). While the calibration's σ is
+above the field heading's σ the check is repeated at each window, so a heading built on a wrong calibration is set
+anew once the new one is known well enough to tell; a change the filter's heading already agrees with moves nothing.
+With a right configured calibration nothing changes and the filter runs as without the calibration.
 """
 
 from __future__ import annotations

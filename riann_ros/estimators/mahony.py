@@ -20,8 +20,9 @@ reference field puts magnetic north on the world *y* axis, so this earth frame i
 conversion, unlike :mod:`riann_ros.estimators.madgwick`). Samples without a field (non-finite or
 all-zero ``mag`` row) get the IMU step; the initialisation takes the heading from the field of the
 initialising sample when it has one (:func:`~riann_ros.estimators.common.initial_attitude_marg`: the
-horizontal part of the tilt-compensated field along +y). :meth:`MahonyEstimator.heading_observed` is
-True iff the last sample's correction used a field.
+horizontal part of the tilt-compensated field along +y), and so does a change of the online magnetometer
+calibration that the heading disagrees with (:mod:`~riann_ros.estimators.magcal_slot`).
+:meth:`MahonyEstimator.heading_observed` is True iff the last sample's correction used a field.
 
 Initialisation, per-sample dt, degenerate input and the fast loop (one for both forms: without ``mag`` every sample
 takes the IMU step) follow :mod:`riann_ros.estimators.madgwick`: initialised from the first usable accelerometer

@@ -17,6 +17,9 @@ The C++ implementation of the ``vqf`` package (MIT) does the work; this class on
   Samples without a field (NaN or zero rows, ``mag=None``) skip ``updateMag``: the heading follows the
   gyro. The output is always ``quat9D``: before the first field VQF's heading offset is the identity,
   so it equals ``quat6D`` exactly, and after the magnetometer stops the heading continues without a jump.
+  Where the online magnetometer calibration changes the calibration the field gets and VQF's heading disagrees
+  with it (:mod:`~riann_ros.estimators.magcal_slot`), VQF's magnetic state starts as at its construction (the
+  batch is cut there: ``updateBatch`` per piece, the same numbers as per-sample calls).
 * **dt** — VQF is built for a fixed sampling time ``Ts`` given at construction. The filter is created at
   the first sample with ``Ts`` = that sample's dt (the stream gives the first sample ``1/nominal_rate``;
   ``riann_ros.defaults.FALLBACK_DT_S`` if that dt is not positive). Every sample's gyroscope reading is then scaled by
