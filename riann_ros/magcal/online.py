@@ -197,10 +197,10 @@ class OnlineMagCalibrator:
         return self.test.tolerance_at(np.asarray(w.m1_ut), self.q)
 
     def _retest(self, w: Window, j: Array, r0: Array, var: float) -> bool:
-        """After the prior was rejected, a window the estimate rejected: :data:`~.records.SWITCH_WINDOWS` consecutive
-        such windows that agree with the prior restore it (a magnet attached for a while and taken off again); the
-        estimate and the test start anew from the prior. A window that agrees with both (observing none of their
-        difference) is evidence for neither. Returns whether the window agreed with the prior."""
+        """After the prior was rejected, a window the estimate rejected: :data:`~.records.SWITCH_WINDOWS` such windows
+        that agree with the prior, none failing it between them, restore it (a magnet attached for a while and taken
+        off again); the estimate and the test start anew from the prior. A window that agrees with both (observing
+        none of their difference) is evidence for neither (:meth:`_test`). Returns whether it agreed with the prior."""
         if self.test.window_fails(j, r0, var, self._tolerance(w)):
             self.agree = 0
             return False
