@@ -24,7 +24,7 @@ the filter's start (Madgwick and Mahony: :func:`~.common.align_heading`, the fil
 part restarted as at its construction, so its heading initialises over ``tau_mag``). While the calibration's σ is
 above the field heading's σ the check is repeated at each window, so a heading built on a wrong calibration is set
 anew once the new one is known well enough to tell; a change the filter's heading already agrees with moves nothing.
-With a right configured calibration nothing changes and the filter runs as without the calibration.
+A configured calibration the windows keep never changes: the filter's attitude is the one without the calibration.
 """
 
 from __future__ import annotations
