@@ -89,15 +89,21 @@ def initial_attitude_marg(ax: float, ay: float, az: float, mx: float, my: float,
     return align_heading(q, (mx, my, mz))
 
 
+def field_heading(q: Quat, m: Vec) -> float | None:
+    """rad; the angle of the horizontal part of the tilt-compensated field ``R(q) m`` from +y (magnetic north)
+    toward +x, ``q`` sensor → ENU; None when that part is zero or not finite."""
+    hx, hy, _ = rotate(q, m)
+    return math.atan2(hx, hy) if 0.0 < hx * hx + hy * hy < math.inf else None
+
+
 def align_heading(q: Quat, m: Vec) -> Quat:
     """The attitude ``q`` (sensor → ENU) turned about world z so that the horizontal part of the tilt-compensated
     field ``R(q) m`` lies on +y (magnetic north); ``q`` itself when that part is zero or not finite. The tilt is
     kept: only the heading comes from the field."""
-    w, x, y, z = q
-    hx, hy, _ = rotate(q, m)
-    if not (0.0 < hx * hx + hy * hy < math.inf):
+    psi = field_heading(q, m)
+    if psi is None:
         return q
-    psi = math.atan2(hx, hy)  # angle of the horizontal field from +y toward +x
+    w, x, y, z = q
     c = math.cos(0.5 * psi)
     s = math.sin(0.5 * psi)
     # rot_z(psi) ⊗ q
@@ -129,22 +135,26 @@ class Rows(NamedTuple):
                     tuple((k - a, t) for k, t in self.realign if a <= k < b))
 
     def pieces(self) -> Iterator[tuple[Rows, float | None]]:
-        """The batch cut before each :attr:`realign` row: each piece, and the calibration's heading σ at its first
-        row when the heading is to be checked there (else None)."""
-        sds = dict(self.realign)
-        cuts = [0, *(k for k in sds if k > 0), len(self.acc)]
-        for a, b in itertools.pairwise(cuts):
-            if b > a:
-                yield self.part(a, b), sds.get(a)
+        """The batch cut before each :attr:`realign` row (:func:`cut_at`): each piece, and the calibration's heading
+        σ at its first row when the heading is to be checked there (else None)."""
+        for a, b, sd in cut_at(self.realign, len(self.acc)):
+            yield self.part(a, b), sd
+
+
+def cut_at(realign: tuple[tuple[int, float], ...], n: int) -> Iterator[tuple[int, int, float | None]]:
+    """``n`` rows cut before each ``realign`` row (:attr:`Rows.realign`): ``(start, end, σ)`` per non-empty piece,
+    ``σ`` the calibration's heading σ at its first row when the heading is to be checked there, else None."""
+    sds = dict(realign)
+    for a, b in itertools.pairwise([0, *(k for k in sds if k > 0), n]):
+        if b > a:
+            yield a, b, sds.get(a)
 
 
 def field_disagrees(q: Quat, m: Vec, sd_rad: float) -> bool:
     """Whether the heading of the attitude ``q`` (sensor → ENU) and that of the field ``m`` (sensor frame) differ by
     more than :data:`REALIGN_SIGMAS` times their σ: the calibration's ``sd_rad`` and the field heading's own."""
-    hx, hy, _ = rotate(q, m)
-    if not (0.0 < hx * hx + hy * hy < math.inf):
-        return False
-    return abs(math.atan2(hx, hy)) > REALIGN_SIGMAS * math.hypot(sd_rad, FIELD_HEADING_SD_RAD)
+    psi = field_heading(q, m)
+    return psi is not None and abs(psi) > REALIGN_SIGMAS * math.hypot(sd_rad, FIELD_HEADING_SD_RAD)
 
 
 def realigned(q: Quat, m: Vec, sd_rad: float) -> Quat:

@@ -56,16 +56,7 @@ from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import (
-    BIAS_KEY,
-    Quat,
-    Rows,
-    as_array,
-    bias_text,
-    initialise,
-    loop_rows,
-    realigned,
-)
+from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows, realigned
 from riann_ros.mag import MAG_CAL_PARAMS
 
 #: ahrs 0.4.0 ``Madgwick`` default ``gain_imu`` (IMU/6D mode); Madgwick's report gives β = √(3/4)·ω̃ with

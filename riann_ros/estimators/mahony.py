@@ -41,16 +41,7 @@ from numpy.typing import ArrayLike
 
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import (
-    BIAS_KEY,
-    Quat,
-    Rows,
-    as_array,
-    bias_text,
-    initialise,
-    loop_rows,
-    realigned,
-)
+from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows, realigned
 from riann_ros.mag import MAG_CAL_PARAMS
 from riann_ros.rotations import Vec
 

@@ -41,15 +41,20 @@ The C++ implementation of the ``vqf`` package (MIT) does the work; this class on
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 from numpy.typing import ArrayLike
 from vqf import VQF
 
 from riann_ros import defaults
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.common import BIAS_KEY, bias_text, calibrated_field, field_disagrees, sanitize_arrays
+from riann_ros.estimators.common import (
+    BIAS_KEY,
+    bias_text,
+    calibrated_field,
+    cut_at,
+    field_disagrees,
+    sanitize_arrays,
+)
 from riann_ros.mag import MAG_CAL_PARAMS
 
 # defaults of vqf 2.1.2 (VQFParams)
@@ -187,12 +192,10 @@ class VqfEstimator(AttitudeEstimator):
         g = np.ascontiguousarray(g * (h / ts)[:, None])  # zero rows: VQF skips updateMag
         self._mag_used = bool(m[-1].any())
         a = np.ascontiguousarray(a)
-        sds = dict(realign)
-        cuts = [0, *(k for k in sds if k > 0), len(a)]
         out = []
-        for i, j in itertools.pairwise(cuts):
-            if i in sds:
-                self._restart_heading(sds[i], m[i])
+        for i, j, sd in cut_at(realign, len(a)):
+            if sd is not None:
+                self._restart_heading(sd, m[i])
             out.append(v.updateBatch(np.ascontiguousarray(g[i:j]), np.ascontiguousarray(a[i:j]),
                                      np.ascontiguousarray(m[i:j]))["quat9D"])
         return np.array(np.concatenate(out), dtype=float)

@@ -352,22 +352,24 @@ class Changes:
             self.aligned = in_use
 
 
-def heading_of(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat) -> float:
-    """rad; the heading of the raw reading ``m`` (µT) calibrated with ``(a, c)`` (row-major soft iron, ``c`` in µT)
-    at the attitude ``q`` (sensor → world): the angle of its horizontal part from +y toward +x."""
+def calibrated_world(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat) -> Vec:
+    """The raw reading ``m`` (µT) calibrated with ``(a, c)`` (row-major soft iron, ``c`` in µT) and rotated into the
+    world frame by the attitude ``q`` (sensor → world), µT."""
     x, y, z = m
-    u = (a[0] * x + a[1] * y + a[2] * z - c[0], a[3] * x + a[4] * y + a[5] * z - c[1],
-         a[6] * x + a[7] * y + a[8] * z - c[2])
-    w = rotate(q, u)
+    return rotate(q, (a[0] * x + a[1] * y + a[2] * z - c[0], a[3] * x + a[4] * y + a[5] * z - c[1],
+                      a[6] * x + a[7] * y + a[8] * z - c[2]))
+
+
+def heading_of(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat) -> float:
+    """rad; the heading of the raw reading ``m`` calibrated with ``(a, c)`` at the attitude ``q``
+    (:func:`calibrated_world`): the angle of its horizontal part from +y toward +x."""
+    w = calibrated_world(a, c, m, q)
     return math.atan2(w[0], w[1])
 
 
 def heading_gap(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat, field_world_t: Vec) -> float:
-    """rad; the heading difference between the calibration ``(a, c)`` (row-major soft iron, ``c`` in µT) of the
-    raw reading ``m`` (µT) and ``field_world_t`` (another calibration's, world frame), at the attitude ``q``."""
-    x, y, z = m
-    u = (a[0] * x + a[1] * y + a[2] * z - c[0], a[3] * x + a[4] * y + a[5] * z - c[1],
-         a[6] * x + a[7] * y + a[8] * z - c[2])
-    w = rotate(q, u)
+    """rad; the heading difference between the raw reading ``m`` calibrated with ``(a, c)`` at the attitude ``q``
+    (:func:`calibrated_world`) and ``field_world_t`` (another calibration's, world frame)."""
+    w = calibrated_world(a, c, m, q)
     f = field_world_t
     return abs(math.atan2(w[0] * f[1] - w[1] * f[0], w[0] * f[0] + w[1] * f[1]))
