@@ -137,6 +137,9 @@ class Rows(NamedTuple):
     def pieces(self) -> Iterator[tuple[Rows, float | None]]:
         """The batch cut before each :attr:`realign` row (:func:`cut_at`): each piece, and the calibration's heading
         σ at its first row when the heading is to be checked there (else None)."""
+        if not self.realign:  # the common case: the batch as it is, not copied
+            yield self, None
+            return
         for a, b, sd in cut_at(self.realign, len(self.acc)):
             yield self.part(a, b), sd
 
