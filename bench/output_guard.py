@@ -1,5 +1,5 @@
-"""Every RIANN output on the BROAD trials, recorded once and compared later: the guard of a change that must not
-move one number (a redesign, a faster network call).
+"""Every estimator's output on the BROAD trials, recorded once and compared later: the guard of a change that must
+not move one number (a redesign, a faster network call).
 
 Usage::
 
@@ -10,13 +10,15 @@ The code it runs is the riann_ros Python imports: the checkout whose ``.venv`` r
 that checkout), or another one with ``PYTHONPATH=<checkout>``; the first line it prints names it.
 
 For each BROAD trial (``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``) and each of 6D (``--use-mag false``)
-and 9D (``--use-mag auto``), RIANN at its defaults runs through the evaluator's own pipeline
-(:func:`riann_ros.evaluation.evaluate_source`, so scenario cropping, perturbations and the input gate are part of
-what is guarded) under every condition of ``bench/bench_accuracy.py``: scenarios as-recorded and realistic × its
-perturbations, and the as-recorded scenario at its resampled rates. ``record`` writes every output quaternion
-(float32: its round-off, 6e-8, is far below any tolerance used) to ``DIR/<trial>-<6d|9d>.npz``; ``check``
-recomputes them and prints the largest difference per quaternion component per file, exiting 1 when one
-exceeds ``--tol``. The files are derived from BROAD and stay outside the repository (``test/test_output_guard.py``
+and 9D (``--use-mag auto``), every estimator (``--estimators``, default RIANN, VQF, Madgwick and Mahony) at its
+defaults runs through the evaluator's own pipeline (:func:`riann_ros.evaluation.evaluate_source`, so scenario
+cropping, perturbations and the input gate are part of what is guarded) under every condition of
+``bench/bench_accuracy.py``: scenarios as-recorded and realistic × its perturbations, and the as-recorded scenario at
+its resampled rates; 9D adds the three magnetometer calibration conditions of ``bench/results_tables.py``'s magcal
+table (hard irons and a soft iron injected, :data:`MAGNETIC`). ``record`` writes every output quaternion and its σ
+(float32: its round-off, 6e-8, is far below any tolerance used) to ``DIR/<trial>-<6d|9d>.npz``, keyed
+``scenario|condition|rate|estimator`` (the σ under ``…|sigma``); ``check`` recomputes them and prints the largest
+difference per component per file, exiting 1 when one exceeds ``--tol``. The files are derived from BROAD and stay outside the repository (``test/test_output_guard.py``
 reads them from ``$RIANN_OUTPUT_GUARD`` and skips without them).
 """
 
@@ -35,13 +37,19 @@ import riann_ros
 from riann_ros.datasets.broad import broad_files, find_broad_dir
 
 MODES = {"6d": "false", "9d": "auto"}
+ESTIMATORS = "riann,vqf,madgwick,mahony"
+#: the magnetometer calibration conditions (BENCHMARKS "Magnetometer calibration online"), guarded in 9D
+MAGNETIC = ("magnetic:offset:20,0,-10", "magnetic:offset:0,28,-21",
+            "magnetic:soft:1.15,0.05,0,0,0.85,0.05,0.05,0,1+magnetic:offset:10,-20,-20")
 
 
 def outputs(trial: str, use_mag: str, conditions: tuple[str, ...] = CONDITIONS,
-            rates: str = RATES) -> dict[str, np.ndarray]:
-    """key ``scenario|condition|rate`` -> (N, 4) RIANN outputs of one trial, in the evaluator's pipeline."""
+            rates: str = RATES, estimators: str = ESTIMATORS) -> dict[str, np.ndarray]:
+    """key ``scenario|condition|rate|estimator`` -> (N, 4) outputs of one trial, in the evaluator's pipeline, and
+    ``…|sigma`` -> their σ (rad; N × 2, or 3 with the heading state)."""
     from riann_ros import evaluation as ev
     from riann_ros.evaluation import scenario_run as run_mod
+    from riann_ros.evaluation.runners import run_sigmas
 
     got: dict[str, list[np.ndarray]] = {}
     rate_now: list[str] = ["native"]
@@ -54,8 +62,16 @@ def outputs(trial: str, use_mag: str, conditions: tuple[str, ...] = CONDITIONS,
             def feed(_tap: Any, rec: Any) -> list[np.ndarray]:
                 qs = inner.feed(rec)
                 key = f"{self.plan.scenario}|{self.condition.label}|{rate_now[0]}"
-                got.setdefault(key, []).append(np.asarray(qs[0], dtype=np.float32))
+                sigmas = run_sigmas(inner, len(qs))
+                for spec, q, sig in zip(self.own, qs, sigmas, strict=True):
+                    got.setdefault(f"{key}|{spec.label}", []).append(np.asarray(q, dtype=np.float32))
+                    if sig is not None:
+                        got.setdefault(f"{key}|{spec.label}|sigma", []).append(np.asarray(sig, dtype=np.float32))
                 return qs
+
+            @property
+            def sigmas(_tap: Any) -> Any:
+                return getattr(inner, "sigmas", None)
 
             def finish(_tap: Any) -> Any:
                 return inner.finish()
@@ -68,7 +84,7 @@ def outputs(trial: str, use_mag: str, conditions: tuple[str, ...] = CONDITIONS,
 
     run_mod.ScenarioRun.feed = feed  # type: ignore[method-assign]
     try:
-        base = dict(estimators=ev.parse_estimators("riann"), seed=0, use_mag=use_mag)
+        base = dict(estimators=ev.parse_estimators(estimators), seed=0, use_mag=use_mag)
         perturbed = ev.EvalSettings(scenarios=["as-recorded", "realistic"],
                                     conditions=[ev.parse_condition(c) for c in conditions], **base)
         res = ev.evaluate_source(trial, perturbed)
@@ -101,13 +117,13 @@ def _no_arena() -> None:
     ort.SessionOptions = Options  # type: ignore[misc]
 
 
-def _job(args: tuple[str, str, str, str, float]) -> tuple[str, float, str]:
+def _job(args: tuple[str, str, str, str, str]) -> tuple[str, float, str]:
     import os
 
     os.environ["OMP_NUM_THREADS"] = "1"
     _no_arena()
-    action, trial, mode, out_dir, _tol = args
-    out = outputs(trial, MODES[mode])
+    action, trial, mode, out_dir, estimators = args
+    out = outputs(trial, MODES[mode], CONDITIONS + (MAGNETIC if mode == "9d" else ()), RATES, estimators)
     path = Path(out_dir) / _file(Path(trial), mode)
     if action == "record":
         np.savez_compressed(path, **out)
@@ -136,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tol", type=float, default=1e-6)
     ap.add_argument("--trials", default="", help="comma-separated trial numbers (default: all)")
     ap.add_argument("--modes", default="6d,9d")
+    ap.add_argument("--estimators", default=ESTIMATORS)
     ap.add_argument("--skip-existing", action="store_true", help="record: keep the files already there")
     args = ap.parse_args(argv)
     # the code under test is the riann_ros Python imports: the checkout its .venv installed, or PYTHONPATH=<checkout>
@@ -146,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     trials = [p for p in broad_files(d) if not args.trials or p.name[:2] in args.trials.split(",")]
     args.dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(args.action, str(t), m, str(args.dir), args.tol) for t in trials for m in args.modes.split(",")
+    jobs = [(args.action, str(t), m, str(args.dir), args.estimators) for t in trials for m in args.modes.split(",")
             if not (args.skip_existing and args.action == "record" and (args.dir / _file(t, m)).is_file())]
     # a fresh process per trial: ONNX Runtime's arenas of many sessions would otherwise add up to GBs per worker
     with mp.get_context("forkserver").Pool(args.jobs, maxtasksperchild=1) as pool:

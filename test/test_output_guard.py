@@ -1,4 +1,4 @@
-"""RIANN's outputs against a recording of them (``bench/output_guard.py record DIR``, from the version a change must
+"""Every estimator's outputs against a recording of them (``bench/output_guard.py record DIR``, from the version a change must
 not alter): offline through the evaluator's pipeline within 1e-6, and riann_node over DDS within 1e-4 (the node
 runs sample by sample, the recording in blocks: float32 round-off of the network's state).
 
@@ -72,7 +72,7 @@ def test_node_outputs_equal_the_recording(guard_dir, broad_trial, ros, start_nod
     path = guard_dir / f"{number}-6d.npz"
     if not path.is_file():
         pytest.skip(f"{path} not recorded")
-    ref = np.load(path)["as-recorded|none|native"].astype(np.float64)
+    ref = np.load(path)["as-recorded|none|native|riann"].astype(np.float64)
     rec = broad_trial(number)
     node = start_node("riann_node", "-p", "input_qos:=reliable", "-p", "input_depth:=1000",
                       "-p", f"nominal_rate:={rec.rate_hz}")
@@ -97,10 +97,13 @@ def test_the_guard_taps_every_run_of_the_evaluator():
     from riann_ros.bagio import read_recording
 
     bag = ROOT / "bags" / "synthetic_rotation_100hz.mcap"
-    got = output_guard.outputs(str(bag), "false", conditions=("none", "bias:3,3,0"), rates="50")
-    assert set(got) == {f"{s}|{c}|native" for s in ("as-recorded", "realistic") for c in ("none", "bias:3,3,0")} | {
+    got = output_guard.outputs(str(bag), "false", conditions=("none", "bias:3,3,0"), rates="50", estimators="riann")
+    runs = {f"{s}|{c}|native" for s in ("as-recorded", "realistic") for c in ("none", "bias:3,3,0")} | {
         "as-recorded|none|50"}
+    assert set(got) == {f"{r}|riann{k}" for r in runs for k in ("", "|sigma")}
     n = len(read_recording(bag))
-    assert len(got["as-recorded|none|native"]) == n
-    for q in got.values():
-        assert np.all(np.isfinite(q)) and np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-5)
+    assert len(got["as-recorded|none|native|riann"]) == n
+    assert len(got["as-recorded|none|native|riann|sigma"]) == n  # σ of inclination and heading (and its state)
+    for key, q in got.items():
+        if not key.endswith("|sigma"):
+            assert np.all(np.isfinite(q)) and np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-5)
