@@ -38,7 +38,7 @@ def trial(args: tuple[str, tuple[float, float, float]]) -> dict:
     from riann_ros.datasets import read_any
     from riann_ros.estimators import create
     from riann_ros.gate import GateConfig
-    from riann_ros.mag import MagConfig
+    from riann_ros.magcal.input import MagConfig
     from riann_ros.magcal.records import MagCalPrior
     from riann_ros.stream import EstimatorStream
 
@@ -47,13 +47,16 @@ def trial(args: tuple[str, tuple[float, float, float]]) -> dict:
     raw = rec.mag + np.asarray(offset) * 1e-6
     est = create("riann")
 
+    streams: list[EstimatorStream] = []
+
     def run(mag, prior=None):
         est.reset()
         s = EstimatorStream(est, GateConfig(), MagConfig(), prior)
+        streams.append(s)
         return s.process_batch(rec.stamps_ns, rec.acc, rec.gyr, mag)[0]
 
     first = heading_rmse(rec, run(raw))
-    cal = est.mag_calibration()
+    cal = streams[0].mag_calibration()
     assert cal is not None
     second = heading_rmse(rec, run(raw, MagCalPrior.from_calibration(cal)))
     recorded = heading_rmse(rec, run(rec.mag))

@@ -44,7 +44,7 @@ from riann_ros.estimators.riann.s8_uncertainty import (
     inclination_sigma,
 )
 from riann_ros.evaluation.perturb import parse_condition
-from riann_ros.mag import MagConfig
+from riann_ros.magcal.input import MagConfig
 from riann_ros.stream import EstimatorStream, GateConfig
 
 CHI2_2_95 = 5.991  # χ²₂(0.95)

@@ -32,7 +32,7 @@ import numpy as np
 from riann_ros import quaternion as quat
 from riann_ros.datasets.broad import broad_files, find_broad_dir, read_broad
 from riann_ros.estimators.bias import GyroBiasFrontEnd
-from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
+from riann_ros.magcal.latency import LatencyEstimator
 from riann_ros.magcal.offline import fit_recording
 from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.magcal.records import UT

@@ -18,8 +18,9 @@ its resampled rates; 9D adds the three magnetometer calibration conditions of ``
 table (hard irons and a soft iron injected, :data:`MAGNETIC`). ``record`` writes every output quaternion and its σ
 (float32: its round-off, 6e-8, is far below any tolerance used) to ``DIR/<trial>-<6d|9d>.npz``, keyed
 ``scenario|condition|rate|estimator`` (the σ under ``…|sigma``); ``check`` recomputes them and prints the largest
-difference per component per file, exiting 1 when one exceeds ``--tol``. The files are derived from BROAD and stay outside the repository (``test/test_output_guard.py``
-reads them from ``$RIANN_OUTPUT_GUARD`` and skips without them).
+difference per component per file, exiting 1 when one exceeds ``--tol``. The files are derived from BROAD and stay
+outside the repository (``test/test_output_guard.py`` reads them from ``$RIANN_OUTPUT_GUARD`` and skips without
+them).
 """
 
 from __future__ import annotations

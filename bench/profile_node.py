@@ -247,7 +247,7 @@ CATEGORIES = (  # (category, patterns in a frame); a stack goes to the first cat
     ("network (ONNX Runtime)", ("onnxruntime", "run_with_iobinding", "_run_rows", "network.py")),
     ("composition", ("_compose_one", "combine", "_combine_row", "ensemble.py", "heading.py", "holes.py")),
     ("estimator planning", ("grid.py", "bias.py", "_plan_", "riann.py", "vqf", "madgwick.py", "mahony.py")),
-    ("input gate and stream", ("stream.py", "mag.py")),
+    ("input gate and stream", ("stream.py", "input.py")),
     ("diagnostics", ("_publish_diagnostics", "_diagnostic_level", "percentile")),
     ("publish", ("publisher.py", "_publish")),
     ("logging", ("logging.py", "get_logger", "_log_gate_result", "_warn_throttled", "rcutils_log")),

@@ -2,9 +2,13 @@
 (ROS-free).
 
 :class:`EstimatorStream` couples an :class:`~riann_ros.gate.InputGate` (the input checks and dt from stamps,
-docs/node.md "Bad input") with an estimator and the magnetometer input (:mod:`riann_ros.mag`). The node base feeds
-it one message at a time; the evaluator feeds whole sequences through :meth:`EstimatorStream.process_batch`, which
-gives the same numbers as the per-sample path. So an offline score is a score of what the node does.
+docs/node.md "Bad input") with an estimator and the magnetometer wing: the input (:mod:`riann_ros.magcal.input`:
+pairing, plausibility, ``use_mag``, the configured calibration) and, for an estimator that uses the field, the front
+end it gives the estimator (:class:`~riann_ros.magcal.frontend.MagFrontEnd`: the online calibration, the latency,
+the change events), whose prior (the configured or a saved calibration) and outputs the stream manages. The node
+base feeds it one message at a time; the evaluator feeds whole sequences through
+:meth:`EstimatorStream.process_batch`, which gives the same numbers as the per-sample path. So an offline score is a
+score of what the node does.
 """
 
 from __future__ import annotations
@@ -16,8 +20,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from riann_ros.estimators.base import AttitudeEstimator
 from riann_ros.gate import ESTIMATOR_FAULT, GAP, GateConfig, GateResult, InputGate
-from riann_ros.mag import MagConfig, MagInput
-from riann_ros.magcal.records import MagCalPrior
+from riann_ros.magcal.frontend import FrontEndConfig, MagFrontEnd
+from riann_ros.magcal.input import MagConfig, MagInput
+from riann_ros.magcal.records import MagCalibration, MagCalPrior, MagCalStatus
 
 __all__ = ["EstimatorStream", "GateConfig", "InputGate"]
 
@@ -27,12 +32,18 @@ class EstimatorStream:
 
     def __init__(self, estimator: AttitudeEstimator, config: GateConfig | None = None,
                  mag_config: MagConfig | None = None, mag_prior: MagCalPrior | None = None) -> None:
-        """``mag_prior``: where the estimator's online magnetometer calibration starts (a saved calibration,
-        :meth:`MagCalPrior.from_calibration`); None: the configured ``mag_hard_iron`` / ``mag_soft_iron``."""
+        """``mag_prior``: where the online magnetometer calibration starts (a saved calibration,
+        :meth:`MagCalPrior.from_calibration`); None: the configured ``mag_hard_iron`` / ``mag_soft_iron``. The
+        calibration's settings are the estimator's parameters (``mag_calibration``, …)."""
         self.estimator = estimator
         self.gate = InputGate(config)
-        self.mag = MagInput(mag_config, raw=estimator.calibrates_mag())
-        self.mag_prior: MagCalPrior | None = None  # the prior the estimator's calibration started from
+        #: the magnetometer's front end of an estimator that uses the field (None: a 6D estimator)
+        self.front: MagFrontEnd | None = None
+        if estimator.USES_MAG:
+            self.front = MagFrontEnd(FrontEndConfig.of(estimator.params), latency=estimator.front_end_latency())
+            estimator.take_front_end(self.front)
+        self.mag = MagInput(mag_config, raw=self.front is not None and self.front.calibrating)
+        self.mag_prior: MagCalPrior | None = None  # the prior the calibration started from
         self.configure_mag(self.mag.config, mag_prior)
         # σ (rad) of the inclination per axis and of the heading (:meth:`AttitudeEstimator.sigma`): of the last
         # accepted sample of process() (None: rejected), and per sample of the last process_batch() (NaN: rejected)
@@ -41,16 +52,24 @@ class EstimatorStream:
         self.batch_state: NDArray[np.float64] = np.empty(0)  # the estimator's heading state (NaN: it says none)
 
     def configure_mag(self, config: MagConfig, prior: MagCalPrior | None = None) -> None:
-        """New magnetometer parameters (the node's run-time change): with an estimator that calibrates online, a
-        new prior (``prior``, or the configured ``mag_hard_iron`` / ``mag_soft_iron`` when None) restarts its
-        calibration; the same prior keeps it."""
+        """New magnetometer parameters (the node's run-time change): with the online calibration on, a new prior
+        (``prior``, or the configured ``mag_hard_iron`` / ``mag_soft_iron`` when None) restarts it; the same prior
+        keeps it."""
         self.mag.config = config
-        if not self.estimator.calibrates_mag():
+        if self.front is None or not self.front.calibrating:
             return
         new = prior if prior is not None else config.prior()
         if new != self.mag_prior:
             self.mag_prior = new
-            self.estimator.set_mag_prior(new)
+            self.front.set_prior(new)
+
+    def mag_calibration(self) -> MagCalibration | None:
+        """The online calibration in use (what ``~/save_mag_calibration`` writes); None when it is off."""
+        return self.front.calibration() if self.front is not None else None
+
+    def mag_cal_status(self) -> MagCalStatus | None:
+        """The online calibration's state for ``/diagnostics``; None when it is off."""
+        return self.front.status() if self.front is not None else None
 
     def reset(self) -> None:
         """Clear the estimator and restart the stamp sequence (the node's ~/reset service)."""
@@ -62,7 +81,7 @@ class EstimatorStream:
         self, stamp_ns: int, acc: ArrayLike, gyr: ArrayLike, receive_ns: int | None = None,
         mag: ArrayLike | None = None,
     ) -> tuple[NDArray[np.float64] | None, GateResult]:
-        """One sample (and the field paired with it, see :mod:`riann_ros.mag`) → (quaternion wxyz or None
+        """One sample (and the field paired with it, see :mod:`riann_ros.magcal.input`) → (quaternion wxyz or None
         when rejected, the gate's verdict)."""
         self.sigma = None
         r = self.gate.check(stamp_ns, acc, gyr, receive_ns)

@@ -23,7 +23,7 @@ from helpers_mag import (
 from riann_ros import evaluation as ev
 from riann_ros import quaternion as quat
 from riann_ros.estimators import create
-from riann_ros.mag import FIELD_OFF, USABLE_MAX_T, USABLE_MIN_T, MagConfig
+from riann_ros.magcal.input import FIELD_OFF, USABLE_MAX_T, USABLE_MIN_T, MagConfig
 from riann_ros.recording import Recording
 from riann_ros.stream import EstimatorStream, GateConfig
 

@@ -11,7 +11,7 @@ import pytest
 from riann_ros import bagio
 from riann_ros.datasets.synthetic import generate
 from riann_ros.evaluation.magpair import NodePairing
-from riann_ros.mag import MagConfig, pair_fields
+from riann_ros.magcal.input import MagConfig, pair_fields
 from riann_ros.recording import Recording
 
 

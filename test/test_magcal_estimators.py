@@ -1,4 +1,4 @@
-"""The online magnetometer calibration inside the estimators (riann_ros.estimators.magcal_slot, RIANN's stage 7a):
+"""The online magnetometer calibration in front of the estimators (riann_ros.magcal.frontend, RIANN's stage 7a):
 the configured calibration as a hypothesis, the heading and its σ while the calibration converges, a ground robot
 turning about the vertical only, and what a reset, a gap and a new prior do."""
 
@@ -14,7 +14,8 @@ from riann_ros import quaternion as quat
 from riann_ros.datasets.synthetic import generate
 from riann_ros.estimators import create
 from riann_ros.gate import GateConfig
-from riann_ros.mag import MagConfig, MagInput
+from riann_ros.magcal.frontend import FrontEndConfig, MagFrontEnd
+from riann_ros.magcal.input import MagConfig, MagInput
 from riann_ros.magcal.records import CALIBRATED, UT, MagCalPrior
 from riann_ros.magcal.synthetic import distort, ground_robot
 from riann_ros.stream import EstimatorStream
@@ -52,12 +53,12 @@ def test_a_ground_robot_turning_about_the_vertical_calibrates_and_the_heading_co
     q, ok = s.process_batch(rec.stamps_ns[turning], rec.acc[turning], rec.gyr[turning], raw[turning])
     sig = np.degrees(s.batch_sigma[:, 1])
     err = heading_error_deg(rec.quat_ref[turning], q)
-    status = s.estimator.mag_cal_status()
+    status = s.mag_cal_status()
     assert status is not None and not status.prior_holds  # the 24 µT offset was found out
     assert ok[1:].all() and np.all(np.isfinite(q[ok])) and np.all(np.isfinite(sig[ok]))  # (the gate drops stamp 0)
     last = t[turning] > t_turns - 20.0
     assert np.sqrt(np.mean(err[last] ** 2)) < 4.0  # converged (without calibration: tens of degrees)
-    cal = s.estimator.mag_calibration()
+    cal = s.mag_calibration()
     assert cal is not None
     axis = quat.rotate(quat.conjugate(rec.quat_ref[0]), np.array([0.0, 0.0, 1.0]))
     h = np.asarray(cal.hard_iron_t) / UT - H_TRUE_UT
@@ -66,9 +67,9 @@ def test_a_ground_robot_turning_about_the_vertical_calibrates_and_the_heading_co
         assert np.mean(np.abs(err[ok]) <= 1.96 * sig[ok]) > 0.8
     # rest and straight driving: the calibration does not move at all
     after = ~turning
-    before = s.estimator.mag_calibration()
+    before = s.mag_calibration()
     s.process_batch(rec.stamps_ns[after], rec.acc[after], rec.gyr[after], raw[after])
-    still = s.estimator.mag_calibration()
+    still = s.mag_calibration()
     assert still is not None and before is not None
     moved = np.abs(np.asarray(still.hard_iron_t) - np.asarray(before.hard_iron_t)).max()
     assert moved < 1e-6 * UT or still.windows <= before.windows + 1  # at most the last turn's window closing
@@ -83,9 +84,11 @@ def test_the_classical_filters_heading_follows_the_calibration_that_takes_over(n
     rec = generate(duration=90.0, rate=100.0, seed=0, bias=0.0, gyr_noise=0.002)  # its first 30 s
     raw = distort(rec.quat_ref, np.array([30.0, 20.0, -20.0]) * UT, noise_t=0.4e-6, seed=2)
     est = create(name)
+    front = MagFrontEnd(FrontEndConfig.of(est.params))  # (the stream's, without the gate)
+    est.take_front_end(front)
     q = np.vstack([est.update_batch(rec.acc[i:i + 100], rec.gyr[i:i + 100], rec.dt[i:i + 100], raw[i:i + 100])
                    for i in range(0, 3000, 100)])
-    assert est.magcal is not None and est.magcal.cal is not None and est.magcal.cal.changes.count > 0
+    assert front.cal is not None and front.cal.changes.count > 0
     err = heading_error_deg(rec.quat_ref[:3000], q)
     after = (rec.t[:3000] >= 10.0) & (rec.t[:3000] < 20.0)
     assert np.sqrt(np.mean(err[after] ** 2)) < 8.0
@@ -103,7 +106,7 @@ def test_a_right_configured_calibration_is_used_as_it_is(name):
         s = EstimatorStream(create(name, mag_calibration=on), GateConfig(nominal_rate=100.0),
                             MagConfig(mag_hard_iron=h))
         out.append(s.process_batch(rec.stamps_ns, rec.acc, rec.gyr, raw)[0])
-        status = s.estimator.mag_cal_status()
+        status = s.mag_cal_status()
         assert (status is not None and status.prior_holds and status.windows > 5) if on else status is None
     np.testing.assert_allclose(out[0], out[1], atol=1e-6)
 
@@ -119,7 +122,7 @@ def test_the_heading_sigma_says_the_configured_calibration_is_not_yet_tested():
     t = (rec.stamps_ns - rec.stamps_ns[0]) * 1e-9
     assert np.all(sig[(t > 1.0) & (t < 3.0)] > 20.0)  # the initial rest: unverified
     assert np.all(sig[t > 30.0] < 3.5)  # verified: the field heading's own σ (2.5°) and the tilt's share
-    assert s.estimator.mag_cal_status().prior_holds
+    assert s.mag_cal_status().prior_holds
 
 
 @pytest.mark.parametrize("name", ESTIMATORS)
@@ -129,18 +132,18 @@ def test_the_calibration_belongs_to_the_robot(name):
     raw = distort(rec.quat_ref, H_TRUE_UT * UT, noise_t=0.4e-6, seed=2)
     s = stream_of(name)
     s.process_batch(rec.stamps_ns, rec.acc, rec.gyr, raw)
-    before = s.estimator.mag_calibration()
+    before = s.mag_calibration()
     assert before is not None and before.windows > 5
     s.reset()
     s.estimator.on_gap()
-    assert s.estimator.mag_calibration() == before
+    assert s.mag_calibration() == before
     s.configure_mag(MagConfig())  # the same prior: kept
-    assert s.estimator.mag_calibration() == before
+    assert s.mag_calibration() == before
     s.configure_mag(MagConfig(mag_hard_iron=(1e-6, 0.0, 0.0)))  # a new one: anew
-    assert s.estimator.mag_calibration().windows == 0
+    assert s.mag_calibration().windows == 0
     saved = MagCalPrior.from_calibration(before)  # a saved calibration as the prior
     s.configure_mag(MagConfig(), saved)
-    assert s.estimator.mag_calibration().hard_iron_t == pytest.approx(before.hard_iron_t, abs=1e-12)
+    assert s.mag_calibration().hard_iron_t == pytest.approx(before.hard_iron_t, abs=1e-12)
 
 
 def test_with_calibration_on_the_stream_passes_the_raw_field():
@@ -162,9 +165,10 @@ def test_batch_and_per_sample_give_the_same_numbers_with_calibration(name):
     qb, _ = per_sample(b, rec.stamps_ns[:n], rec.acc[:n], rec.gyr[:n], raw[:n])
     np.testing.assert_allclose(qa, qb, atol=1e-5 if name == "riann" else 1e-9)
     np.testing.assert_allclose(a.batch_sigma[-1], b.sigma, atol=1e-6)
-    assert a.estimator.magcal.cal.changes.count > 0  # the estimate took over (a filter's heading checked there)
-    assert a.estimator.mag_calibration() == b.estimator.mag_calibration() or math.isclose(
-        a.estimator.mag_calibration().hard_iron_t[0], b.estimator.mag_calibration().hard_iron_t[0], abs_tol=1e-9)
+    assert a.front is not None and a.front.cal is not None
+    assert a.front.cal.changes.count > 0  # the estimate took over (a filter's heading checked there)
+    assert a.mag_calibration() == b.mag_calibration() or math.isclose(
+        a.mag_calibration().hard_iron_t[0], b.mag_calibration().hard_iron_t[0], abs_tol=1e-9)
 
 
 def test_state_calibrated_once_converged():
@@ -172,7 +176,7 @@ def test_state_calibrated_once_converged():
     raw = distort(rec.quat_ref, H_TRUE_UT * UT, noise_t=0.4e-6, seed=2)
     s = stream_of("madgwick")
     s.process_batch(rec.stamps_ns, rec.acc, rec.gyr, raw)
-    st = s.estimator.mag_cal_status()
+    st = s.mag_cal_status()
     assert st.state == CALIBRATED and st.converged_after_s is not None and 3.0 < st.converged_after_s < 150.0
 
 
@@ -180,17 +184,13 @@ def test_the_classical_filters_calibration_tilt_is_not_tilted_by_a_linear_accele
     """The calibration in front of Madgwick, Mahony and VQF needs the sensor's tilt (for the tolerance of its test and
     the heading σ): the gyro carries it and the accelerometer pulls it toward gravity over seconds, so half a second
     of 5 m/s² sideways (a robot braking; the accelerometer alone reads 27° of tilt) moves it by a few degrees."""
-    from riann_ros.estimators.magcal_slot import MagCalSlot
-    from riann_ros.magcal.records import MagCalPrior
-
-    slot = MagCalSlot({"mag_calibration": True, "mag_soft_iron_model": "full", "mag_hard_iron_sd": 5e-5})
-    slot.set_prior(MagCalPrior())
+    front = MagFrontEnd()
     n = 400
     acc = np.tile([0.0, 0.0, 9.81], (n, 1))
     acc[200:250, 0] = 5.0  # 0.5 s of acceleration along x, no rotation
     worst = 0.0
     for i in range(n):
-        slot.calibrate([acc[i].tolist()], [[0.0, 0.0, 0.0]], [0.01], [(0.0, 2e-5, -4e-5)])
-        up = quat.rotate(np.asarray(slot.q)[None], np.array([[0.0, 0.0, 1.0]]))[0]
+        front.rows([acc[i].tolist()], [[0.0, 0.0, 0.0]], [0.01], [(0.0, 2e-5, -4e-5)])
+        up = quat.rotate(np.asarray(front.tilt.q)[None], np.array([[0.0, 0.0, 1.0]]))[0]
         worst = max(worst, math.degrees(math.acos(min(1.0, up[2]))))
     assert 1.0 < worst < 6.0

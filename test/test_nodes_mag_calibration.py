@@ -20,7 +20,7 @@ from conftest import wait_for, wait_matched
 from helpers_ros import quats, stamp_ns
 from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
-from riann_ros.mag import MagConfig, pair_fields
+from riann_ros.magcal.input import MagConfig, pair_fields
 from riann_ros.magcal.records import CALIBRATED, IDENTITY_9, STATES, UT, MagCalibration, MagCalPrior
 from riann_ros.magcal.store import load_calibration, save_calibration
 from riann_ros.nodes.mag_calibration import SAVE_SERVICE
@@ -40,7 +40,7 @@ def offline_run(name: str, stamps, acc, gyr, raw, sent, config: MagConfig,
     """The offline estimates and the stream after them (its ``batch_sigma``)."""
     fields = pair_fields(stamps, stamps[sent], raw[sent], config.timeout_ns)
     stream = EstimatorStream(create(name), GateConfig(nominal_rate=RATE), config, mag_prior=prior)
-    assert stream.estimator.calibrates_mag()
+    assert stream.front is not None and stream.front.calibrating
     q, ok = stream.process_batch(stamps, acc, gyr, fields)
     assert ok.all()
     return q, stream
@@ -170,7 +170,7 @@ def test_reset_keeps_the_calibration_restart_starts_as_at_start(ros, start_node,
 
     kept = EstimatorStream(create(name), GateConfig(nominal_rate=RATE))
     kept.process_batch(*fields(first))
-    cal = kept.estimator.mag_calibration()
+    cal = kept.mag_calibration()
     assert cal is not None and cal.windows > 0  # it learned the hard iron
     kept.reset()
     q_kept, ok = kept.process_batch(*fields(after_reset))

@@ -1,6 +1,6 @@
-"""Every estimator's outputs against a recording of them (``bench/output_guard.py record DIR``, from the version a change must
-not alter): offline through the evaluator's pipeline within 1e-6, and riann_node over DDS within 1e-4 (the node
-runs sample by sample, the recording in blocks: float32 round-off of the network's state).
+"""Every estimator's outputs against a recording of them (``bench/output_guard.py record DIR``, from the version a
+change must not alter): offline through the evaluator's pipeline within 1e-6, and riann_node over DDS within 1e-4
+(the node runs sample by sample, the recording in blocks: float32 round-off of the network's state).
 
 The recording is derived from BROAD and is not in the repository: set ``RIANN_OUTPUT_GUARD`` to its folder (and
 ``RIANN_BROAD_DIR`` if BROAD is elsewhere); without them these tests skip, except the one that checks the guard still

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from riann_ros.mag import MAG_PARAMS
+from riann_ros.magcal.input import MAG_PARAMS
 from riann_ros.nodes.parameters import NODE_PARAMS
 from riann_ros.params import ParamSpec, find
 

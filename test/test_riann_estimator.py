@@ -16,6 +16,7 @@ from riann_ros.estimators import create
 from riann_ros.estimators.riann import RiannEstimator
 from riann_ros.estimators.riann.s4b_model import BatchedModel
 from riann_ros.estimators.riann.stage import NetworkIn, Samples
+from riann_ros.magcal.frontend import LatencySettings
 from riann_ros.stream import EstimatorStream, GateConfig
 
 
@@ -178,7 +179,8 @@ def test_runtime_parameters_reach_their_stages(model):
     est.set_params(tau_mag=3.0, mag_delay=0.02, mag_dist_rejection=False, estimate_mag_delay=False,
                    hole_blend=False)
     m = est.heading.mag
-    assert (m.tau_mag, m.mag_delay, m.reject, m.estimate_delay) == (3.0, 0.02, False, False)
+    assert (m.tau_mag, m.reject) == (3.0, False)
+    assert m.front.latency_settings == LatencySettings(0.02, estimate=False, compensate=True)
     assert not est.handover.enabled
     est.reset()  # a reset keeps what was set (the parameters are the estimator's)
     assert est.heading.mag.tau_mag == 3.0 and not est.handover.enabled

@@ -17,6 +17,7 @@ from riann_ros.estimators.riann import RiannEstimator
 from riann_ros.estimators.riann.s7_heading import Heading
 from riann_ros.estimators.riann.stage import SMALL_BLOCK, CarryBlock, HandoverBlock, HeadingIn, Samples
 from riann_ros.evaluation.scoring import roll_pitch_deg
+from riann_ros.magcal.frontend import FrontEndConfig, LatencySettings, MagFrontEnd
 from riann_ros.rotations import from_rotvec, normalized
 
 
@@ -43,8 +44,8 @@ def test_the_plain_float_form_equals_the_vectorised_reference(seed, n, first, ho
     """A block of more than SMALL_BLOCK samples (the reference) equals its samples one at a time (the plain-float
     path), attitudes, gains and dips, with the first field and a hole anywhere."""
     qc, delta, mag, bridges, sd = _random_block(n, seed, min(first, n), hole)
-    vec = Heading(9.0, 0.0, True, True).run(_heading_in(qc, delta, mag, bridges, sd))
-    one = Heading(9.0, 0.0, True, True)
+    vec = Heading(9.0, True, _front()).run(_heading_in(qc, delta, mag, bridges, sd))
+    one = Heading(9.0, True, _front())
     parts = [one.run(_heading_in([qc[k]], [delta[k]], [mag[k]], {0: 5.0} if k in bridges else {}, [sd[k]]))
              for k in range(n)]
     assert np.abs(np.vstack([p.q for p in parts]) - vec.q).max() < 1e-9
@@ -111,3 +112,8 @@ def test_riann_9d_inclination_equals_6d_broad(broad_trial) -> None:
     q9 = est.update_batch(rec.acc, rec.gyr, rec.dt, rec.mag)
     assert gravity_angle(q6, q9).max() < 1e-6
     assert est.heading_observed()
+
+
+def _front() -> MagFrontEnd:
+    """RIANN's front end without the online calibration (the field as given, its latency estimated)."""
+    return MagFrontEnd(FrontEndConfig(calibrate=False), latency=LatencySettings(0.0, estimate=True, compensate=True))

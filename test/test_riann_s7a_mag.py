@@ -12,6 +12,7 @@ from helpers_mag import NAN3, heading_change_deg, moving, rot_z, static
 from riann_ros import quaternion as quat
 from riann_ros.estimators import create
 from riann_ros.estimators.riann.s7a_mag import REACQUIRE_FIELD_SD_DEG, MagHeading
+from riann_ros.magcal.frontend import FrontEndConfig, LatencySettings, MagFrontEnd
 
 
 @pytest.mark.parametrize("yaw_deg", [120.0, -60.0])
@@ -109,7 +110,8 @@ def test_riann_heading_reacquires_the_field_after_a_hole() -> None:
 
 def _settled_heading() -> MagHeading:
     """A MagHeading past its start (20 s at rest, 100 Hz, a field with a dip of 63°), ready to re-acquire."""
-    h = MagHeading(tau_mag=9.0, mag_delay=0.0, reject=True, estimate_delay=False)
+    front = MagFrontEnd(FrontEndConfig(calibrate=False), latency=LatencySettings(0.0, estimate=False, compensate=True))
+    h = MagHeading(tau_mag=9.0, reject=True, front=front)
     for _ in range(2000):
         h.step((1.0, 0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.01, (0.0, 20e-6, -40e-6))
     return h

@@ -11,7 +11,7 @@ from pathlib import Path
 from riann_ros import defaults
 from riann_ros import evaluation as ev
 from riann_ros.evaluation import perturb
-from riann_ros.mag import USE_MAG_CHOICES
+from riann_ros.magcal.input import USE_MAG_CHOICES
 
 DEFAULT_ESTIMATORS = "riann,madgwick,mahony,vqf"
 #: the options behind each evaluation setting, named when a resumed run asks for other settings (--resume)

@@ -10,12 +10,17 @@ Every estimator is a causal filter over IMU samples:
   batch call gives the same numbers as ``N`` calls of ``update`` (tested per estimator);
 * ``reset()`` — forget everything; the next sample re-initialises the filter.
 
-**Magnetometer (9D).** ``mag`` is the calibrated field in the sensor frame, in tesla (only its
-direction and its norm relative to a learned reference matter). ``None`` or a non-finite row means
-"no field for this sample": the estimator runs its 6D step and its heading follows the gyro. With a
-field, the world frame is magnetic ENU (y = magnetic north); without one, the heading starts at zero.
-Estimators that use the field set ``USES_MAG``; :meth:`AttitudeEstimator.heading_observed` says whether
-the last sample's heading was tied to the field (the node reports a finite yaw covariance only then).
+**Magnetometer (9D).** ``mag`` is the field in the sensor frame, in tesla (only its direction and its norm
+relative to a learned reference matter). ``None`` or a non-finite row means "no field for this sample": the
+estimator runs its 6D step and its heading follows the gyro. With a field, the world frame is magnetic ENU
+(y = magnetic north); without one, the heading starts at zero. Estimators that use the field set ``USES_MAG``;
+:meth:`AttitudeEstimator.heading_observed` says whether the last sample's heading was tied to the field (the node
+reports a finite yaw covariance only then). The field an estimator gets is calibrated: by the stream with the
+configured calibration, or, where the online calibration is on, by the magnetometer's front end
+(:class:`~riann_ros.magcal.frontend.MagFrontEnd`) that the stream gives the estimator
+(:meth:`AttitudeEstimator.take_front_end`): the estimator then hands it the raw field with its gyro and takes back
+the calibrated field, its σ and the change events, never touching the calibration itself. Without a front end the
+field is used as it is given.
 
 A subclass implements ``reset`` and at least one of ``update`` / ``update_batch``: the base class
 derives the other (one sample as a batch of one, or a batch as a loop of samples). Construction
@@ -23,10 +28,11 @@ validates the parameters and calls ``reset()``.
 
 **Uncertainty.** :meth:`AttitudeEstimator.sigma` gives, per sample of the last ``update`` /
 ``update_batch`` call, the standard deviations (rad) of the inclination (roll and pitch errors as an
-isotropic 2-D Gaussian: σ per horizontal axis) and of the heading. The default (Madgwick, Mahony, VQF)
-is a documented constant: :data:`~riann_ros.defaults.INCLINATION_SD_DEG`, and the heading
-:data:`~riann_ros.defaults.YAW_FREE_SD_DEG` without a field or
-:data:`~riann_ros.defaults.MAG_HEADING_SD_DEG` with one; RIANN reports its per-sample model.
+isotropic 2-D Gaussian: σ per horizontal axis) and of the heading. The default is a documented
+constant: :data:`~riann_ros.defaults.INCLINATION_SD_DEG`, and the heading
+:data:`~riann_ros.defaults.YAW_FREE_SD_DEG` without a field or :data:`~riann_ros.defaults.MAG_HEADING_SD_DEG` with
+one (the classical filters add the calibration's share, :mod:`~riann_ros.estimators.classical`); RIANN reports its
+per-sample model.
 :meth:`AttitudeEstimator.heading_state` may say per sample whether a field corrected the heading or the gyro
 held it (the evaluator then splits the heading's uncertainty scores by it; default: not said).
 
@@ -44,8 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
-from riann_ros.estimators.magcal_slot import MagCalSlot
-from riann_ros.magcal.records import MagCalibration, MagCalPrior, MagCalStatus
+from riann_ros.magcal.frontend import LatencySettings, MagFrontEnd
 from riann_ros.params import ParamSpec, find
 
 Array = NDArray[np.float64]
@@ -80,8 +85,7 @@ class AttitudeEstimator(ABC):
         self.params: dict[str, Any] = {p.name: p.default for p in self.PARAMS}
         for key, value in params.items():
             self.params[key] = specs[key].validate(value)
-        # the online magnetometer calibration (estimators with riann_ros.mag.MAG_CAL_PARAMS): kept over reset()
-        self.magcal = MagCalSlot(self.params) if "mag_calibration" in self.params else None
+        self.front: MagFrontEnd | None = None  # the magnetometer's front end (take_front_end); kept over reset()
         self.reset()
 
     # -- parameters -----------------------------------------------------------------------------
@@ -105,30 +109,18 @@ class AttitudeEstimator(ABC):
         """Estimator-specific values for the node's ``/diagnostics`` (e.g. its gyro-bias estimate)."""
         return {}
 
-    # -- magnetometer calibration (docs/magnetometer.md) -------------------------------------------
-    def calibrates_mag(self) -> bool:
-        """True when the estimator calibrates the field online (its ``mag_calibration`` parameter): it then takes
-        the raw field (:class:`riann_ros.mag.MagInput` passes it uncalibrated)."""
-        return self.magcal is not None and self.magcal.on
+    # -- the magnetometer's front end (docs/magnetometer.md) ---------------------------------------------------------
+    def take_front_end(self, front: MagFrontEnd) -> None:
+        """The stream's magnetometer front end (the field's calibration, latency and tilt, :mod:`riann_ros.magcal`):
+        from now on the estimator hands it the raw field, where it calibrates online (``front.calibrating``), and
+        takes back the calibrated field. Kept over :meth:`reset` (the calibration is the robot's)."""
+        self.front = front
+        front.latency_settings = self.front_end_latency()
 
-    def set_mag_prior(self, prior: MagCalPrior) -> None:
-        """Where the online calibration starts, and the hypothesis it tests: the configured ``mag_hard_iron`` /
-        ``mag_soft_iron`` (:meth:`riann_ros.mag.MagConfig.prior`) or a saved calibration
-        (:meth:`MagCalPrior.from_calibration`). Restarts the calibration; nothing else of the state changes."""
-        if self.magcal is not None:
-            self.magcal.set_prior(prior)
-            self._on_mag_prior()
-
-    def _on_mag_prior(self) -> None:  # noqa: B027 - optional hook, default does nothing
-        """Hook for estimators that hand the calibrator to a part of themselves (RIANN's heading stage)."""
-
-    def mag_calibration(self) -> MagCalibration | None:
-        """The online calibration's current estimate (what ``~/save_mag_calibration`` writes); None when off."""
-        return self.magcal.calibration() if self.magcal is not None else None
-
-    def mag_cal_status(self) -> MagCalStatus | None:
-        """The online calibration's state for ``/diagnostics``; None when off."""
-        return self.magcal.status() if self.magcal is not None else None
+    def front_end_latency(self) -> LatencySettings:
+        """What the estimator does with the magnetometer's latency (the front end's :class:`LatencySettings`).
+        Default: estimated for the calibration's windows only, the field used as it comes."""
+        return LatencySettings()
 
     # -- estimation -----------------------------------------------------------------------------
     @abstractmethod
@@ -158,11 +150,7 @@ class AttitudeEstimator(ABC):
         got. Default: the documented constants (see the module docstring); the heading's σ with a field only for
         estimators that use it (``USES_MAG``). Never changes the state."""
         f = np.asarray(fields, dtype=bool) & self.USES_MAG
-        mag_sd = np.radians(MAG_HEADING_SD_DEG)
-        cal = self.magcal.sd_rad if self.magcal is not None and self.magcal.on else None
-        if cal is not None and len(cal) == len(f) and cal.any():  # the calibration's share (0 while trusted)
-            mag_sd = np.minimum(np.hypot(mag_sd, cal), np.radians(YAW_FREE_SD_DEG))
-        yaw = np.where(f, mag_sd, np.radians(YAW_FREE_SD_DEG))
+        yaw = np.where(f, np.radians(MAG_HEADING_SD_DEG), np.radians(YAW_FREE_SD_DEG))
         return np.column_stack([np.full(len(f), np.radians(INCLINATION_SD_DEG)), yaw])
 
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:

@@ -1,8 +1,9 @@
 """Helpers shared by the classical filters (Madgwick, Mahony, VQF), ROS-free.
 
 Input sanitising (the documented degenerate-input rules), the accelerometer initialisation of
-Madgwick and Mahony (and, with a magnetometer, the heading from the field), and list ↔ array conversion
-for their plain-float loops (:class:`Rows`).
+Madgwick and Mahony (and, with a magnetometer, the heading from the field), their realign event
+(:func:`realigned`), and the batch for their plain-float loops (:class:`Rows`, cut at the realign events by
+:func:`cut_at`). The skeleton that runs them is :mod:`.classical`.
 """
 
 from __future__ import annotations
@@ -17,15 +18,11 @@ from numpy.typing import ArrayLike
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
-from riann_ros.estimators.bias import FrontEndSlot
-from riann_ros.estimators.magcal_slot import MagCalSlot
-from riann_ros.magcal.records import FIELD_HEADING_SD_RAD
-from riann_ros.rotations import Quat, Vec, rotate
+from riann_ros.magcal.changes import Realign, field_disagrees
+from riann_ros.magcal.heading import field_heading
+from riann_ros.rotations import Quat, Vec
 
 BIAS_KEY = "gyro bias estimate (deg/s)"
-#: a filter's heading is set anew from the field where the calibration changed only if the two differ by more than
-#: this many σ (:func:`field_disagrees`): a change the filter's heading already agrees with does not move it
-REALIGN_SIGMAS = 3.0
 
 
 def bias_text(bias_rad_s: ArrayLike) -> str:
@@ -89,13 +86,6 @@ def initial_attitude_marg(ax: float, ay: float, az: float, mx: float, my: float,
     return align_heading(q, (mx, my, mz))
 
 
-def field_heading(q: Quat, m: Vec) -> float | None:
-    """rad; the angle of the horizontal part of the tilt-compensated field ``R(q) m`` from +y (magnetic north)
-    toward +x, ``q`` sensor → ENU; None when that part is zero or not finite."""
-    hx, hy, _ = rotate(q, m)
-    return math.atan2(hx, hy) if 0.0 < hx * hx + hy * hy < math.inf else None
-
-
 def align_heading(q: Quat, m: Vec) -> Quat:
     """The attitude ``q`` (sensor → ENU) turned about world z so that the horizontal part of the tilt-compensated
     field ``R(q) m`` lies on +y (magnetic north); ``q`` itself when that part is zero or not finite. The tilt is
@@ -115,15 +105,15 @@ def align_heading(q: Quat, m: Vec) -> Quat:
 class Rows(NamedTuple):
     """One batch as the plain-float loops take it: nested lists of Python floats, degenerate values neutralised
     (:func:`sanitize_arrays`, :func:`sanitize_mag`); a ``mag`` row that is None or zeros has no field. ``realign``:
-    ``(row, σ)`` where the online calibration changed the calibration the field gets and ``σ`` the heading σ it
-    adds at that row (rad): before it the filter's heading is set anew from the row's field if the two disagree
-    (:func:`realigned`, :attr:`~.magcal_slot.MagCalSlot.realign`)."""
+    the rows where the online calibration changed the calibration the field gets (the magnetometer front end's
+    :class:`~riann_ros.magcal.changes.Realign` events): before each the filter's heading is set anew from the row's
+    field if the two disagree (:func:`realigned`)."""
 
     acc: list
     gyr: list
     mag: list
     dt: list
-    realign: tuple[tuple[int, float], ...] = ()
+    realign: tuple[Realign, ...] = ()
 
     def tail(self, i: int) -> Rows:
         """The samples from index ``i`` on."""
@@ -132,7 +122,7 @@ class Rows(NamedTuple):
     def part(self, a: int, b: int) -> Rows:
         """The samples ``a`` to ``b − 1``."""
         return Rows(self.acc[a:b], self.gyr[a:b], self.mag[a:b], self.dt[a:b],
-                    tuple((k - a, t) for k, t in self.realign if a <= k < b))
+                    tuple(Realign(e.row - a, e.sd_rad) for e in self.realign if a <= e.row < b))
 
     def pieces(self) -> Iterator[tuple[Rows, float | None]]:
         """The batch cut before each :attr:`realign` row (:func:`cut_at`): each piece, and the calibration's heading
@@ -144,54 +134,19 @@ class Rows(NamedTuple):
             yield self.part(a, b), sd
 
 
-def cut_at(realign: tuple[tuple[int, float], ...], n: int) -> Iterator[tuple[int, int, float | None]]:
-    """``n`` rows cut before each ``realign`` row (:attr:`Rows.realign`): ``(start, end, σ)`` per non-empty piece,
+def cut_at(realign: tuple[Realign, ...], n: int) -> Iterator[tuple[int, int, float | None]]:
+    """``n`` rows cut before each realign row (:attr:`Rows.realign`): ``(start, end, σ)`` per non-empty piece,
     ``σ`` the calibration's heading σ at its first row when the heading is to be checked there, else None."""
-    sds = dict(realign)
+    sds = {e.row: e.sd_rad for e in realign}
     for a, b in itertools.pairwise([0, *(k for k in sds if k > 0), n]):
         if b > a:
             yield a, b, sds.get(a)
 
 
-def field_disagrees(q: Quat, m: Vec, sd_rad: float) -> bool:
-    """Whether the heading of the attitude ``q`` (sensor → ENU) and that of the field ``m`` (sensor frame) differ by
-    more than :data:`REALIGN_SIGMAS` times their σ: the calibration's ``sd_rad`` and the field heading's own."""
-    psi = field_heading(q, m)
-    return psi is not None and abs(psi) > REALIGN_SIGMAS * math.hypot(sd_rad, FIELD_HEADING_SD_RAD)
-
-
 def realigned(q: Quat, m: Vec, sd_rad: float) -> Quat:
-    """``q`` (sensor → ENU) with its heading set anew from the field ``m`` (:func:`align_heading`) if the two
-    disagree (:func:`field_disagrees`), else ``q``."""
+    """The realign event of Madgwick and Mahony: ``q`` (sensor → ENU) with its heading set anew from the field ``m``
+    (:func:`align_heading`) if the two disagree (:func:`~riann_ros.magcal.changes.field_disagrees`), else ``q``."""
     return align_heading(q, m) if field_disagrees(q, m, sd_rad) else q
-
-
-def loop_rows(acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None, front_end: FrontEndSlot,
-              magcal: MagCalSlot | None = None) -> Rows:
-    """The batch for a loop: sanitised, the gyro debiased by ``front_end``; without ``mag`` every row is None; with
-    ``magcal`` on, the field calibrated online (:meth:`MagCalSlot.calibrate`, a row without a field is None) and the
-    rows where the calibration changed (:attr:`Rows.realign`)."""
-    a, g, h = sanitize_arrays(acc, gyr, dt)
-    m = [None] * len(a) if mag is None else sanitize_mag(mag, len(a))
-    al, gl, hl = a.tolist(), front_end.debias(a, g, h).tolist(), h.tolist()
-    if magcal is not None and magcal.takes(mag):
-        m = magcal.calibrate(al, gl, hl, m)
-        return Rows(al, gl, m, hl, magcal.realign)
-    return Rows(al, gl, m, hl)
-
-
-def calibrated_field(acc: Array, gyr: Array, dt: Array, mag: ArrayLike | None, magcal: MagCalSlot | None
-                     ) -> tuple[ArrayLike | None, tuple[tuple[int, float], ...]]:
-    """``mag`` calibrated online by ``magcal`` when it is on (NaN rows: no field; sanitised inputs), else as given;
-    and the rows where the calibration the field gets changed (:attr:`Rows.realign`). Once a field was seen, the
-    calibration gets every sample, with a field or without (its windows and tilt need the gyro of each), so one
-    sample at a time and a batch give it the same samples."""
-    if magcal is None or not magcal.takes(mag):
-        return mag, ()
-    rows = magcal.calibrate(acc.tolist(), gyr.tolist(), dt.tolist(),
-                            [None] * len(acc) if mag is None else sanitize_mag(mag, len(acc)))
-    field = np.array([(math.nan,) * 3 if u is None else u for u in rows], dtype=float).reshape(-1, 3)
-    return field, magcal.realign
 
 
 def initialise(rows: Rows, out: list) -> tuple[Quat | None, Rows, bool]:

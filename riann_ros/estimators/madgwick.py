@@ -28,7 +28,7 @@ default ``Dt``. Initialisation with a field: :func:`~riann_ros.estimators.common
 (accelerometer attitude, heading from the tilt-compensated field: its horizontal part along +y).
 :meth:`MadgwickEstimator.heading_observed` is True iff the last sample's correction used a field. Where the online
 magnetometer calibration changes the calibration the field gets and the heading disagrees with the new one, the
-heading is set from the field as at the start (:mod:`~riann_ros.estimators.magcal_slot`).
+heading is set from the field as at the start (:mod:`~riann_ros.magcal.changes`).
 
 Conventions shared with :mod:`riann_ros.estimators.mahony`:
 
@@ -52,12 +52,11 @@ from __future__ import annotations
 
 import math
 
-from numpy.typing import ArrayLike
-
-from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
+from riann_ros.estimators.base import Array, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows, realigned
-from riann_ros.mag import MAG_CAL_PARAMS
+from riann_ros.estimators.classical import Batch, ClassicalFilter
+from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, realigned
+from riann_ros.magcal.input import MAG_CAL_PARAMS
 
 #: ahrs 0.4.0 ``Madgwick`` default ``gain_imu`` (IMU/6D mode); Madgwick's report gives β = √(3/4)·ω̃ with
 #: ω̃ the gyro measurement error, and 0.033 corresponds to ω̃ ≈ 2.2°/s.
@@ -143,11 +142,10 @@ def _madgwick_loop(q: Quat, used: bool, rows: Rows, beta: float, beta_marg: floa
     return (qw, qx, qy, qz), used, out
 
 
-class MadgwickEstimator(AttitudeEstimator):
+class MadgwickEstimator(ClassicalFilter):
     """Madgwick IMU/MARG filter with gains ``beta`` (no field) and ``beta_marg`` (field); see the module docstring."""
 
     name = "madgwick"
-    USES_MAG = True
     PARAMS = (
         ParamSpec(
             "beta",
@@ -184,9 +182,13 @@ class MadgwickEstimator(AttitudeEstimator):
     def heading_observed(self) -> bool:
         return self._observed
 
-    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
-        rows = loop_rows(acc, gyr, dt, mag, self._fe, self.magcal)
-        nine = mag is not None
+    def _debiased(self, acc: Array, gyr: Array, dt: Array) -> Array:
+        return self._fe.debias(acc, gyr, dt)
+
+    def _run(self, batch: Batch) -> Array:
+        al, gl, hl = batch.as_lists()
+        nine = batch.mag is not None
+        rows = Rows(al, gl, batch.mag if batch.mag is not None else [None] * len(al), hl, batch.realign)
         out: list = []
         state, used = (self._nwu_state() if nine else self._q), self._observed
         if state is None:

@@ -21,7 +21,7 @@ conversion, unlike :mod:`riann_ros.estimators.madgwick`). Samples without a fiel
 all-zero ``mag`` row) get the IMU step; the initialisation takes the heading from the field of the
 initialising sample when it has one (:func:`~riann_ros.estimators.common.initial_attitude_marg`: the
 horizontal part of the tilt-compensated field along +y), and so does a change of the online magnetometer
-calibration that the heading disagrees with (:mod:`~riann_ros.estimators.magcal_slot`).
+calibration that the heading disagrees with (:mod:`~riann_ros.magcal.changes`).
 :meth:`MahonyEstimator.heading_observed` is True iff the last sample's correction used a field.
 
 Initialisation, per-sample dt, degenerate input and the fast loop (one for both forms: without ``mag`` every sample
@@ -37,12 +37,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import ArrayLike
 
-from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
+from riann_ros.estimators.base import Array, ParamSpec
 from riann_ros.estimators.bias import FrontEndSlot, front_end_params
-from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, loop_rows, realigned
-from riann_ros.mag import MAG_CAL_PARAMS
+from riann_ros.estimators.classical import Batch, ClassicalFilter
+from riann_ros.estimators.common import BIAS_KEY, Quat, Rows, as_array, bias_text, initialise, realigned
+from riann_ros.magcal.input import MAG_CAL_PARAMS
 from riann_ros.rotations import Vec
 
 #: ahrs 0.4.0 ``Mahony`` defaults (``k_P=1.0``, ``k_I=0.3``).
@@ -103,11 +103,10 @@ def _mahony_loop(q: Quat, b: Vec, used: bool, rows: Rows, kp: float, ki: float) 
     return (qw, qx, qy, qz), (bx, by, bz), used, out
 
 
-class MahonyEstimator(AttitudeEstimator):
+class MahonyEstimator(ClassicalFilter):
     """Mahony IMU filter with proportional gain ``kp`` and integral (gyro-bias) gain ``ki``."""
 
     name = "mahony"
-    USES_MAG = True
     PARAMS = (
         ParamSpec(
             "kp",
@@ -149,8 +148,12 @@ class MahonyEstimator(AttitudeEstimator):
     def heading_observed(self) -> bool:
         return self._observed
 
-    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
-        rows = loop_rows(acc, gyr, dt, mag, self._fe, self.magcal)
+    def _debiased(self, acc: Array, gyr: Array, dt: Array) -> Array:
+        return self._fe.debias(acc, gyr, dt)
+
+    def _run(self, batch: Batch) -> Array:
+        al, gl, hl = batch.as_lists()
+        rows = Rows(al, gl, batch.mag if batch.mag is not None else [None] * len(al), hl, batch.realign)
         out: list = []
         q, used = self._q, self._observed
         if q is None:

@@ -18,8 +18,8 @@ The C++ implementation of the ``vqf`` package (MIT) does the work; this class on
   gyro. The output is always ``quat9D``: before the first field VQF's heading offset is the identity,
   so it equals ``quat6D`` exactly, and after the magnetometer stops the heading continues without a jump.
   Where the online magnetometer calibration changes the calibration the field gets and VQF's heading disagrees
-  with it (:mod:`~riann_ros.estimators.magcal_slot`), VQF's magnetic state starts as at its construction (the
-  batch is cut there: ``updateBatch`` per piece, the same numbers as per-sample calls).
+  with it (a :class:`~riann_ros.magcal.changes.Realign` event), VQF's magnetic state starts as at its construction
+  (the batch is cut there: ``updateBatch`` per piece, the same numbers as per-sample calls).
 * **dt** — VQF is built for a fixed sampling time ``Ts`` given at construction. The filter is created at
   the first sample with ``Ts`` = that sample's dt (the stream gives the first sample ``1/nominal_rate``;
   ``riann_ros.defaults.FALLBACK_DT_S`` if that dt is not positive). Every sample's gyroscope reading is then scaled by
@@ -46,16 +46,11 @@ from numpy.typing import ArrayLike
 from vqf import VQF
 
 from riann_ros import defaults
-from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
-from riann_ros.estimators.common import (
-    BIAS_KEY,
-    bias_text,
-    calibrated_field,
-    cut_at,
-    field_disagrees,
-    sanitize_arrays,
-)
-from riann_ros.mag import MAG_CAL_PARAMS
+from riann_ros.estimators.base import Array, ParamSpec
+from riann_ros.estimators.classical import Batch, ClassicalFilter
+from riann_ros.estimators.common import BIAS_KEY, bias_text, cut_at
+from riann_ros.magcal.changes import field_disagrees
+from riann_ros.magcal.input import MAG_CAL_PARAMS
 
 # defaults of vqf 2.1.2 (VQFParams)
 DEFAULT_TAU_ACC = 3.0
@@ -71,7 +66,7 @@ _VQF_MAG_STATE = ("kMagInit", "lastMagDisAngle", "lastMagCorrAngularRate", "magD
                   "magCandidateT", "magNormDip", "magNormDipLpState")
 
 
-class VqfEstimator(AttitudeEstimator):
+class VqfEstimator(ClassicalFilter):
     """VQF 6D (gyr + acc) with rest and motion gyro-bias estimation."""
 
     name = "vqf"
@@ -124,7 +119,6 @@ class VqfEstimator(AttitudeEstimator):
         ),
         *MAG_CAL_PARAMS,
     )
-    USES_MAG = True
 
     def reset(self) -> None:
         self._vqf: VQF | None = None
@@ -169,31 +163,31 @@ class VqfEstimator(AttitudeEstimator):
         return self._vqf, self._ts
 
     def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
-        a, g, h = sanitize_arrays(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt])
+        b = self._batch(np.reshape(acc, (1, 3)), np.reshape(gyr, (1, 3)), [dt],
+                        None if mag is None else np.reshape(mag, (1, 3)))
+        a, g, h = b.acc, b.gyr, b.dt
         v, ts = self._ensure(float(h[0]))
-        mag, realign = calibrated_field(a, g, h, None if mag is None else np.reshape(mag, (1, 3)), self.magcal)
-        m = _field_ut(mag, 1)[0]
+        m = _field_ut(b.mag, 1)[0]
         self._mag_used = bool(m.any())
-        if realign:
-            self._restart_heading(realign[0][1], m)
+        if b.realign:
+            self._restart_heading(b.realign[0].sd_rad, m)
         if self._mag_used:
             v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]), m)
         else:
             v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]))
         return np.asarray(v.getQuat9D(), dtype=float).copy()
 
-    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
-        a, g, h = sanitize_arrays(acc, gyr, dt)
+    def _run(self, batch: Batch) -> Array:
+        a, g, h = batch.acc, batch.gyr, batch.dt
         if len(a) == 0:
             return np.empty((0, 4))
         v, ts = self._ensure(float(h[0]))
-        field, realign = calibrated_field(a, g, h, mag, self.magcal)
-        m = _field_ut(field, len(a))
+        m = _field_ut(batch.mag, len(a))
         g = np.ascontiguousarray(g * (h / ts)[:, None])  # zero rows: VQF skips updateMag
         self._mag_used = bool(m[-1].any())
         a = np.ascontiguousarray(a)
         out = []
-        for i, j, sd in cut_at(realign, len(a)):
+        for i, j, sd in cut_at(batch.realign, len(a)):
             if sd is not None:
                 self._restart_heading(sd, m[i])
             out.append(v.updateBatch(np.ascontiguousarray(g[i:j]), np.ascontiguousarray(a[i:j]),
@@ -201,8 +195,9 @@ class VqfEstimator(AttitudeEstimator):
         return np.array(np.concatenate(out), dtype=float)
 
     def _restart_heading(self, sd_rad: float, m_ut: Array) -> None:
-        """The online calibration changed the calibration the field gets (``m_ut`` the row's field, ``sd_rad`` the
-        heading σ it adds): where VQF's heading disagrees with it (:func:`~.common.field_disagrees`) VQF's magnetic
+        """VQF's realign event: the online calibration changed the calibration the field gets (``m_ut`` the row's
+        field, ``sd_rad`` the heading σ it adds): where VQF's heading disagrees with it
+        (:func:`~riann_ros.magcal.changes.field_disagrees`) VQF's magnetic
         part starts as at its construction (its heading initialisation over ``tau_mag``, a new field reference for
         the disturbance rejection); its inclination, gyro bias and current heading are kept."""
         v, ts = self._vqf, self._ts
@@ -216,10 +211,12 @@ class VqfEstimator(AttitudeEstimator):
         v.state = state
 
 
-def _field_ut(mag: ArrayLike | None, n: int) -> Array:
-    """The field as a C-contiguous (n, 3) array in µT; rows without a usable field are zeros."""
+def _field_ut(mag: list | None, n: int) -> Array:
+    """The field rows (a row None: no field) as a C-contiguous (n, 3) array in µT; rows without a usable field are
+    zeros."""
     if mag is None:
         return np.zeros((n, 3))
-    m = np.array(mag, dtype=float).reshape(n, 3) * TESLA_TO_UT
+    rows = [(np.nan, np.nan, np.nan) if u is None else u for u in mag]
+    m = np.array(rows, dtype=float).reshape(n, 3) * TESLA_TO_UT
     m[~np.isfinite(m).all(axis=1)] = 0.0
     return np.ascontiguousarray(m)

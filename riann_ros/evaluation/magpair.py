@@ -1,5 +1,5 @@
 """The evaluator's magnetometer pairing (ROS-free): a bag's ``/imu/mag`` readings are paired with the IMU samples
-the way the nodes pair them (:mod:`riann_ros.mag`: the newest reading stamped at or before the sample, at most
+the way the nodes pair them (:mod:`riann_ros.magcal.input`: the newest reading stamped at or before the sample, at most
 ``mag_timeout`` older, never waiting), chunk by chunk, so an offline 9D score is a node's.
 
 The bag reader (:mod:`riann_ros.bagio`) only hands over the readings; this policy is the evaluator's.
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from riann_ros.mag import MagConfig, pair_fields
+from riann_ros.magcal.input import MagConfig, pair_fields
 
 
 class NodePairing:

@@ -17,7 +17,7 @@ from riann_ros.evaluation.results import RECORDED, RunStats
 from riann_ros.evaluation.sources import Chunk
 from riann_ros.evaluation.specs import EstimatorSpec
 from riann_ros.gate import GateConfig
-from riann_ros.mag import MagConfig
+from riann_ros.magcal.input import MagConfig, UseMag
 from riann_ros.recording import Recording
 from riann_ros.stream import EstimatorStream
 
@@ -46,7 +46,7 @@ class _OfflineRun:
     fit (:class:`~riann_ros.estimators.magcal_slot.MagCalSlot`). Creating one costs little (RIANN: ~20 ms)."""
 
     def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, use_mag: str = "auto") -> None:
-        self.streams = [EstimatorStream(spec.create(), gate, MagConfig(use_mag=use_mag)) for spec in specs]
+        self.streams = [EstimatorStream(spec.create(), gate, MagConfig(use_mag=UseMag.parse(use_mag))) for spec in specs]
         self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
         self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimator (N, 3): σ, state
 
@@ -67,7 +67,7 @@ class _OfflineRun:
             stats.rejected = {k: int(v) for k, v in stream.gate.rejected.items()}
             stats.resets = {k: int(v) for k, v in stream.gate.resets.items()}
             stats.mag_samples = stream.mag.samples_with_field
-            cal = stream.estimator.mag_cal_status()
+            cal = stream.mag_cal_status()
             stats.mag_converged_after_s = None if cal is None else cal.converged_after_s
             stats.gyro_bias_dps = reported_bias(stream.estimator)
         return self.stats

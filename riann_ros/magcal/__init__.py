@@ -1,5 +1,5 @@
 """Magnetometer calibration, ROS-free: online (causal, per sample, gyro-aided), offline (a whole recording) and
-the saved file. Convention of the node (:mod:`riann_ros.mag`): the field used is ``m = S (m_raw − h)``.
+the saved file. Convention of the node (:mod:`riann_ros.magcal.input`): the field used is ``m = S (m_raw − h)``.
 
 **Physics.** A field fixed in the world, seen from a sensor that turns by ``P`` (the bias-corrected gyro's rotation
 between two readings), satisfies ``S (m₀ − h) = R(P) S (m₁ − h)``. With ``A = S`` and ``c = S h`` this is linear in

@@ -22,7 +22,7 @@ over 0–100 ms (the range RIANN's online latency estimate allows), then a golde
 it (nothing is biased either).
 
 Readings are used once: a reading repeated on the following IMU samples (a magnetometer slower than the IMU, paired
-the nodes' way, :mod:`riann_ros.mag`) counts at the first of them only.
+the nodes' way, :mod:`riann_ros.magcal.input`) counts at the first of them only.
 """
 
 from __future__ import annotations
@@ -165,7 +165,7 @@ def calibrate_recording(rec: Recording, prior: MagCalPrior | None = None, soft_i
     :func:`estimate_delay`); :class:`NotCalibratable` when there is nothing to fit."""
     from riann_ros.estimators.bias import GyroBiasFrontEnd
     from riann_ros.estimators.vqf_estimator import VqfEstimator
-    from riann_ros.mag import plausible
+    from riann_ros.magcal.input import plausible
 
     if rec.mag is None:
         raise NoMagnetometer(f"no magnetometer in the recording (in a bag: no sensor_msgs/msg/MagneticField on "

@@ -1,6 +1,7 @@
 """The magnetometer's latency behind the gyro, estimated online from the field's rotation against the gyro's
-(ROS-free): RIANN's stage 7b (:mod:`riann_ros.estimators.riann.s7b_latency`) and the calibration front end of the
-classical filters (:mod:`riann_ros.estimators.magcal_slot`, for the windows' ends) use it.
+(ROS-free), and the gyro history that rotates a late field back over it: part of the magnetometer's front end
+(:class:`~riann_ros.magcal.frontend.MagFrontEnd`), which every estimator shares: the calibration's windows end at
+the estimated latency, and RIANN's heading compensates it (its stage 7b).
 
 docs/riann.md, stage 7 (the heading), and docs/magnetometer.md.
 """
@@ -13,7 +14,7 @@ import numpy as np
 
 from riann_ros.magcal.model import rotation_matrix
 from riann_ros.magcal.records import HARD_IRON_PRIOR_SD_T
-from riann_ros.rotations import IDENTITY, Quat, Vec, cross, qmul, rotate
+from riann_ros.rotations import IDENTITY, Quat, Vec, cross, from_rotvec, qmul, rotate, to_rotvec
 
 # online latency fit (LatencyEstimator)
 WINDOW = 0.1  # s; the field's rotation is compared with the gyro's over windows this long
@@ -134,3 +135,32 @@ class LatencyEstimator:
         self.see = f * self.see + float(e @ e)
         self.count = f * self.count + 1.0
         self.windows += 1
+
+
+class DelayHistory:
+    """The gyro's rotation over the magnetometer's latency, to rotate a late field back to the gyro's time: the gyro
+    increments of the last samples, as many as the latency spans (the oldest one in part)."""
+
+    def __init__(self) -> None:
+        self.hist: list[tuple[float, float, float, float]] = []  # (dt, rotation vector of the increment)
+
+    def reset(self) -> None:
+        self.hist = []
+
+    def rotation(self, delta: Quat, dt: float, delay_s: float) -> Quat:
+        """Sensor-frame rotation over the last ``delay_s`` s from the gyro increments, this sample's (``delta`` over
+        ``dt``) the newest."""
+        rx, ry, rz = to_rotvec(delta)
+        self.hist.append((dt, rx, ry, rz))
+        r: Quat = IDENTITY
+        rem = delay_s
+        keep = 0
+        for h_dt, hx, hy, hz in reversed(self.hist):
+            if rem <= 0.0:
+                break
+            keep += 1
+            f = min(h_dt, rem) / h_dt if h_dt > 0.0 else 0.0
+            rem -= h_dt
+            r = qmul(from_rotvec(hx * f, hy * f, hz * f), r)
+        del self.hist[: len(self.hist) - max(keep, 1)]
+        return r

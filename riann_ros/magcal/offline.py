@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from riann_ros import quaternion as quat
-from riann_ros.mag import plausible
+from riann_ros.magcal.input import plausible
 from riann_ros.magcal.model import Array, CalModel, heading_sd_bound, posterior
 from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.magcal.records import (

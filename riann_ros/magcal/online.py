@@ -29,7 +29,8 @@ import math
 
 import numpy as np
 
-from riann_ros.mag import USABLE_MAX_T, USABLE_MIN_T
+from riann_ros.magcal.changes import Changes
+from riann_ros.magcal.heading import heading_gap
 from riann_ros.magcal.hypothesis import PriorTest
 from riann_ros.magcal.model import Array, CalModel, heading_sd_bound
 from riann_ros.magcal.records import (
@@ -37,11 +38,12 @@ from riann_ros.magcal.records import (
     CALIBRATED_SD_RAD,
     CONVERGING,
     DELAY_SD_S,
-    FIELD_HEADING_SD_RAD,
     REFRESH_ANGLE_RAD,
     STATE_HEADINGS,
     SWITCH_WINDOWS,
     UNCALIBRATED,
+    USABLE_MAX_T,
+    USABLE_MIN_T,
     UT,
     CalState,
     MagCalibration,
@@ -57,7 +59,7 @@ _COS_REFRESH = math.cos(0.5 * REFRESH_ANGLE_RAD)
 #: below this posterior probability that the configured calibration is wrong, its share of the heading σ is none (a
 #: millionth of even a 180° doubt is 0.2°: below the field heading's own σ, 2.5°, in quadrature: 0.006°)
 UNDOUBTED = 1e-6
-_MIN2_UT, _MAX2_UT = (USABLE_MIN_T / UT) ** 2, (USABLE_MAX_T / UT) ** 2  # µT²: riann_ros.mag's plausible norms
+_MIN2_UT, _MAX2_UT = (USABLE_MIN_T / UT) ** 2, (USABLE_MAX_T / UT) ** 2  # µT²: riann_ros.magcal.input's plausible norms
 
 
 class OnlineMagCalibrator:
@@ -94,7 +96,7 @@ class OnlineMagCalibrator:
     def update(self, delta: Quat, dt: float, mag_t: Vec | None, delay_s: float = 0.0, q: Quat | None = None,
                delay_sd_s: float = DELAY_SD_S) -> Vec | None:
         """One sample: ``delta`` the bias-corrected gyro increment (sensor frame), ``dt`` its step (s), ``mag_t``
-        the raw field (T; a reading that is not finite or outside riann_ros.mag's plausible 1 µT–1 mT counts as
+        the raw field (T; a reading that is not finite or outside riann_ros.magcal.input's plausible 1 µT–1 mT counts as
         none) or None, ``delay_s`` the magnetometer's latency (s) and ``delay_sd_s`` its standard deviation,
         ``q`` the attitude (sensor → world; only its tilt matters) when known. Returns the calibrated field (T) or
         None."""
@@ -324,52 +326,3 @@ def _record(cal: OnlineMagCalibrator) -> MagCalibration:
                           covariance=tuple(float(v) for v in cov.reshape(144)), state=cal.state,
                           windows=cal.windows, converged_after_s=cal.converged_after_s,
                           soft_iron_model=cal.model.model)
-
-
-class Changes:
-    """When the calibration the readings get changes under a filter whose heading was built on the one before
-    (:attr:`OnlineMagCalibrator.changes`; :class:`~riann_ros.estimators.magcal_slot.MagCalSlot` sets the filter's
-    heading anew there if it disagrees): :attr:`count` the changes, by a decision (another calibration: the prior
-    found the less probable hypothesis or restored, a candidate replacing the estimate in use) or because the one in
-    use turned the heading of the last reading, at the current tilt, by more than the field heading's own σ since the
-    last change; :attr:`closed` the windows closed."""
-
-    def __init__(self, in_use: tuple[tuple[float, ...], tuple[float, ...]]) -> None:
-        self.count = 0
-        self.closed = 0
-        self.aligned = in_use  # the calibration (row-major soft iron, hard iron in µT) at the last change
-
-    def window(self, decided: bool, in_use: tuple[tuple[float, ...], tuple[float, ...]], m: Vec | None,
-               q: Quat | None) -> None:
-        """After a window: ``decided`` whether the readings got another calibration, ``in_use`` the calibration they
-        get, ``m`` the last raw reading (µT) and ``q`` the attitude (sensor → world)."""
-        self.closed += 1
-        if not decided and m is not None and q is not None:
-            turn = heading_of(*in_use, m, q) - heading_of(*self.aligned, m, q)
-            decided = abs(math.remainder(turn, math.tau)) > FIELD_HEADING_SD_RAD
-        if decided:
-            self.count += 1
-            self.aligned = in_use
-
-
-def calibrated_world(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat) -> Vec:
-    """The raw reading ``m`` (µT) calibrated with ``(a, c)`` (row-major soft iron, ``c`` in µT) and rotated into the
-    world frame by the attitude ``q`` (sensor → world), µT."""
-    x, y, z = m
-    return rotate(q, (a[0] * x + a[1] * y + a[2] * z - c[0], a[3] * x + a[4] * y + a[5] * z - c[1],
-                      a[6] * x + a[7] * y + a[8] * z - c[2]))
-
-
-def heading_of(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat) -> float:
-    """rad; the heading of the raw reading ``m`` calibrated with ``(a, c)`` at the attitude ``q``
-    (:func:`calibrated_world`): the angle of its horizontal part from +y toward +x."""
-    w = calibrated_world(a, c, m, q)
-    return math.atan2(w[0], w[1])
-
-
-def heading_gap(a: tuple[float, ...], c: tuple[float, ...], m: Vec, q: Quat, field_world_t: Vec) -> float:
-    """rad; the heading difference between the raw reading ``m`` calibrated with ``(a, c)`` at the attitude ``q``
-    (:func:`calibrated_world`) and ``field_world_t`` (another calibration's, world frame)."""
-    w = calibrated_world(a, c, m, q)
-    f = field_world_t
-    return abs(math.atan2(w[0] * f[1] - w[1] * f[0], w[0] * f[0] + w[1] * f[1]))

@@ -1,9 +1,9 @@
 """What crosses the calibration's boundary: the prior it starts from, the estimate it hands out, its state, and the
 physical constants it is built on (ROS-free, frozen records).
 
-Conventions (the node's, :mod:`riann_ros.mag`): the calibrated field is ``m = S (m_raw − h)`` with the hard-iron
-offset ``h`` in tesla (sensor frame) and the soft-iron matrix ``S`` row-major 3×3. Covariances are over the 12
-numbers ``(S row-major (9), h in T (3))`` in that order, row-major 12×12.
+Conventions (the node's, :mod:`riann_ros.magcal.input`): the calibrated field is ``m = S (m_raw − h)`` with the
+hard-iron offset ``h`` in tesla (sensor frame) and the soft-iron matrix ``S`` row-major 3×3. Covariances are over
+the 12 numbers ``(S row-major (9), h in T (3))`` in that order, row-major 12×12.
 """
 
 from __future__ import annotations
@@ -15,6 +15,8 @@ from typing import Literal
 from riann_ros.constants import DEG
 
 UT = 1e-6  # T per µT: the calibration computes in µT (Earth's field ≈ 25–65 µT: numbers of order one)
+USABLE_MIN_T = 1e-6  # T; a reading below: a dead sensor or a field in the wrong unit (not used)
+USABLE_MAX_T = 1e-3  # T; a reading above: saturated, or a magnet next to the sensor (not used)
 IDENTITY_9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 
 # ------------------------------------------------------------------------------------------------------------------

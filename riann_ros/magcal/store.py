@@ -32,8 +32,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from riann_ros.mag import USABLE_MAX_T
-from riann_ros.magcal.records import SOFT_IRON_MODELS, STATES, MagCalibration
+from riann_ros.magcal.records import SOFT_IRON_MODELS, STATES, USABLE_MAX_T, MagCalibration
 
 FORMAT = "riann_ros.magcal/1"
 SECTION = "mag_calibration"

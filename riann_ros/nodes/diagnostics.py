@@ -12,8 +12,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
 from riann_ros import gate as gt
-from riann_ros import mag as mg
 from riann_ros import stream as st
+from riann_ros.magcal import input as mg
 from riann_ros.nodes.mag_calibration import CalibrationFile, status_values
 
 RATE_CHECK_SAMPLES = 100  # accepted samples (restarts excluded) whose median dt gives the measured stamp rate
@@ -113,7 +113,7 @@ class Diagnostics:
             problems.append(f"nominal_rate {nominal:.1f} Hz differs from the measured stamp rate "
                             f"{self.rate.measured_hz:.1f} Hz: set nominal_rate")
         mag = self.stream.mag
-        if mag.config.use_mag == "true" and self.stream.estimator.USES_MAG and mag.state != mg.FIELD_USED:
+        if mag.config.use_mag is mg.UseMag.TRUE and self.stream.estimator.USES_MAG and mag.state != mg.FIELD_USED:
             problems.append(f"use_mag is true but {mag.state[4:]} on {self.mag_topic}")
         if self.config_warnings:
             problems.append(f"{len(self.config_warnings)} parameter warning(s) at start-up, values not applied "
@@ -151,7 +151,7 @@ class Diagnostics:
         }
         values.update(est.diagnostics())
         if est.USES_MAG:
-            values.update(status_values(est.mag_cal_status(), self.mag_file))
+            values.update(status_values(self.stream.mag_cal_status(), self.mag_file))
         for reason in gt.REJECT_REASONS:
             values[f"rejected {reason} (total)"] = str(gate.rejected[reason])
         for cause in (gt.GAP, gt.CLOCK_JUMP):

@@ -29,10 +29,10 @@ from sensor_msgs.msg import Imu, MagneticField
 from std_srvs.srv import Trigger
 
 from riann_ros import gate as gt
-from riann_ros import mag as mg
 from riann_ros import stamps
 from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
+from riann_ros.magcal import input as mg
 from riann_ros.magcal.records import MagCalPrior
 from riann_ros.nodes import ros_args, usage
 from riann_ros.nodes.diagnostics import Diagnostics
@@ -86,7 +86,7 @@ class EstimatorNode(Node):
         self._imu_sub = self.create_subscription(Imu, INPUT_TOPIC, self._on_imu_queue, qos)
         self._mag = mg.MagPairing()
         self._mag_state = ""  # the field state last logged
-        uses_mag = p["use_mag"] != "false" and self.stream.estimator.USES_MAG
+        uses_mag = mg.UseMag.parse(p["use_mag"]) is not mg.UseMag.FALSE and self.stream.estimator.USES_MAG
         self._mag_sub = self.create_subscription(MagneticField, MAG_TOPIC, self._on_mag, qos) if uses_mag else None
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(Trigger, "~/restart", self._on_restart)
@@ -241,7 +241,7 @@ class EstimatorNode(Node):
         if new == mg.FIELD_NONE and old in ("", mg.FIELD_NONE):
             return  # no magnetometer so far: nothing to say (the start-up line names the topic)
         text = f"magnetometer: {new}" + ("" if new == mg.FIELD_USED else " (heading held by the gyro)")
-        if new == mg.FIELD_USED or self.stream.mag.config.use_mag == "auto":
+        if new == mg.FIELD_USED or self.stream.mag.config.use_mag is mg.UseMag.AUTO:
             self.get_logger().info(text)
         else:
             self.get_logger().warning(text)
@@ -292,7 +292,7 @@ class EstimatorNode(Node):
         return response
 
     def _on_save_mag_calibration(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        response.success, response.message = self.mag_file.save(self.stream.estimator.mag_calibration())
+        response.success, response.message = self.mag_file.save(self.stream.mag_calibration())
         log = self.get_logger()
         (log.info if response.success else log.warning)(f"{SAVE_SERVICE}: {response.message}")
         return response

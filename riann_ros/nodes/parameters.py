@@ -1,7 +1,7 @@
 """The nodes' ROS parameters: their specs, their declaration, the types users write, imu_tools' names.
 
 Every parameter is a :class:`~riann_ros.params.ParamSpec` (the node's own below, the input gate's
-:data:`riann_ros.gate.GATE_PARAMS`, the magnetometer's :data:`riann_ros.mag.MAG_PARAMS`, the estimator's
+:data:`riann_ros.gate.GATE_PARAMS`, the magnetometer's :data:`riann_ros.magcal.input.MAG_PARAMS`, the estimator's
 ``PARAMS``). :class:`NodeParameters` declares them on the node:
 
 * **types** — YAML and the command line type a value by its spelling (``200`` is an integer, ``false`` a
@@ -23,9 +23,9 @@ from rclpy.parameter import Parameter
 
 from riann_ros import frames
 from riann_ros import gate as gt
-from riann_ros import mag as mg
 from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.estimators import REGISTRY, estimator_class
+from riann_ros.magcal import input as mg
 from riann_ros.nodes import imu_tools
 from riann_ros.nodes.mag_calibration import MAG_CALIBRATION_FILE
 from riann_ros.params import ParamSpec

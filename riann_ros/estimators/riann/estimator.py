@@ -55,7 +55,8 @@ from riann_ros.estimators.riann.stage import (
     UncertaintyIn,
     Vec,
 )
-from riann_ros.mag import MAG_CAL_PARAMS
+from riann_ros.magcal.frontend import FrontEndConfig, LatencySettings, MagFrontEnd
+from riann_ros.magcal.input import MAG_CAL_PARAMS
 
 
 class RiannEstimator(AttitudeEstimator):
@@ -130,8 +131,9 @@ class RiannEstimator(AttitudeEstimator):
         self.network = Network(self.model)
         self.carry = Carry()
         self.handover = Handover(p["hole_blend"])
-        self.heading = Heading(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"], p["estimate_mag_delay"],
-                               self.magcal.cal if self.magcal is not None else None)
+        # the stream's front end (take_front_end), else one of its own that estimates the latency only
+        mag_front = self.front or MagFrontEnd(FrontEndConfig(calibrate=False), latency=self.front_end_latency())
+        self.heading = Heading(p["tau_mag"], p["mag_dist_rejection"], mag_front)
         self.uncertainty = Uncertainty()
         self.stages = [*front, self.bias, self.network, self.carry, self.handover, self.heading, self.uncertainty]
 
@@ -153,13 +155,21 @@ class RiannEstimator(AttitudeEstimator):
         for stage in self.stages:
             stage.restart(cause)
 
-    def _on_mag_prior(self) -> None:
-        if self.stages and self.magcal is not None:
-            self.heading.calibrate_with(self.magcal.cal)
+    def take_front_end(self, front: MagFrontEnd) -> None:
+        """The stream's magnetometer front end: the heading stage's from now on."""
+        super().take_front_end(front)
+        self.heading.use_front_end(front)
+
+    def front_end_latency(self) -> LatencySettings:
+        """The magnetometer's latency as stage 7 treats it: ``mag_delay`` the fixed value or the estimate's start,
+        estimated with ``estimate_mag_delay``, compensated (the field rotated back over it by the gyro)."""
+        p = self.params
+        return LatencySettings(float(p["mag_delay"]), bool(p["estimate_mag_delay"]), compensate=True)
 
     def _on_params_changed(self) -> None:
         p = self.params
-        self.heading.configure(p["tau_mag"], p["mag_delay"], p["mag_dist_rejection"], p["estimate_mag_delay"])
+        self.heading.configure(p["tau_mag"], p["mag_dist_rejection"])
+        self.heading.mag.front.latency_settings = self.front_end_latency()
         self.handover.configure(p["hole_blend"])
 
     def heading_observed(self) -> bool:

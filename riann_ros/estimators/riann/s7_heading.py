@@ -24,7 +24,7 @@ from riann_ros import quaternion as quat
 from riann_ros.estimators.base import Array
 from riann_ros.estimators.riann.s7a_mag import MagHeading
 from riann_ros.estimators.riann.stage import SMALL_BLOCK, Cause, HeadingBlock, HeadingIn, Quat, Vec
-from riann_ros.magcal.online import OnlineMagCalibrator
+from riann_ros.magcal.frontend import MagFrontEnd
 from riann_ros.rotations import about_z, conj, qmul, twist
 
 
@@ -33,18 +33,17 @@ class Heading:
 
     NAME = "heading"
 
-    def __init__(self, tau_mag_s: float, mag_delay_s: float, reject: bool, estimate_delay: bool,
-                 cal: OnlineMagCalibrator | None = None) -> None:
-        self.mag = MagHeading(tau_mag_s, mag_delay_s, reject, estimate_delay, cal)
+    def __init__(self, tau_mag_s: float, reject: bool, front: MagFrontEnd) -> None:
+        self.mag = MagHeading(tau_mag_s, reject, front)
         self.restart(Cause.RESET)
 
-    def calibrate_with(self, cal: OnlineMagCalibrator | None) -> None:
-        """The online magnetometer calibration the heading uses from now on (None: the field comes calibrated)."""
-        self.mag.cal, self.mag.trusted = cal, True
+    def use_front_end(self, front: MagFrontEnd) -> None:
+        """The magnetometer's front end the heading takes its field from from now on (the stream's)."""
+        self.mag.front = front
 
-    def configure(self, tau_mag_s: float, mag_delay_s: float, reject: bool, estimate_delay: bool) -> None:
+    def configure(self, tau_mag_s: float, reject: bool) -> None:
         """The run-time parameters of the magnetic heading (:meth:`.s7a_mag.MagHeading.configure`)."""
-        self.mag.configure(tau_mag_s, mag_delay_s, reject, estimate_delay)
+        self.mag.configure(tau_mag_s, reject)
 
     def restart(self, cause: Cause) -> None:
         """RESET: the heading anew (zero, or the first field); GAP: kept, the field re-acquired without a bridge (a
@@ -152,6 +151,6 @@ class Heading:
         h = self.mag
         if not h.started:
             return {}
-        kind = "estimated" if h.estimate_delay else "fixed"
+        kind = "estimated" if h.front.latency_settings.estimate else "fixed"
         return {"magnetic disturbance": "detected" if h.disturbed else "none",
                 "magnetometer latency (ms)": f"{1e3 * h.delay:.1f} ({kind})"}

@@ -30,10 +30,10 @@ import math
 
 from riann_ros.constants import DEG
 from riann_ros.defaults import MAG_HEADING_SD_DEG
-from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
-from riann_ros.magcal.online import OnlineMagCalibrator
-from riann_ros.magcal.records import DELAY_SD_S, GYRO_BIAS_RESIDUAL_SD_RAD_S
-from riann_ros.rotations import IDENTITY, Quat, Vec, from_rotvec, qmul, rotate, to_rotvec
+from riann_ros.magcal.frontend import MagFrontEnd
+from riann_ros.magcal.heading import heading_angle
+from riann_ros.magcal.records import GYRO_BIAS_RESIDUAL_SD_RAD_S
+from riann_ros.rotations import Quat, Vec, rotate, to_rotvec
 
 # VQF's defaults (vqf 2.1.2 VQFParams): magnetic disturbance rejection
 NORM_TH = 0.1  # relative deviation of |m| from the reference
@@ -60,26 +60,20 @@ CAL_BAND = 3.0  # the disturbance bands widen by this many of the calibrated fie
 class MagHeading:
     """The heading correction state (see the module docstring); :meth:`step` per sample."""
 
-    def __init__(self, tau_mag: float, mag_delay: float, reject: bool, estimate_delay: bool = True,
-                 cal: OnlineMagCalibrator | None = None) -> None:
-        self.configure(tau_mag, mag_delay, reject, estimate_delay)
-        self.latency = LatencyEstimator()
-        self.cal = cal  # the online calibration (None: the field comes calibrated); kept over a reset
-        self.trusted = True  # the calibration's prior held at the last sample
+    def __init__(self, tau_mag: float, reject: bool, front: MagFrontEnd) -> None:
+        self.configure(tau_mag, reject)
+        self.front = front  # the magnetometer's front end: calibration, latency (kept over a reset: the robot's)
         self.reset()
 
-    def configure(self, tau_mag: float, mag_delay: float, reject: bool, estimate_delay: bool) -> None:
-        """The run-time parameters: ``tau_mag`` (s), ``mag_delay`` (s: the fixed latency, or the estimate's starting
-        value), disturbance rejection on, latency estimation on."""
+    def configure(self, tau_mag: float, reject: bool) -> None:
+        """The run-time parameters: ``tau_mag`` (s), disturbance rejection on."""
         self.tau_mag = tau_mag
-        self.mag_delay = mag_delay
         self.reject = reject
-        self.estimate_delay = estimate_delay
 
     @property
     def delay(self) -> float:
         """The latency compensated now (s)."""
-        return self.latency.delay(self.mag_delay) if self.estimate_delay else self.mag_delay
+        return self.front.delay_s
 
     def reset(self) -> None:
         self.started = False  # the heading has been set from a field
@@ -91,7 +85,6 @@ class MagHeading:
         self.cand_t = self.undist_t = self.reject_t = 0.0
         self.disturbed = False
         self.gyr_lp = 0.0
-        self.hist: list[tuple[float, float, float, float]] = []  # (dt, rotation vector of the increment)
         self.gain = 0.0  # the last sample's gain toward the field (0: not corrected, 1: the field set the heading)
         self.reacq = False  # re-acquiring the heading after a hole (start phase without reference learning)
         self.weight = 0.0  # while re-acquiring: Σ of the weights (1/deg²) of the bridge and the fields since the hole
@@ -100,9 +93,7 @@ class MagHeading:
         self.wsum = 0.0  # Σ of the start's weights (relative to a calibrated field's: 1 each while trusted)
         self.cal_sd = 0.0  # the heading σ the calibration's estimate added to the last field (rad)
         self.doubt_sd = 0.0  # while the configured calibration is used: the σ of the doubt that it holds (rad)
-        self.latency.reset()
-        if self.cal is not None:
-            self.cal.restart()
+        self.front.reset()
 
     @property
     def observed(self) -> bool:
@@ -118,29 +109,11 @@ class MagHeading:
         field to pass the norm and dip test again would set the heading at once, and a field that passes after
         being rejected is not a trusted one (an attached magnet's field passes in some orientations). The heading
         then carries on over the bridge, and takes the field at the usual gain once it is accepted."""
-        if self.cal is not None:
-            self.cal.restart()
+        self.front.restart()
         if self.started and not (self.disturbed and bridge_sd):
             self.t, self.reacq = 0.0, True
             self.weight = 1.0 / (bridge_sd * bridge_sd) if bridge_sd else 0.0
             self.gate = self.weight > 0.0
-
-    def _delay_rotation(self, delta: Quat, dt: float) -> Quat:
-        """Sensor-frame rotation over the last :attr:`delay` s from the gyro increments (oldest partial)."""
-        rx, ry, rz = to_rotvec(delta)
-        self.hist.append((dt, rx, ry, rz))
-        r: Quat = IDENTITY
-        rem = self.delay
-        keep = 0
-        for h_dt, hx, hy, hz in reversed(self.hist):
-            if rem <= 0.0:
-                break
-            keep += 1
-            f = min(h_dt, rem) / h_dt if h_dt > 0.0 else 0.0
-            rem -= h_dt
-            r = qmul(from_rotvec(hx * f, hy * f, hz * f), r)
-        del self.hist[: len(self.hist) - max(keep, 1)]
-        return r
 
     def step(self, q: Quat, delta: Quat, dt: float, mag: Vec | None,
              tilt_sd: float = 0.0) -> float:
@@ -148,16 +121,14 @@ class MagHeading:
         ``delta`` is the sample's bias-corrected gyro increment (sensor frame), ``mag`` its field or None,
         ``tilt_sd`` the standard deviation (deg) of ``q``'s inclination after a hole (0: converged)."""
         self.gain = 0.0
-        if self.cal is not None:
-            mag = self._calibrated(q, delta, dt, mag)
-        mag = self._delayed(delta, dt, mag)
+        mag = self._through_front_end(q, delta, dt, mag)
         if mag is None:
             return 0.0
         mn = math.sqrt(mag[0] * mag[0] + mag[1] * mag[1] + mag[2] * mag[2])
         mw = rotate(q, mag)
         if mw[0] * mw[0] + mw[1] * mw[1] <= 0.0:
             return 0.0  # the field is vertical: no heading information
-        err = math.atan2(mw[0], mw[1])
+        err = heading_angle(mw[0], mw[1])
         dip = -math.asin(max(-1.0, min(1.0, mw[2] / mn)))
         scale = self._weight(q, mw)
         if not self.started or (self.switch and self._switched(mn, dip)):
@@ -179,41 +150,32 @@ class MagHeading:
         self.gain = k
         return k * err
 
-    def _delayed(self, delta: Quat, dt: float, mag: Vec | None) -> Vec | None:
-        """The gyro's rate low-pass and the latency (stage 7b) from this sample; the field rotated back over it."""
+    def _through_front_end(self, q: Quat, delta: Quat, dt: float, mag: Vec | None) -> Vec | None:
+        """The gyro's rate low-pass; the sample through the magnetometer's front end (every sample once a field came:
+        the calibration's windows and the latency fit need its gyro), which gives the field calibrated and rotated
+        back over the latency, or None. When the configured calibration is rejected or restored, the next field
+        sets the heading anew (:meth:`_switched`)."""
         w = to_rotvec(delta)
         rate = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / dt if dt > 0.0 else 0.0
         self.gyr_lp += dt / (GYR_LP_TAU + dt) * (rate - self.gyr_lp)
-        if self.estimate_delay or self.cal is not None:  # (the calibration's windows use the estimate either way)
-            self.latency.add(delta, w, dt, None if self.disturbed else mag)
-        if self.estimate_delay or self.mag_delay > 0.0:
-            r = self._delay_rotation(delta, dt)
-            if mag is not None:
-                mag = rotate((r[0], -r[1], -r[2], -r[3]), mag)
-        return mag
+        out = self.front.step(delta, w, dt, mag, q, not self.disturbed)
+        if out.switched:  # rejected, or (a changed magnetic situation) restored
+            self.cal_sd, self.switch = 0.0, True
+        return out.field_t
 
     def _weight(self, q: Quat, mw: Vec) -> float:
         """This field heading's weight relative to a calibrated one's, ``σ_m²/(σ_m² + σ_c²)`` (1 while the
         configured calibration holds, or without the online calibration; the σ its doubt leaves then goes to
         :attr:`doubt_sd`)."""
-        if self.cal is None:
+        front = self.front
+        if not front.calibrating:
             return 1.0
-        if self.trusted:  # used as configured; the doubt the windows leave goes to the σ only (stage 8)
-            self.doubt_sd = self.cal.heading_sd_rad(q, mw)
+        if front.trusted:  # used as configured; the doubt the windows leave goes to the σ only (stage 8)
+            self.doubt_sd = front.heading_sd(q, mw)
             return 1.0
         self.doubt_sd = 0.0
-        self.cal_sd = self.cal.heading_sd_rad(q, mw)
+        self.cal_sd = front.heading_sd(q, mw)
         return MAG_SD * MAG_SD / (MAG_SD * MAG_SD + self.cal_sd * self.cal_sd)
-
-    def _calibrated(self, q: Quat, delta: Quat, dt: float, mag: Vec | None) -> Vec | None:
-        """The sample through the online calibration (every sample: its gyro extends the open window); the calibrated
-        field or None. When its prior is rejected the next field sets the heading anew."""
-        assert self.cal is not None
-        lat = self.latency  # the windows' ends at the estimated latency, whether the heading compensates it or not
-        out = self.cal.update(delta, dt, mag, lat.delay(self.mag_delay), q, lat.sd(DELAY_SD_S))
-        if self.trusted != self.cal.trusted:  # rejected, or (a changed magnetic situation) restored
-            self.trusted, self.cal_sd, self.switch = self.cal.trusted, 0.0, True
-        return out
 
     def _switched(self, norm: float, dip: float) -> bool:
         """The configured calibration was just rejected, or restored; ``norm``, ``dip``: the first field calibrated
@@ -225,7 +187,7 @@ class MagHeading:
         self.switch = False  # (the bands as for a calibrated field: the new calibration is one, or nothing fits)
         fits = abs(norm - self.ref_norm) < NORM_TH * self.ref_norm and abs(dip - self.ref_dip) < DIP_TH
         if not (self.started and self.disturbed and fits):
-            return not self.trusted
+            return not self.front.trusted
         bridge_deg = math.hypot(MAG_HEADING_SD_DEG, GYRO_BIAS_RESIDUAL_SD_RAD_S / DEG * self.reject_t)
         self.t, self.reacq, self.gate = 0.0, True, True
         self.weight = 1.0 / (bridge_deg * bridge_deg)
@@ -266,7 +228,8 @@ class MagHeading:
             self.ref_dip += kr * (dip - self.ref_dip)
             self.cand_norm, self.cand_dip = self.ref_norm, self.ref_dip
             return k
-        band = 0.0 if self.cal is None or self.trusted else CAL_BAND * self.cal.field_sd_t()  # T
+        front = self.front
+        band = 0.0 if not front.calibrating or front.trusted else CAL_BAND * front.field_sd_t()  # T
         if abs(n - self.ref_norm) < NORM_TH * self.ref_norm + band and abs(dip - self.ref_dip) < DIP_TH + band / n:
             self.undist_t += dt
             if self.undist_t >= MIN_UNDISTURBED:

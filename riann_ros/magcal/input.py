@@ -25,20 +25,40 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from enum import Enum
 from typing import TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from riann_ros.magcal.records import SOFT_IRON_MODELS, MagCalPrior
+from riann_ros.magcal.records import IDENTITY_9, SOFT_IRON_MODELS, USABLE_MAX_T, USABLE_MIN_T, MagCalPrior
 from riann_ros.params import ParamSpec, defaults
 
 F = TypeVar("F", float, NDArray[np.float64])  # one field's component (float) or a column of fields (array)
 
-USABLE_MIN_T = 1e-6  # T; below: a dead sensor or a field in the wrong unit
-USABLE_MAX_T = 1e-3  # T; above: saturated, or a magnet next to the sensor
-USE_MAG_CHOICES = ("auto", "true", "false")
-IDENTITY_9 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+
+
+class UseMag(Enum):
+    """The ``use_mag`` parameter: what the stream does with a paired field (module docstring)."""
+
+    AUTO = "auto"  # use the field whenever a fresh, plausible one is paired
+    TRUE = "true"  # the same, and a missing field is a warning
+    FALSE = "false"  # never pass a field
+
+    @classmethod
+    def parse(cls, value: object) -> UseMag:
+        """The setting from what a user writes: ``auto``, ``true``/``false`` in any case, a bool, or a member."""
+        if isinstance(value, UseMag):
+            return value
+        if isinstance(value, bool):
+            return cls.TRUE if value else cls.FALSE
+        try:
+            return cls(str(value).strip().lower())
+        except ValueError:
+            raise ValueError(f"use_mag must be one of {', '.join(USE_MAG_CHOICES)}, got {value!r}") from None
+
+
+USE_MAG_CHOICES = tuple(m.value for m in UseMag)
 
 # state of the field for the last sample (diagnostics)
 FIELD_USED = "9D: field used"
@@ -81,9 +101,9 @@ MAG_CAL_PARAMS: tuple[ParamSpec, ...] = (
 
 @dataclass
 class MagConfig:
-    """The magnetometer parameters (see :data:`MAG_PARAMS`)."""
+    """The magnetometer parameters (see :data:`MAG_PARAMS`); ``use_mag`` is parsed into :class:`UseMag`."""
 
-    use_mag: str = _MAG_DEFAULTS["use_mag"]
+    use_mag: UseMag = UseMag.AUTO
     mag_timeout: float = _MAG_DEFAULTS["mag_timeout"]
     mag_hard_iron: tuple[float, ...] = _MAG_DEFAULTS["mag_hard_iron"]
     mag_soft_iron: tuple[float, ...] = _MAG_DEFAULTS["mag_soft_iron"]
@@ -91,7 +111,11 @@ class MagConfig:
 
     def __post_init__(self) -> None:
         for spec in MAG_PARAMS:
-            setattr(self, spec.name, spec.validate(getattr(self, spec.name)))
+            value = getattr(self, spec.name)
+            if spec.name == "use_mag":
+                setattr(self, spec.name, UseMag.parse(value))
+            else:
+                setattr(self, spec.name, spec.validate(value))
 
     @property
     def timeout_ns(self) -> int:
@@ -185,7 +209,7 @@ class MagInput:
 
     def reset(self) -> None:
         self.seen = False  # a field was passed to the estimator since the last reset
-        self.state = FIELD_NONE if self.config.use_mag != "false" else FIELD_OFF
+        self.state = FIELD_OFF if self.config.use_mag is UseMag.FALSE else FIELD_NONE
 
     def _calibrated(self, x: F, y: F, z: F) -> tuple[F, F, F]:
         """``S (m − h)`` of one field (floats) or of columns of fields (arrays): the one formula of both paths."""
@@ -200,8 +224,8 @@ class MagInput:
     def prepare_batch(self, mag: ArrayLike | None) -> NDArray[np.float64] | None:
         """Fields (N, 3) for the estimator, NaN rows = none; None when no field at all is passed (the reference of
         :meth:`prepare`)."""
-        if mag is None or self.config.use_mag == "false":
-            self.state = FIELD_OFF if self.config.use_mag == "false" else self._missing()
+        if mag is None or self.config.use_mag is UseMag.FALSE:
+            self.state = FIELD_OFF if self.config.use_mag is UseMag.FALSE else self._missing()
             return None
         raw = np.asarray(mag, dtype=float).reshape(-1, 3)
         with np.errstate(invalid="ignore", over="ignore"):  # a reading that is not finite is no field
@@ -220,8 +244,8 @@ class MagInput:
     def prepare(self, mag: ArrayLike | None) -> tuple[float, float, float] | None:
         """:meth:`prepare_batch` for one sample, in plain floats (the node's hot path): the field or None."""
         c = self.config
-        if mag is None or c.use_mag == "false":
-            self.state = FIELD_OFF if c.use_mag == "false" else self._missing()
+        if mag is None or c.use_mag is UseMag.FALSE:
+            self.state = FIELD_OFF if c.use_mag is UseMag.FALSE else self._missing()
             return None
         x, y, z = _floats(mag)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):

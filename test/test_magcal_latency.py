@@ -1,4 +1,4 @@
-"""riann_ros/estimators/riann/s7b_latency.py: the magnetometer's latency estimated online from the gyro, and
+"""riann_ros/magcal/latency.py: the magnetometer's latency estimated online from the gyro, and
 compensated."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from helpers_mag import IDENTITY_Q, delayed_field, moving
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators import create
-from riann_ros.estimators.riann.s7b_latency import LatencyEstimator
+from riann_ros.magcal.latency import LatencyEstimator
 from riann_ros.rotations import from_rotvec
 
 

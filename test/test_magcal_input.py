@@ -1,5 +1,5 @@
-"""riann_ros/mag.py: the magnetometer input: pairing, calibration, plausibility, use_mag, declination, the field
-state through the stream (the node's one-sample path against the batch reference)."""
+"""riann_ros/magcal/input.py: the magnetometer input: pairing, calibration, plausibility, use_mag, declination, the
+field state through the stream (the node's one-sample path against the batch reference)."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 from riann_ros import quaternion as quat
 from riann_ros.estimators import create
-from riann_ros.mag import (
+from riann_ros.magcal.input import (
     FIELD_BAD,
     FIELD_NONE,
     FIELD_OFF,

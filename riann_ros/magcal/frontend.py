@@ -1,0 +1,260 @@
+"""The magnetometer's front end: one per stream, the one driver of the online calibration, shared by every estimator
+(ROS-free).
+
+Between the magnetometer input (:mod:`.input`: pairing, units, plausibility, ``use_mag``) and an estimator that uses
+the field, the front end does, per sample, what every estimator's field needs:
+
+* **the calibration** (:class:`~.online.OnlineMagCalibrator`, when ``mag_calibration`` is on): the raw reading goes
+  in with the sample's bias-corrected gyro increment and the sensor's tilt; the calibrated field comes out, with the
+  heading σ the calibration adds (:meth:`MagFrontEnd.heading_sd`) and the calibrated field's own σ
+  (:meth:`MagFrontEnd.field_sd_t`);
+* **the latency** of the magnetometer behind the gyro (:class:`~.latency.LatencyEstimator`): the calibration's
+  windows end at it, and where the estimator asks for it (:class:`LatencySettings`) the field is rotated back over it
+  by the gyro (:class:`~.latency.DelayHistory`);
+* **the tilt** the calibration needs: the estimator's own attitude where it gives one (RIANN: its network's
+  inclination, a typed input of :meth:`MagFrontEnd.step`), else the front end's own (:class:`~.tilt.TiltFilter`);
+* **typed change events**: :class:`FieldOut.switched` where the configured calibration was rejected or restored,
+  :class:`~.changes.Realign` where the calibration a filter's heading was built on changed (:mod:`.changes`).
+
+Two ways in, one kernel (:meth:`MagFrontEnd._sample`): :meth:`MagFrontEnd.step`, one sample at a time inside an
+estimator's loop (RIANN's heading stage, which gives its attitude and whether its disturbance test passed the last
+field: the latency fit needs an undisturbed one), and :meth:`MagFrontEnd.rows`, a batch of rows before a classical
+filter runs (Madgwick, Mahony, VQF: the tilt is the front end's own, every field goes to the latency fit, the field
+is not rotated back). The estimators know the front end's records, never the calibrator.
+
+The calibration belongs to the robot, not to a run of the filter: the estimator's reset keeps its estimate.
+:meth:`MagFrontEnd.restart` drops the open window (a hole, a gap), :meth:`MagFrontEnd.reset` also the latency fit
+and the gyro history (RIANN's reset). :meth:`MagFrontEnd.snapshot` and :meth:`MagFrontEnd.restore` hold the whole
+state as one record. docs/magnetometer.md has the physics.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from riann_ros.magcal.changes import ChangeFollower, Realign
+from riann_ros.magcal.latency import DelayHistory, LatencyEstimator
+from riann_ros.magcal.online import OnlineMagCalibrator
+from riann_ros.magcal.records import (
+    DELAY_SD_S,
+    HARD_IRON_PRIOR_SD_T,
+    MagCalibration,
+    MagCalPrior,
+    MagCalStatus,
+    SoftIronModel,
+)
+from riann_ros.magcal.tilt import TiltFilter
+from riann_ros.rotations import Quat, Vec, from_rotvec, rotate
+
+
+@dataclasses.dataclass(frozen=True)
+class FrontEndConfig:
+    """The online calibration's settings (the estimators' ``mag_calibration``, ``mag_soft_iron_model`` and
+    ``mag_hard_iron_sd`` parameters, :data:`~.input.MAG_CAL_PARAMS`)."""
+
+    calibrate: bool = True
+    soft_iron_model: SoftIronModel = "full"
+    hard_iron_sd_t: float = HARD_IRON_PRIOR_SD_T
+
+    @classmethod
+    def of(cls, params: Mapping[str, Any]) -> FrontEndConfig:
+        """From an estimator's parameters (their defaults where it has none of them)."""
+        return cls(bool(params.get("mag_calibration", True)), params.get("mag_soft_iron_model", "full"),
+                   float(params.get("mag_hard_iron_sd", HARD_IRON_PRIOR_SD_T)))
+
+
+@dataclasses.dataclass(frozen=True)
+class LatencySettings:
+    """What the estimator does with the magnetometer's latency: ``start_s`` the fixed latency or the estimate's
+    starting value, ``estimate`` estimate it online, ``compensate`` rotate the field back over it (while it is
+    estimated or ``start_s`` > 0). The calibration's windows end at the estimate either way."""
+
+    start_s: float = 0.0
+    estimate: bool = True
+    compensate: bool = False
+
+
+class FieldOut(NamedTuple):
+    """:meth:`MagFrontEnd.step`'s output: the field (calibrated, rotated back over the latency where compensated;
+    None: no field), and whether the configured calibration was rejected or restored at this sample."""
+
+    field_t: Vec | None
+    switched: bool
+
+
+class FieldRows(NamedTuple):
+    """:meth:`MagFrontEnd.rows`' output: per row the calibrated field (None: no field, and none while the
+    calibration says the field's heading is unknown: the filter's gyro holds it) and the heading σ the calibration
+    adds (rad; 0 while the configured calibration holds), and the rows where the filter checks its heading."""
+
+    field: list[Vec | None]
+    sd_rad: NDArray[np.float64]
+    realign: tuple[Realign, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class FrontEndState:
+    """The front end's whole state (:meth:`MagFrontEnd.snapshot`)."""
+
+    cal: OnlineMagCalibrator | None
+    latency: LatencyEstimator
+    delays: DelayHistory
+    tilt: Quat | None
+    seen: bool
+    follower: ChangeFollower
+    trusted: bool
+
+
+class MagFrontEnd:
+    """The magnetometer's front end (module docstring): ``config`` the calibration's settings, ``prior`` where it
+    starts (the configured or a saved calibration), ``latency`` what the estimator does with the latency."""
+
+    def __init__(self, config: FrontEndConfig | None = None, prior: MagCalPrior | None = None,
+                 latency: LatencySettings | None = None) -> None:
+        self.config = config or FrontEndConfig()
+        self.latency_settings = latency or LatencySettings()
+        self.latency = LatencyEstimator()
+        self.delays = DelayHistory()
+        self.tilt = TiltFilter()
+        self.seen = False  # a field has come (rows(): from then on every row goes to the calibration)
+        self.cal: OnlineMagCalibrator | None = None
+        self.follower = ChangeFollower()
+        self.trusted = True  # the configured calibration was in use at the last step()
+        self.set_prior(prior or MagCalPrior())
+
+    # -- settings and outputs ----------------------------------------------------------------------------------
+    @property
+    def calibrating(self) -> bool:
+        """The field is calibrated online (the stream then passes the raw field)."""
+        return self.cal is not None
+
+    def set_prior(self, prior: MagCalPrior) -> None:
+        """Start the calibration anew from ``prior`` (a saved calibration's covariance widens the test's tolerance);
+        its hard iron's σ should it be wrong is the config's. Nothing else of the state changes."""
+        prior = dataclasses.replace(prior, hard_iron_sd_t=self.config.hard_iron_sd_t)
+        self.cal = OnlineMagCalibrator(prior, self.config.soft_iron_model) if self.config.calibrate else None
+        self.follower = ChangeFollower()
+        self.trusted = True
+
+    def calibration(self) -> MagCalibration | None:
+        """The calibration in use as a record (what ``~/save_mag_calibration`` writes); None when off."""
+        return self.cal.calibration() if self.cal is not None else None
+
+    def status(self) -> MagCalStatus | None:
+        """The calibration's state for ``/diagnostics``; None when off."""
+        return self.cal.status() if self.cal is not None else None
+
+    @property
+    def delay_s(self) -> float:
+        """s; the latency compensated now: the estimate, or the fixed value when it is not estimated."""
+        ls = self.latency_settings
+        return self.latency.delay(ls.start_s) if ls.estimate else ls.start_s
+
+    # -- restarts and state ------------------------------------------------------------------------------------
+    def restart(self) -> None:
+        """A hole or a gap: the calibration's open window is dropped, its estimate kept."""
+        if self.cal is not None:
+            self.cal.restart()
+
+    def reset(self) -> None:
+        """The estimator's reset: :meth:`restart`, and the latency fit and the gyro history anew."""
+        self.latency.reset()
+        self.delays.reset()
+        self.restart()
+
+    def snapshot(self) -> FrontEndState:
+        """The whole state, as a record independent of this front end (:meth:`restore` takes it back)."""
+        return copy.deepcopy(FrontEndState(self.cal, self.latency, self.delays, self.tilt.q, self.seen,
+                                           self.follower, self.trusted))
+
+    def restore(self, state: FrontEndState) -> None:
+        s = copy.deepcopy(state)
+        self.cal, self.latency, self.delays, self.tilt.q = s.cal, s.latency, s.delays, s.tilt
+        self.seen, self.follower, self.trusted = s.seen, s.follower, s.trusted
+
+    # -- per sample --------------------------------------------------------------------------------------------
+    def _sample(self, delta: Quat, rv: Vec, dt: float, raw: Vec | None, q: Quat | None,
+                undisturbed: bool) -> Vec | None:
+        """The kernel of both ways in: the raw reading through the calibration (the windows end at the latency
+        estimate), then this sample into the latency fit (with the field where ``undisturbed``)."""
+        lat = self.latency
+        u = raw
+        if self.cal is not None:
+            u = self.cal.update(delta, dt, raw, lat.delay(self.latency_settings.start_s), q, lat.sd(DELAY_SD_S))
+        if self.latency_settings.estimate or self.cal is not None:
+            lat.add(delta, rv, dt, u if undisturbed else None)
+        return u
+
+    def step(self, delta: Quat, rv: Vec, dt: float, raw: Vec | None, q: Quat, undisturbed: bool) -> FieldOut:
+        """One sample inside an estimator's loop: ``delta`` its bias-corrected gyro increment and ``rv`` that
+        increment's rotation vector, ``dt`` its step (s), ``raw`` its field (T; None: none), ``q`` the estimator's
+        attitude (sensor → world; only its tilt is read), ``undisturbed`` whether the estimator's disturbance test
+        passed the last field."""
+        u = self._sample(delta, rv, dt, raw, q, undisturbed)
+        switched = self.cal is not None and self.trusted != self.cal.trusted
+        if switched:
+            assert self.cal is not None
+            self.trusted = self.cal.trusted
+        ls = self.latency_settings
+        if ls.compensate and (ls.estimate or ls.start_s > 0.0):
+            r = self.delays.rotation(delta, dt, self.delay_s)
+            if u is not None:
+                u = rotate((r[0], -r[1], -r[2], -r[3]), u)
+        return FieldOut(u, switched)
+
+    def heading_sd(self, q: Quat, field_world_t: Vec) -> float:
+        """rad; the σ the calibration adds to the heading of this sample's field (``q`` its attitude,
+        ``field_world_t`` the calibrated field in the world frame, T); 0 without the online calibration."""
+        return self.cal.heading_sd_rad(q, field_world_t) if self.cal is not None else 0.0
+
+    def field_sd_t(self) -> float:
+        """T; the calibrated field's σ in its worst direction (0 while the configured calibration is used, and
+        without the online calibration)."""
+        return self.cal.field_sd_t() if self.cal is not None else 0.0
+
+    # -- a batch of rows ---------------------------------------------------------------------------------------
+    def takes(self, mag: object) -> bool:
+        """Whether a batch goes through :meth:`rows`: the calibration is on, and the batch has a field or one came
+        before (until the first field it would pass every row by)."""
+        return self.cal is not None and (mag is not None or self.seen)
+
+    def rows(self, acc: list, gyr: list, dt: list, mag: list) -> FieldRows:
+        """The classical filters' way in: ``acc``, ``gyr`` (bias-corrected where the filter corrects it), ``dt`` and
+        the raw ``mag`` rows (a zero row or None: no field), as lists of plain floats → :class:`FieldRows`."""
+        cal = self.cal
+        assert cal is not None
+        out: list[Vec | None] = []
+        sd: list[float] = []
+        realign: list[Realign] = []
+        for i, ((ax, ay, az), (gx, gy, gz), h, m) in enumerate(zip(acc, gyr, dt, mag, strict=True)):
+            field = None if m is None or not (m[0] or m[1] or m[2]) else (m[0], m[1], m[2])
+            self.seen = self.seen or field is not None
+            if not self.seen:  # nothing before the first field (a filter fed one sample at a time does not call it)
+                out.append(None)
+                sd.append(0.0)
+                continue
+            rv = (gx * h, gy * h, gz * h)
+            if not math.isfinite(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]):
+                cal.restart()  # a turn no window can hold (a degenerate gyro sample): the open window goes
+                out.append(None)
+                sd.append(0.0)
+                continue
+            delta = from_rotvec(*rv)
+            q = self.tilt.step(delta, h, ax, ay, az)
+            u = self._sample(delta, rv, h, field, q, True)
+            s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
+            if s >= math.pi:  # the field's heading is unknown (the last window contradicted the estimate)
+                u, s = None, 0.0
+            event = self.follower.event(i, cal.changes, u is not None, s)
+            if event is not None:
+                realign.append(event)
+            out.append(u)
+            sd.append(s)
+        return FieldRows(out, np.asarray(sd, dtype=float), tuple(realign))
