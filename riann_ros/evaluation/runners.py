@@ -46,7 +46,8 @@ class _OfflineRun:
     fit (:class:`~riann_ros.estimators.magcal_slot.MagCalSlot`). Creating one costs little (RIANN: ~20 ms)."""
 
     def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, use_mag: str = "auto") -> None:
-        self.streams = [EstimatorStream(spec.create(), gate, MagConfig(use_mag=UseMag.parse(use_mag))) for spec in specs]
+        mag = MagConfig(use_mag=UseMag.parse(use_mag))
+        self.streams = [EstimatorStream(spec.create(), gate, mag) for spec in specs]
         self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
         self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimator (N, 3): σ, state
 
