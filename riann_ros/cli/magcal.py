@@ -109,6 +109,7 @@ def format_fit(rf: RecordingFit) -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from riann_ros.estimators.motion import gyro_motion
     from riann_ros.evaluation import BagTopics, EvalError
     from riann_ros.evaluation.sources import read_whole
     from riann_ros.magcal import plots
@@ -120,7 +121,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         prior = _prior(args)
         rec = read_whole(args.bag, topics)
-        rf = calibrate_recording(rec, prior, args.soft_iron_model, _delay(args))
+        rf = calibrate_recording(rec, gyro_motion, prior, args.soft_iron_model, _delay(args))
     except (EvalError, CalibrationFileError) as exc:
         _err(str(exc))
         return EXIT_FAILED

@@ -1,9 +1,9 @@
 """The offline calibration of one recording, with what a user checks it by (ROS-free; ``riann-mag-calibrate``).
 
-:func:`calibrate_recording` takes a whole :class:`~riann_ros.recording.Recording` with its magnetometer, removes
-the gyro's bias the way the estimators do (:class:`~riann_ros.estimators.bias.GyroBiasFrontEnd`: VQF's rest and
-motion bias estimate, causal), fits hard and soft iron over all of it (:func:`~.offline.fit_recording`) and measures
-the result two ways:
+:func:`calibrate_recording` takes a whole :class:`~riann_ros.recording.Recording` with its magnetometer and what
+its gyro and accelerometer say of its motion (:class:`GyroMotion`: the gyro with its bias removed the way the
+estimators do, and a 6D attitude; :func:`riann_ros.estimators.motion.gyro_motion` makes it), fits hard and soft iron
+over all of it (:func:`~.offline.fit_recording`) and measures the result two ways:
 
 * **the sphere**: the calibrated readings' norm (the field's strength) is the same in every orientation; its spread
   against the raw readings' shows what the calibration removed;
@@ -28,6 +28,7 @@ the nodes' way, :mod:`riann_ros.magcal.input`) counts at the first of them only.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,6 +59,16 @@ class NotCalibratable(ValueError):
 
 class NoMagnetometer(NotCalibratable):
     """A recording without a magnetometer."""
+
+
+@dataclass(frozen=True)
+class GyroMotion:
+    """What a recording's gyro and accelerometer say of its motion, per sample: the gyro with its bias removed
+    (rad/s, (N, 3)) and an attitude without the magnetometer (sensor → world, (N, 4): tilt from the accelerometer,
+    heading from the integrated gyro)."""
+
+    gyr: Array
+    attitude: Array
 
 
 @dataclass(frozen=True)
@@ -159,12 +170,12 @@ def estimate_delay(gyr: Array, dt: Array, mag_t: Array, prior: MagCalPrior | Non
     return round(best[1], 4)
 
 
-def calibrate_recording(rec: Recording, prior: MagCalPrior | None = None, soft_iron_model: SoftIronModel = "full",
-                        delay_s: float | None = None) -> RecordingFit:
-    """Fit the calibration of ``rec`` (module docstring) with the magnetometer's latency ``delay_s`` (s; None:
-    :func:`estimate_delay`); :class:`NotCalibratable` when there is nothing to fit."""
-    from riann_ros.estimators.bias import GyroBiasFrontEnd
-    from riann_ros.estimators.vqf_estimator import VqfEstimator
+def calibrate_recording(rec: Recording, motion: Callable[[Recording], GyroMotion], prior: MagCalPrior | None = None,
+                        soft_iron_model: SoftIronModel = "full", delay_s: float | None = None) -> RecordingFit:
+    """Fit the calibration of ``rec`` (module docstring), ``motion`` what gives its gyro and attitude
+    (:func:`riann_ros.estimators.motion.gyro_motion`; called once the recording has readings to fit), with the
+    magnetometer's latency ``delay_s`` (s; None: :func:`estimate_delay`); :class:`NotCalibratable` when there is
+    nothing to fit."""
     from riann_ros.magcal.input import plausible
 
     if rec.mag is None:
@@ -176,7 +187,8 @@ def calibrate_recording(rec: Recording, prior: MagCalPrior | None = None, soft_i
         raise NotCalibratable("no plausible magnetometer reading (all missing, or norms outside the Earth's field "
                               "range: a field in µT or gauss stored as tesla?)")
     dt = rec.dt
-    gyr = rec.gyr - GyroBiasFrontEnd(float(dt[0])).update_batch(rec.acc, rec.gyr, dt)
+    moved = motion(rec)
+    gyr = moved.gyr
     delay = estimate_delay(gyr, dt, mag, prior, soft_iron_model) if delay_s is None else delay_s
     fit = fit_recording(gyr, dt, mag, prior=prior, soft_iron_model=soft_iron_model, delay_s=delay, acc=rec.acc)
     if fit.windows == 0:
@@ -185,7 +197,7 @@ def calibrate_recording(rec: Recording, prior: MagCalPrior | None = None, soft_i
     cal = fit.calibration
     s = np.asarray(cal.soft_iron).reshape(3, 3)
     h = np.asarray(cal.hard_iron_t) / UT
-    q = VqfEstimator().update_batch(rec.acc, rec.gyr, dt)[ok]
+    q = moved.attitude[ok]
     raw = mag[ok] / UT
     calibrated = (raw - h) @ s.T
     prior_sd = (prior.hard_iron_sd_t if prior is not None and prior.covariance is None else HARD_IRON_PRIOR_SD_T)
