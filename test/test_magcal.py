@@ -171,7 +171,7 @@ def test_no_drift_at_rest_and_straight():
     cal = OnlineMagCalibrator(prior)
     theta0 = cal.theta.copy()
     run(cal, rec, raw)
-    assert cal.windows == 0 and cal.est.added == 0
+    assert cal.windows == 0 and cal.s.est.added == 0
     assert np.array_equal(cal.theta, theta0)
     assert cal.state == UNCALIBRATED
 
@@ -186,7 +186,7 @@ def test_disturbance_windows_are_rejected():
     _, snaps_c = run(clean, rec, raw, every=200)
     cal = OnlineMagCalibrator(soft_iron_model="symmetric")
     _, snaps = run(cal, rec, raw_d, every=200)
-    assert cal.rejected >= 5 and cal.switches == 0
+    assert cal.rejected >= 5 and cal.s.switches == 0
     h_before = next(h for t, h in snaps if t >= 80.0)
     h_in = [h for t, h in snaps if 80.0 <= t < 90.0]
     assert max(np.linalg.norm(h - h_before) for h in h_in) < 0.3  # the estimate holds through the disturbance
@@ -205,7 +205,7 @@ def test_a_changed_magnetic_situation_replaces_the_estimate():
     _, snaps = run(cal, rec, raw, every=200)
     h_attached = next(h for t, h in snaps if t >= 39.0)
     assert np.linalg.norm(h_attached - H_TRUE - magnet) < 1.0
-    assert cal.switches == 1 and cal.rejected >= 20
+    assert cal.s.switches == 1 and cal.rejected >= 20
     assert np.linalg.norm(snaps[-1][1] - H_TRUE) < 0.6
 
 

@@ -162,9 +162,9 @@ def test_reacquire_does_not_start_while_the_field_is_rejected() -> None:
             gains.append(h.gain)
         first = next(k for k in gains if k > 0.0)
         if bridge is None:
-            assert first == 1.0 and h.reacq
+            assert first == 1.0 and h.s.reacq
         else:
-            assert first == pytest.approx(0.01 / 9.0) and not h.reacq
+            assert first == pytest.approx(0.01 / 9.0) and not h.s.reacq
 
 
 @pytest.mark.slow

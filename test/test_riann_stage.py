@@ -80,7 +80,7 @@ def test_a_gap_does_what_the_table_says(model):
     # handover: no blend; a gap's fresh network, whose σ goes to stage 8
     assert est.handover.blend is None and est.handover.fresh is not None
     # heading: kept, re-acquired without a bridge
-    assert est.heading.psi == psi and est.heading.mag.reacq and est.heading.mag.weight == 0.0
+    assert est.heading.psi == psi and est.heading.mag.s.reacq and est.heading.mag.s.weight == 0.0
     # uncertainty: the rate low-pass starts again, the heading unknown until a field sets it
     assert not est.uncertainty.started and not est.uncertainty.known and est.uncertainty.spread == 0.0
 
