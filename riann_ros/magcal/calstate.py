@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from riann_ros.magcal.changes import Changes
 from riann_ros.magcal.hypothesis import PriorTest
+from riann_ros.magcal.model import Array, CalModel
 from riann_ros.magcal.records import UNCALIBRATED, CalState
 from riann_ros.magcal.solver import InfoEstimate
 from riann_ros.magcal.windows import Windower
@@ -58,3 +60,22 @@ class CalibratorState:
     sd: SdCache = field(default_factory=SdCache)
     bound: float = math.pi  # the last state bound (rad)
     state: CalState = UNCALIBRATED
+
+
+class Calibrator(Protocol):
+    """What the calibrator's parts (:mod:`.decisions`, :mod:`.knowledge`) read of it: its state, what its
+    construction fixed, and the calibration in use."""
+
+    s: CalibratorState
+    model: CalModel
+    lam0: Array  # the prior's information
+    theta0: Array  # the prior
+
+    @property
+    def trusted(self) -> bool: ...
+
+    @property
+    def covariance(self) -> Array: ...
+
+    @property
+    def in_use(self) -> Array: ...

@@ -7,21 +7,17 @@ Each function takes the calibrator (:class:`~.online.OnlineMagCalibrator`) and c
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from riann_ros.magcal.calstate import Calibrator
 from riann_ros.magcal.hypothesis import PriorTest
 from riann_ros.magcal.model import Array
 from riann_ros.magcal.records import SWITCH_WINDOWS
 from riann_ros.magcal.solver import InfoEstimate
 from riann_ros.magcal.windows import Window, WindowSet
 
-if TYPE_CHECKING:
-    from riann_ros.magcal.online import OnlineMagCalibrator
 
-
-def test_prior(cal: OnlineMagCalibrator, w: Window, j: Array, r0: Array, var: float) -> None:
+def test_prior(cal: Calibrator, w: Window, j: Array, r0: Array, var: float) -> None:
     """The prior's test (:mod:`.hypothesis`) after a window the estimate took; once rejected, such a window that
     contradicts the prior too ends the windows that would restore it (one both explain is evidence for neither)."""
     s = cal.s
@@ -31,11 +27,11 @@ def test_prior(cal: OnlineMagCalibrator, w: Window, j: Array, r0: Array, var: fl
         s.agree = 0
 
 
-def _tolerance(cal: OnlineMagCalibrator, w: Window) -> Array:
+def _tolerance(cal: Calibrator, w: Window) -> Array:
     return cal.s.test.tolerance_at(np.asarray(w.m1_ut), cal.s.q)
 
 
-def retest_prior(cal: OnlineMagCalibrator, w: Window, j: Array, r0: Array, var: float) -> bool:
+def retest_prior(cal: Calibrator, w: Window, j: Array, r0: Array, var: float) -> bool:
     """After the prior was rejected, a window the estimate rejected: :data:`~.records.SWITCH_WINDOWS` such windows
     that agree with the prior, none failing it between them, restore it (a magnet attached for a while and taken off
     again); the estimate and the test start anew from the prior. A window that agrees with both (observing none of
@@ -52,7 +48,7 @@ def retest_prior(cal: OnlineMagCalibrator, w: Window, j: Array, r0: Array, var: 
     return True
 
 
-def candidate(cal: OnlineMagCalibrator, j: Array, r0: Array, ws: WindowSet) -> None:
+def candidate(cal: Calibrator, j: Array, r0: Array, ws: WindowSet) -> None:
     """A rejected window goes to the candidate (restarted from the prior when it does not fit the candidate either);
     :data:`~.records.SWITCH_WINDOWS` consecutive rejected windows that fit one candidate replace the estimate with
     it."""

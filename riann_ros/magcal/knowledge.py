@@ -12,17 +12,14 @@ the heading σ is the share of the doubt the gyro-aided test leaves about it (:m
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from riann_ros.magcal.calstate import Calibrator
 from riann_ros.magcal.heading import heading_gap
 from riann_ros.magcal.model import heading_sd_bound
 from riann_ros.magcal.records import REFRESH_ANGLE_RAD, STATE_HEADINGS, UT
 from riann_ros.rotations import Quat, Vec, rotate
-
-if TYPE_CHECKING:
-    from riann_ros.magcal.online import OnlineMagCalibrator
 
 _COS_REFRESH = math.cos(0.5 * REFRESH_ANGLE_RAD)
 #: below this posterior probability that the configured calibration is wrong, its share of the heading σ is none (a
@@ -30,7 +27,7 @@ _COS_REFRESH = math.cos(0.5 * REFRESH_ANGLE_RAD)
 UNDOUBTED = 1e-6
 
 
-def heading_sd_rad(cal: OnlineMagCalibrator, q: Quat, field_world_t: Vec) -> float:
+def heading_sd_rad(cal: Calibrator, q: Quat, field_world_t: Vec) -> float:
     """rad; the σ the calibration adds to the heading of this sample (``q`` its attitude, sensor → world;
     ``field_world_t`` its calibrated field, world frame, T): π with a vertical field, and while the last window
     contradicted the estimate (disturbed, or a changed magnetic situation); while the prior is used, the share of the
@@ -54,7 +51,7 @@ def heading_sd_rad(cal: OnlineMagCalibrator, q: Quat, field_world_t: Vec) -> flo
     return _heading_sd(cal, q, fx / fh, fy / fh, fh)
 
 
-def _heading_sd(cal: OnlineMagCalibrator, q: Quat, ex: float, ey: float, fh: float) -> float:
+def _heading_sd(cal: Calibrator, q: Quat, ex: float, ey: float, fh: float) -> float:
     """rad; the estimate's heading σ for the horizontal field direction (ex, ey) of strength ``fh`` (T)."""
     refresh(cal)
     wx, wy, wz = rotate((q[0], -q[1], -q[2], -q[3]), (ey, -ex, 0.0))  # across the field, sensor frame
@@ -64,7 +61,7 @@ def _heading_sd(cal: OnlineMagCalibrator, q: Quat, ex: float, ey: float, fh: flo
     return math.sqrt(max(var, 0.0)) * UT / fh
 
 
-def field_sd_t(cal: OnlineMagCalibrator) -> float:
+def field_sd_t(cal: Calibrator) -> float:
     """T; the calibrated field's σ in its worst direction for the current orientation: how far its norm and dip can
     be off through the calibration alone (a disturbance test against a learned reference should widen its band by a
     few of these while the calibration converges); 0 while the prior holds."""
@@ -74,7 +71,7 @@ def field_sd_t(cal: OnlineMagCalibrator) -> float:
     return cal.s.sd.field_sd_ut * UT
 
 
-def refresh(cal: OnlineMagCalibrator) -> None:
+def refresh(cal: Calibrator) -> None:
     """The cached field covariance anew once the sensor has turned :data:`~.records.REFRESH_ANGLE_RAD` since it was
     computed (or it was made stale)."""
     s = cal.s
@@ -88,7 +85,7 @@ def refresh(cal: OnlineMagCalibrator) -> None:
     s.sd.field_sd_ut = math.sqrt(max(float(np.linalg.eigvalsh(su)[-1]), 0.0))
 
 
-def state_bound(cal: OnlineMagCalibrator) -> float:
+def state_bound(cal: Calibrator) -> float:
     """rad; the largest heading σ the calibration can add over all headings at the current tilt (π before a reading;
     without an attitude, the worst direction in the sensor frame, ignoring the dip)."""
     s = cal.s
