@@ -1,7 +1,7 @@
 """The magnetometer's latency behind the gyro, estimated online from the field's rotation against the gyro's
 (ROS-free), and the gyro history that rotates a late field back over it: part of the magnetometer's front end
 (:class:`~riann_ros.magcal.frontend.MagFrontEnd`), which every estimator shares: the calibration's windows end at
-the estimated latency, and RIANN's heading compensates it (its stage 7b).
+the estimated latency, and RIANN's heading compensates it.
 
 docs/riann.md, stage 7 (the heading), and docs/magnetometer.md.
 """

@@ -42,10 +42,11 @@ SYSTEMATIC_SD_UT = 0.5
 GYRO_BIAS_RESIDUAL_SD_RAD_S = 0.3 * DEG
 #: the gyro's scale-factor error: consumer MEMS sensitivity tolerance ±1–3 % untrimmed, ≤ 1 % trimmed.
 GYRO_SCALE_SD = 0.01
-#: s; the uncertainty of the magnetometer's latency against the gyro after compensation (RIANN's stage 7b estimates
-#: it to a few ms; a sample's rounding adds up to half a step).
+#: s; the uncertainty of the magnetometer's latency against the gyro after compensation (the front end's latency fit
+#: estimates it to a few ms; a sample's rounding adds up to half a step).
 DELAY_SD_S = 0.003
-#: s; the latency compensation keeps the gyro attitude of the last this many seconds (stage 7b's bound: 0–100 ms).
+#: s; the latency compensation keeps the gyro attitude of the last this many seconds (the latency fit's bound:
+#: 0–100 ms).
 MAX_DELAY_S = 0.1
 
 # ------------------------------------------------------------------------------------------------------------------

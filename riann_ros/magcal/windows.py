@@ -11,8 +11,8 @@ the start (the swing's end is where the window's angle is largest and the sensor
 in straight motion no window closes, so nothing moves). The next window starts at the next reading, so no two
 windows share a reading and their noises are independent.
 
-The magnetometer's latency ``D`` (RIANN's stage 7b estimates it): a reading stamped ``t`` saw the field at
-``t − D``, so each end of a window takes the gyro attitude of ``t − D``, interpolated in a short history of the
+The magnetometer's latency ``D`` (the front end's latency fit estimates it, :mod:`.latency`): a reading stamped ``t``
+saw the field at ``t − D``, so each end of a window takes the gyro attitude of ``t − D``, interpolated in a short history of the
 integrated attitude (only at a window's ends).
 """
 

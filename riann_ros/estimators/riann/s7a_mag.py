@@ -2,7 +2,7 @@
 
 Per sample with a field (:meth:`MagHeading.step`): the field comes through the magnetometer's front end
 (:class:`~riann_ros.magcal.frontend.MagFrontEnd`, the stream's: calibrated, and rotated back by the gyro over the
-magnetometer's latency, which the front end estimates: stage 7b), is tilt-compensated with the output attitude
+magnetometer's latency, which the front end estimates), is tilt-compensated with the output attitude
 (``m_w = R(q) m``; heading error :func:`~riann_ros.magcal.heading.heading_angle` of ``m_w``, zero when the
 horizontal field points along +y, magnetic north in ENU), tested for disturbance against a reference norm and dip
 learned online (stage 7c, :mod:`.s7c_disturbance`: VQF's rules and constants; then the heading follows the gyro
