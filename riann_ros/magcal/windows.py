@@ -12,8 +12,8 @@ in straight motion no window closes, so nothing moves). The next window starts a
 windows share a reading and their noises are independent.
 
 The magnetometer's latency ``D`` (the front end's latency fit estimates it, :mod:`.latency`): a reading stamped ``t``
-saw the field at ``t − D``, so each end of a window takes the gyro attitude of ``t − D``, interpolated in a short history of the
-integrated attitude (only at a window's ends).
+saw the field at ``t − D``, so each end of a window takes the gyro attitude of ``t − D``, interpolated in a short
+history of the integrated attitude (only at a window's ends).
 """
 
 from __future__ import annotations
