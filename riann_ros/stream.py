@@ -5,8 +5,10 @@
 docs/node.md "Bad input") with an estimator and the magnetometer wing: the input (:mod:`riann_ros.magcal.input`:
 pairing, plausibility, ``use_mag``, the configured calibration) and, for an estimator that uses the field, the front
 end it gives the estimator (:class:`~riann_ros.magcal.frontend.MagFrontEnd`: the online calibration, the latency,
-the change events), whose prior (the configured or a saved calibration) and outputs the stream manages. The node
-base feeds it one message at a time; the evaluator feeds whole sequences through
+the change events), whose prior (the configured or a saved calibration) and outputs the stream manages. Beside them
+run the monitors of the input (:mod:`riann_ros.monitors`: the gyro's unit, input loss, the magnetometer's readings
+and calibration), whose verdicts go to ``/diagnostics`` and, where one says the estimate is not to be trusted, into
+every σ the stream reports. The node base feeds it one message at a time; the evaluator feeds whole sequences through
 :meth:`EstimatorStream.process_batch`, which gives the same numbers as the per-sample path. So an offline score is a
 score of what the node does.
 """
@@ -23,6 +25,10 @@ from riann_ros.gate import ESTIMATOR_FAULT, GAP, GateConfig, GateResult, InputGa
 from riann_ros.magcal.frontend import FrontEndConfig, MagFrontEnd
 from riann_ros.magcal.input import MagConfig, MagInput
 from riann_ros.magcal.records import MagCalibration, MagCalPrior, MagCalStatus
+from riann_ros.monitors import UNTRUSTED_SD_RAD, Monitor, Monitors
+from riann_ros.monitors.field import CalibrationMonitor, FieldMonitor
+from riann_ros.monitors.gyro_units import GyroUnitsMonitor
+from riann_ros.monitors.input_loss import InputLossMonitor
 
 __all__ = ["EstimatorStream", "GateConfig", "InputGate"]
 
@@ -44,6 +50,13 @@ class EstimatorStream:
             estimator.take_front_end(self.front)
         self.mag = MagInput(mag_config, raw=self.front is not None and self.front.calibrating)
         self.mag_prior: MagCalPrior | None = None  # the prior the calibration started from
+        self.gyro_units = GyroUnitsMonitor()
+        self.loss = InputLossMonitor(self.gate.config.nominal_rate)
+        self.field_monitor = FieldMonitor(self.mag)
+        watch: list[Monitor] = [self.gyro_units, self.loss]
+        if estimator.USES_MAG and self.front is not None:
+            watch += [self.field_monitor, CalibrationMonitor(self.front)]
+        self.monitors = Monitors(watch)
         self.configure_mag(self.mag.config, mag_prior)
         # σ (rad) of the inclination per axis and of the heading (:meth:`AttitudeEstimator.sigma`): of the last
         # accepted sample of process() (None: rejected), and per sample of the last process_batch() (NaN: rejected)
@@ -89,16 +102,41 @@ class EstimatorStream:
             return None, r
         if r.reset is not None:
             self._restart(r.reset)
+        self._watch(r.stamp_ns, acc, gyr, r.dt)
         field = self.mag.prepare(mag) if self.estimator.USES_MAG else None
         q = self.estimator.update(acc, gyr, r.dt, field)
         if not _is_unit(q):
             return None, self._fault(r)
-        self.sigma = self.estimator.sigma(np.array([field is not None]))[0]
+        self.monitors.check()
+        self.sigma = self.monitors.widened(self.estimator.sigma(np.array([field is not None]))[0])
         if self.mag.note(field is not None) and self.mag.config.declination_deg != 0.0:
             q = self.mag.declination_applied(q[None, :], np.ones(1, dtype=bool))[0]
         return q, r
 
+    def _watch(self, stamp_ns: int, acc: ArrayLike, gyr: ArrayLike, dt: float) -> None:
+        """An accepted sample into the monitors of the IMU (its unit, its losses)."""
+        ax, ay, az = (float(v) for v in acc)  # type: ignore[union-attr, arg-type]
+        gx, gy, gz = (float(v) for v in gyr)  # type: ignore[union-attr, arg-type]
+        self.gyro_units.step(ax, ay, az, gx, gy, gz, dt)
+        self.loss.step(stamp_ns)
+
+    def _watch_rows(self, rows: NDArray[np.intp], acc: NDArray[np.float64], gyr: NDArray[np.float64],
+                    dts: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """:meth:`_watch` and the monitors' verdicts over accepted samples ``rows`` of a batch, one at a time as
+        :meth:`process` takes them; per row whether a verdict then says the estimate is not to be trusted."""
+        a, g, d, st = acc[rows].tolist(), gyr[rows].tolist(), dts[rows].tolist(), self._stamps[rows].tolist()
+        out = np.zeros(len(rows), dtype=bool)
+        step, loss, monitors = self.gyro_units.step, self.loss.step, self.monitors
+        for k in range(len(rows)):
+            (ax, ay, az), (gx, gy, gz) = a[k], g[k]
+            step(ax, ay, az, gx, gy, gz, d[k])
+            loss(st[k])
+            monitors.check()
+            out[k] = monitors.untrusted
+        return out
+
     def _restart(self, cause: str) -> None:
+        self.gyro_units.restart()
         if cause == GAP:
             self.estimator.on_gap()
         else:
@@ -126,6 +164,7 @@ class EstimatorStream:
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         acc = np.asarray(acc, dtype=float)
         gyr = np.asarray(gyr, dtype=float)
+        self._stamps = stamps
         self._fields = self.mag.prepare_batch(mag) if self.estimator.USES_MAG else None
         state = self.mag.state  # of the last sample (a restart inside the sequence must not clear it)
         out = np.full((len(stamps), 4), np.nan)
@@ -157,7 +196,10 @@ class EstimatorStream:
             n_ok = int(np.argmax(bad)) if bad.any() else len(seg)
             got: NDArray[np.bool_] = (np.zeros(len(seg), dtype=bool) if m is None
                                       else np.asarray(np.isfinite(m).all(axis=1), dtype=bool))
-            self.batch_sigma[seg[:n_ok]] = self.estimator.sigma(got)[:n_ok]
+            untrusted = self._watch_rows(seg[: n_ok + int(bad.any())], acc, gyr, dts)[:n_ok]
+            sig = self.estimator.sigma(got)[:n_ok]
+            sig[untrusted, :2] = UNTRUSTED_SD_RAD
+            self.batch_sigma[seg[:n_ok]] = sig
             state = self.estimator.heading_state()
             if state is not None:
                 self.batch_state[seg[:n_ok]] = state[:n_ok]

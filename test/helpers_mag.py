@@ -83,11 +83,13 @@ def skip_without_mag(name: str) -> None:
 
 
 def per_sample(stream: EstimatorStream, stamps, acc, gyr, mag) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`EstimatorStream.process` over a sequence, NaN rows where rejected."""
+    """:meth:`EstimatorStream.process` over a sequence, NaN rows where rejected; a NaN row of ``mag`` (the evaluator's
+    "no reading") is given as None, as the node's pairing gives it."""
     out = np.full((len(stamps), 4), np.nan)
     ok = np.zeros(len(stamps), dtype=bool)
     for i in range(len(stamps)):
-        q, r = stream.process(int(stamps[i]), acc[i], gyr[i], mag=None if mag is None else mag[i])
+        m = None if mag is None or np.isnan(mag[i]).all() else mag[i]
+        q, r = stream.process(int(stamps[i]), acc[i], gyr[i], mag=m)
         if q is not None:
             out[i], ok[i] = q, r.accepted
     return out, ok

@@ -29,6 +29,7 @@ from riann_ros.estimators import create
 from riann_ros.magcal.input import (
     FIELD_BAD,
     FIELD_NONE,
+    FIELD_NONFINITE,
     FIELD_OFF,
     FIELD_STALE,
     FIELD_USED,
@@ -180,8 +181,8 @@ def test_implausible_field_not_passed(what: str) -> None:
     mi = MagInput()
     assert mi.state == FIELD_NONE
     assert mi.prepare(bad) is None
-    # (a NaN reading cannot be told from "none paired"; an infinite one may count as either)
-    not_finite_states = (FIELD_NONE, FIELD_STALE, FIELD_BAD)
+    # (the node's one-sample path: None is "none paired", any value a reading; the batch path: a NaN row is none)
+    not_finite_states = (FIELD_NONE, FIELD_STALE, FIELD_BAD, FIELD_NONFINITE)
     assert (mi.state == FIELD_BAD) if finite else (mi.state in not_finite_states)
     good = field_of(quat.IDENTITY)
     batch = mi.prepare_batch(np.vstack([good, bad, good]))
@@ -228,7 +229,7 @@ def test_use_mag_false_never_passes_a_field() -> None:
 def test_state_strings_through_the_stream() -> None:
     assert FIELD_USED.startswith("9D") and all(s.startswith("6D") for s in (FIELD_OFF, FIELD_NONE, FIELD_STALE,
                                                                           FIELD_BAD))
-    assert len({FIELD_USED, FIELD_OFF, FIELD_NONE, FIELD_STALE, FIELD_BAD}) == 5
+    assert len({FIELD_USED, FIELD_OFF, FIELD_NONE, FIELD_STALE, FIELD_BAD, FIELD_NONFINITE}) == 6
     rec = moving(duration=2.0)
     assert rec.mag is not None
     s = EstimatorStream(create("vqf"), GateConfig(nominal_rate=100.0))
@@ -240,10 +241,11 @@ def test_state_strings_through_the_stream() -> None:
         return s.mag.state
 
     assert step(0, None) == FIELD_NONE  # nothing received yet
-    assert step(1, NAN3) == FIELD_NONE
+    assert step(1, NAN3) == FIELD_NONFINITE  # a reading (the node's None is none), not finite
     assert step(2, rec.mag[2]) == FIELD_USED
     assert step(3, None) == FIELD_STALE  # had one, none fresh now
-    assert step(4, NAN3) == FIELD_STALE
+    assert step(4, NAN3) == FIELD_NONFINITE
+    assert s.mag.non_finite == 2
     assert step(5, [0.0, 0.0, 0.0]) == FIELD_BAD
     assert step(6, rec.mag[6]) == FIELD_USED
     assert s.mag.samples_with_field == 2
@@ -310,4 +312,7 @@ def test_one_field_in_plain_floats_equals_the_batch_reference(m, calibrated):
         assert np.isnan(want[0]).all()
     else:
         np.testing.assert_allclose(got, want[0], rtol=1e-12, atol=0)
-    assert one.state == batch.state
+    if np.isnan(m).all():  # the batch's "none paired"; to the node's path a reading that is not finite
+        assert one.state == FIELD_NONFINITE and batch.state == FIELD_NONE
+    else:
+        assert one.state == batch.state

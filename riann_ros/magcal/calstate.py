@@ -32,11 +32,13 @@ class Applied:
 
 @dataclass
 class SdCache:
-    """The cached field covariance of the heading σ (µT²: xx, xy, xz, yy, yz, zz), the windower's attitude it was
-    computed at (None: stale), and the calibrated field's σ in its worst direction (µT) computed with it."""
+    """The cached field covariances of the heading σ (µT²: xx, xy, xz, yy, yz, zz): ``su`` of the estimate (``H₁``),
+    ``su0`` of a saved prior (``H₀``: its covariance; zeros for a configured one); the windower's attitude they were
+    computed at (None: stale), and the calibrated field's σ in its worst direction (µT) computed with ``su``."""
 
     q_refresh: Quat | None = None
     su: tuple[float, ...] = (0.0,) * 6
+    su0: tuple[float, ...] = (0.0,) * 6
     field_sd_ut: float = math.inf
 
 
@@ -70,12 +72,16 @@ class Calibrator(Protocol):
     model: CalModel
     lam0: Array  # the prior's information
     theta0: Array  # the prior
+    fixed: bool  # the readings always get the prior (the test as a monitor)
 
     @property
     def trusted(self) -> bool: ...
 
     @property
     def covariance(self) -> Array: ...
+
+    @property
+    def h1_covariance(self) -> Array: ...
 
     @property
     def in_use(self) -> Array: ...

@@ -45,6 +45,7 @@ from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.magcal.records import (
     DELAY_SD_S,
     HARD_IRON_PRIOR_SD_T,
+    UT,
     MagCalibration,
     MagCalPrior,
     MagCalStatus,
@@ -57,11 +58,14 @@ from riann_ros.rotations import Quat, Vec, from_rotvec, rotate
 @dataclasses.dataclass(frozen=True)
 class FrontEndConfig:
     """The online calibration's settings (the estimators' ``mag_calibration``, ``mag_soft_iron_model`` and
-    ``mag_hard_iron_sd`` parameters, :data:`~.input.MAG_CAL_PARAMS`)."""
+    ``mag_hard_iron_sd`` parameters, :data:`~.input.MAG_CAL_PARAMS`); ``test``: with the calibration off, run its
+    gyro-aided test of the configured calibration as a monitor (the field keeps the configured calibration; the
+    heading's σ and the stream's monitor say when the test rejects it)."""
 
     calibrate: bool = True
     soft_iron_model: SoftIronModel = "full"
     hard_iron_sd_t: float = HARD_IRON_PRIOR_SD_T
+    test: bool = True
 
     @classmethod
     def of(cls, params: Mapping[str, Any]) -> FrontEndConfig:
@@ -132,14 +136,30 @@ class MagFrontEnd:
     # -- settings and outputs ----------------------------------------------------------------------------------
     @property
     def calibrating(self) -> bool:
-        """The field is calibrated online (the stream then passes the raw field)."""
+        """The calibrator runs: the field is calibrated online, or it gets the configured calibration here while the
+        test runs as a monitor (:attr:`monitoring`); the stream then passes the raw field."""
         return self.cal is not None
+
+    @property
+    def monitoring(self) -> bool:
+        """The calibrator runs as a monitor only (``mag_calibration`` off): the field always gets the configured
+        calibration, and :attr:`trusted` stays true."""
+        return self.cal is not None and self.cal.fixed
+
+    def estimate_hard_iron_t(self) -> tuple[float, float, float]:
+        """T; the hard iron the windows point to (the estimate's, whether or not the readings get it)."""
+        cal = self.cal
+        assert cal is not None
+        h = cal.model.split(cal.theta)[1]
+        return (float(h[0]) * UT, float(h[1]) * UT, float(h[2]) * UT)
 
     def set_prior(self, prior: MagCalPrior) -> None:
         """Start the calibration anew from ``prior`` (a saved calibration's covariance widens the test's tolerance);
         its hard iron's σ should it be wrong is the config's. Nothing else of the state changes."""
         prior = dataclasses.replace(prior, hard_iron_sd_t=self.config.hard_iron_sd_t)
-        self.cal = OnlineMagCalibrator(prior, self.config.soft_iron_model) if self.config.calibrate else None
+        cfg = self.config
+        on = cfg.calibrate or cfg.test
+        self.cal = OnlineMagCalibrator(prior, cfg.soft_iron_model, fixed=not cfg.calibrate) if on else None
         self.follower = ChangeFollower()
         self.trusted = True
 
@@ -250,7 +270,7 @@ class MagFrontEnd:
             q = self.tilt.step(delta, h, ax, ay, az)
             u = self._sample(delta, rv, h, field, q, True)
             s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
-            if s >= math.pi:  # the field's heading is unknown (the last window contradicted the estimate)
+            if s >= math.pi and not cal.fixed:  # the field's heading is unknown (the last window contradicted it)
                 u, s = None, 0.0
             event = self.follower.event(i, cal.changes, u is not None, s)
             if event is not None:

@@ -66,6 +66,7 @@ FIELD_OFF = "6D: use_mag is false"
 FIELD_NONE = "6D: no field received"
 FIELD_STALE = "6D: no fresh field"
 FIELD_BAD = "6D: implausible field"
+FIELD_NONFINITE = "6D: field readings not finite"
 
 MAG_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("use_mag", "auto", "Magnetometer on imu/mag: auto = use it while fresh field samples arrive (9D), "
@@ -127,13 +128,17 @@ class MagConfig:
 
 
 class MagPairing:
-    """Field readings as they arrive (node side); :meth:`at` pairs one with an IMU stamp."""
+    """Field readings as they arrive (node side); :meth:`at` pairs one with an IMU stamp. It counts what the
+    magnetometer's field monitor reports: readings received, readings stamped before the previous one (the pairing
+    starts over), and IMU samples whose newest reading was older than the timeout (stale)."""
 
     KEEP = 100_000  # at most this many readings ahead of the IMU are kept (a stalled IMU stream)
 
     def __init__(self) -> None:
         self._readings: deque[tuple[int, tuple[float, float, float]]] = deque(maxlen=self.KEEP)
         self.received = 0
+        self.out_of_order = 0
+        self.stale = 0
 
     def clear(self) -> None:
         self._readings.clear()
@@ -143,6 +148,7 @@ class MagPairing:
         x, y, z = (float(v) for v in np.asarray(field, dtype=float).reshape(3))
         if self._readings and stamp_ns < self._readings[-1][0]:
             self._readings.clear()  # the magnetometer's clock went back: start over
+            self.out_of_order += 1
         self._readings.append((int(stamp_ns), (x, y, z)))
         self.received += 1
 
@@ -156,7 +162,10 @@ class MagPairing:
         if r and r[0][0] <= stamp_ns:
             t, v = r[0]
             age = stamp_ns - t
-            return (v if age <= timeout_ns else None), age
+            if age <= timeout_ns:
+                return v, age
+            self.stale += 1
+            return None, age
         return None, None
 
 
@@ -205,6 +214,9 @@ class MagInput:
         self.config = config or MagConfig()
         self.raw = raw  # pass the raw field: the estimator calibrates it (plausibility is tested on the raw field)
         self.samples_with_field = 0  # samples that went to the estimator with a field (never reset)
+        #: paired readings that were not finite, and that were outside the plausible norms (never reset)
+        self.non_finite = 0
+        self.implausible = 0
         self.reset()
 
     def reset(self) -> None:
@@ -232,10 +244,14 @@ class MagInput:
             m = np.column_stack(self._calibrated(raw[:, 0], raw[:, 1], raw[:, 2]))
         ok = plausible(m)
         had = np.isfinite(raw).all(axis=1)
+        offered = ~np.isnan(raw).all(axis=1)  # a row that holds a reading (NaN rows: none paired)
+        self.non_finite += int(np.count_nonzero(offered & ~had))
+        self.implausible += int(np.count_nonzero(had & ~ok))
         m = np.where(ok[:, None], m, np.nan)
         if len(m):
             missing = FIELD_STALE if self.seen or ok.any() else FIELD_NONE
-            self.state = FIELD_USED if ok[-1] else (FIELD_BAD if had[-1] else missing)
+            last = FIELD_BAD if had[-1] else (FIELD_NONFINITE if offered[-1] else missing)
+            self.state = FIELD_USED if ok[-1] else last
         return m
 
     def _missing(self) -> str:
@@ -249,10 +265,12 @@ class MagInput:
             return None
         x, y, z = _floats(mag)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-            self.state = self._missing()
+            self.non_finite += 1
+            self.state = FIELD_NONFINITE
             return None
         x, y, z = self._calibrated(x, y, z)
         if not USABLE_MIN_T <= math.sqrt(x * x + y * y + z * z) <= USABLE_MAX_T:
+            self.implausible += 1
             self.state = FIELD_BAD
             return None
         self.state = FIELD_USED

@@ -30,12 +30,17 @@ UNDOUBTED = 1e-6
 def heading_sd_rad(cal: Calibrator, q: Quat, field_world_t: Vec) -> float:
     """rad; the σ the calibration adds to the heading of this sample (``q`` its attitude, sensor → world;
     ``field_world_t`` its calibrated field, world frame, T): π with a vertical field, and while the last window
-    contradicted the estimate (disturbed, or a changed magnetic situation); while the prior is used, the share of the
-    doubt about it (:mod:`.hypothesis`)."""
+    contradicted the estimate (disturbed, or a changed magnetic situation). While the prior is used, the mixture of
+    the two hypotheses (:mod:`.hypothesis`): ``σ² = p σ₀² + (1 − p)(σ₁² + Δ²)``, ``p`` the probability that the prior
+    holds (0 once the test rejected it: the prior used as a monitor), ``σ₀`` the heading σ of a saved prior's own
+    covariance (0 for a configured one: it is right to within the field heading's σ, which the estimators add), ``σ₁``
+    the estimate's and ``Δ`` the heading difference between the two."""
     s = cal.s
     trusted = cal.trusted
-    doubt = 1.0 - s.test.p_holds if trusted else 1.0
-    if doubt < UNDOUBTED:
+    test = s.test
+    doubt = (1.0 - test.p_holds if test.holds else 1.0) if trusted else 1.0
+    saved = trusted and test.saved is not None
+    if doubt < UNDOUBTED and not saved:
         return 0.0
     fx, fy = field_world_t[0], field_world_t[1]
     fh = math.sqrt(fx * fx + fy * fy)
@@ -45,17 +50,20 @@ def heading_sd_rad(cal: Calibrator, q: Quat, field_world_t: Vec) -> float:
         s1 = _heading_sd(cal, q, fx / fh, fy / fh, fh)
         ap = s.applied
         d = 0.0 if s.m_last is None else heading_gap(ap.est_a, ap.est_c, s.m_last, q, field_world_t)
-        return min(math.sqrt(doubt * (s1 * s1 + d * d)), math.pi)
+        s0 = _heading_sd(cal, q, fx / fh, fy / fh, fh, s.sd.su0) if saved else 0.0
+        return min(math.sqrt((1.0 - doubt) * s0 * s0 + doubt * (s1 * s1 + d * d)), math.pi)
     if s.cand is not None:  # the last window contradicted the estimate: disturbed, or the situation changed
         return math.pi
     return _heading_sd(cal, q, fx / fh, fy / fh, fh)
 
 
-def _heading_sd(cal: Calibrator, q: Quat, ex: float, ey: float, fh: float) -> float:
-    """rad; the estimate's heading σ for the horizontal field direction (ex, ey) of strength ``fh`` (T)."""
+def _heading_sd(cal: Calibrator, q: Quat, ex: float, ey: float, fh: float,
+                su: tuple[float, ...] | None = None) -> float:
+    """rad; the heading σ for the horizontal field direction (ex, ey) of strength ``fh`` (T) from the field covariance
+    ``su`` (default: the estimate's)."""
     refresh(cal)
     wx, wy, wz = rotate((q[0], -q[1], -q[2], -q[3]), (ey, -ex, 0.0))  # across the field, sensor frame
-    s = cal.s.sd.su
+    s = cal.s.sd.su if su is None else su
     var = (s[0] * wx * wx + s[3] * wy * wy + s[5] * wz * wz
            + 2.0 * (s[1] * wx * wy + s[2] * wx * wz + s[4] * wy * wz))
     return math.sqrt(max(var, 0.0)) * UT / fh
@@ -80,9 +88,16 @@ def refresh(cal: Calibrator) -> None:
         return
     s.sd.q_refresh = qw
     m = np.asarray(s.m_last if s.m_last is not None else (0.0, 0.0, 0.0), dtype=float)
-    su = cal.model.field_covariance(m, cal.covariance)
-    s.sd.su = tuple(float(su[i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+    su = cal.model.field_covariance(m, cal.h1_covariance)
+    s.sd.su = _upper(su)
     s.sd.field_sd_ut = math.sqrt(max(float(np.linalg.eigvalsh(su)[-1]), 0.0))
+    if s.test.saved is not None:
+        s.sd.su0 = _upper(cal.model.field_covariance(m, cal.model.with_floor(s.test.saved)))
+
+
+def _upper(su: np.ndarray) -> tuple[float, ...]:
+    """The six numbers of a symmetric 3×3 (xx, xy, xz, yy, yz, zz)."""
+    return tuple(float(su[i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
 
 
 def state_bound(cal: Calibrator) -> float:

@@ -61,10 +61,13 @@ _MIN2_UT, _MAX2_UT = (USABLE_MIN_T / UT) ** 2, (USABLE_MAX_T / UT) ** 2  # µT²
 class OnlineMagCalibrator:
     """The online calibration (module docstring). ``prior``: the configured or saved calibration;
     ``soft_iron_model``: ``full`` (default: all 3×3 including the magnetometer's misalignment to the gyro, which
-    the gyro-aided constraint observes), ``symmetric`` or ``none`` (hard iron only)."""
+    the gyro-aided constraint observes), ``symmetric`` or ``none`` (hard iron only); ``fixed``: the readings always
+    get the prior, the estimate and the test run beside it (``mag_calibration`` off: the test as a monitor)."""
 
-    def __init__(self, prior: MagCalPrior | None = None, soft_iron_model: SoftIronModel = "full") -> None:
+    def __init__(self, prior: MagCalPrior | None = None, soft_iron_model: SoftIronModel = "full",
+                 fixed: bool = False) -> None:
         prior = prior or MagCalPrior()
+        self.fixed = fixed
         self.model = CalModel(soft_iron_model, np.asarray(prior.soft_iron).reshape(3, 3))
         self.lam0, self.theta0 = self.model.prior(dataclasses.replace(prior, covariance=None))  # the estimate's: broad
         saved = None if prior.covariance is None else np.linalg.inv(self.model.prior(prior)[0])  # a saved one's σ
@@ -153,7 +156,7 @@ class OnlineMagCalibrator:
     def _applied(self, est: InfoEstimate, test: PriorTest) -> Applied:
         """The calibration the readings get (the prior while it is trusted, else the estimate) and the estimate's
         own, in plain floats."""
-        theta = self.theta0 if test.holds and test.p_holds >= 0.5 else est.theta
+        theta = self.theta0 if self.fixed or (test.holds and test.p_holds >= 0.5) else est.theta
         p = self.model.p
         return Applied(tuple(float(v) for v in self.model.soft_iron(theta).reshape(9)),
                        tuple(float(v) for v in theta[p:]),
@@ -173,8 +176,9 @@ class OnlineMagCalibrator:
     # -------------------------------------------------------------------------------------------------- readouts
     @property
     def trusted(self) -> bool:
-        """The readings get the prior as configured: it holds, as the more probable hypothesis (else: the estimate)."""
-        return self.s.test.holds and self.s.test.p_holds >= 0.5
+        """The readings get the prior as configured: it holds, as the more probable hypothesis (else: the estimate);
+        always when :attr:`fixed`."""
+        return self.fixed or (self.s.test.holds and self.s.test.p_holds >= 0.5)
 
     @property
     def test(self) -> PriorTest:
@@ -221,12 +225,19 @@ class OnlineMagCalibrator:
         scaled up by the variance of unit weight above 1; with the hard iron's floor (``SYSTEMATIC_SD_UT``)."""
         if self.trusted and self.s.test.saved is not None:
             return self.model.with_floor(self.s.test.saved)
+        return self.h1_covariance
+
+    @property
+    def h1_covariance(self) -> Array:
+        """The estimate's covariance (``H₁``'s: the calibration as the windows alone know it), ``Λ⁻¹`` scaled up by the
+        variance of unit weight above 1, with the hard iron's floor."""
         return self.model.with_floor(self.s.est.cov * max(1.0, self.unit_weight))
 
     @property
     def in_use(self) -> Array:
-        """The calibration the state and the saved file describe: a saved prior while it is used, else the estimate."""
-        return self.theta0 if self.trusted and self.s.test.saved is not None else self.theta
+        """The calibration the state and the saved file describe: a saved prior while it is used (and the prior while
+        :attr:`fixed`), else the estimate."""
+        return self.theta0 if self.fixed or (self.trusted and self.s.test.saved is not None) else self.theta
 
     # -------------------------------------------------------------------------------------------------- outputs
     def calibration(self) -> MagCalibration:

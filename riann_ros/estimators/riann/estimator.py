@@ -132,7 +132,8 @@ class RiannEstimator(AttitudeEstimator):
         self.carry = Carry()
         self.handover = Handover(p["hole_blend"])
         # the stream's front end (take_front_end), else one of its own that estimates the latency only
-        mag_front = self.front or MagFrontEnd(FrontEndConfig(calibrate=False), latency=self.front_end_latency())
+        mag_front = self.front or MagFrontEnd(FrontEndConfig(calibrate=False, test=False),
+                                              latency=self.front_end_latency())
         self.heading = Heading(p["tau_mag"], p["mag_dist_rejection"], mag_front)
         self.uncertainty = Uncertainty()
         self.stages = [*front, self.bias, self.network, self.carry, self.handover, self.heading, self.uncertainty]
