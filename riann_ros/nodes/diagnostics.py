@@ -14,6 +14,7 @@ from rclpy.node import Node
 from riann_ros import gate as gt
 from riann_ros import stream as st
 from riann_ros.magcal import input as mg
+from riann_ros.monitors import Level
 from riann_ros.nodes.mag_calibration import CalibrationFile, status_values
 
 RATE_CHECK_SAMPLES = 100  # accepted samples (restarts excluded) whose median dt gives the measured stamp rate
@@ -86,14 +87,16 @@ class Diagnostics:
         self.proc_us: list[float] = []
         self.est_us: list[float] = []
         self.config_warnings: list[str] = []  # the start-up warnings on parameters (values written but not applied)
+        self._use_mag_warned = False  # use_mag true without a field: logged once
         self.mag_file = CalibrationFile("")  # the node's mag_calibration_file
         node.create_timer(period_s, self.publish)
 
     def level(self) -> tuple[bytes, str]:
         """(level, message) of this period. ERROR: input arrived but no estimate was published (every message
-        rejected). WARN, for as long as it holds: no input, rejections, an accelerometer in g, zero stamps, a
-        nominal_rate far from the stamp rate, use_mag true without a field, parameters not applied. The message
-        names each with what to do."""
+        rejected), or a monitor says the estimate is not to be trusted (:mod:`riann_ros.monitors`). WARN, for as
+        long as it holds: a monitor's warning (input loss, the magnetometer's readings or calibration), no input,
+        rejections, an accelerometer in g, zero stamps, a nominal_rate far from the stamp rate, use_mag true without
+        a field, parameters not applied. The message names each with what to do."""
         problems = []
         if self.inputs == 0:
             problems.append("no input on " + self.input_topic)
@@ -118,9 +121,12 @@ class Diagnostics:
         if self.config_warnings:
             problems.append(f"{len(self.config_warnings)} parameter warning(s) at start-up, values not applied "
                             f"(see the log): {self.config_warnings[0][:100]}")
-        if self.inputs and n_rejected >= self.inputs:
-            return DiagnosticStatus.ERROR, "; ".join([f"no estimate published: all {self.inputs} messages rejected",
-                                                      *problems])
+        verdicts = [v for v in self.stream.monitors.verdicts() if v.level > Level.OK]
+        problems += [f"{v.name}: {v.message}" for v in verdicts]
+        none_published = n_rejected >= self.inputs > 0
+        if none_published or any(v.level == Level.ERROR for v in verdicts):
+            head = [f"no estimate published: all {self.inputs} messages rejected"] if none_published else []
+            return DiagnosticStatus.ERROR, "; ".join([*head, *problems])
         if problems:
             return DiagnosticStatus.WARN, "; ".join(problems)
         return DiagnosticStatus.OK, "ok"
@@ -150,7 +156,8 @@ class Diagnostics:
             "heading": "magnetic (9D)" if est.heading_observed() else "gyro only",
         }
         values.update(est.diagnostics())
-        if est.USES_MAG:
+        values.update(self._monitor_values())
+        if est.USES_MAG and self._field_expected():
             values.update(status_values(self.stream.mag_cal_status(), self.mag_file))
         for reason in gt.REJECT_REASONS:
             values[f"rejected {reason} (total)"] = str(gate.rejected[reason])
@@ -158,7 +165,37 @@ class Diagnostics:
             values[f"restarts {cause} (total)"] = str(gate.resets[cause])
         return values
 
+    def _field_expected(self) -> bool:
+        """A field is in the picture: use_mag is not false and a reading came, or use_mag is true (a 6D node shows
+        no calibration values)."""
+        use = self.stream.mag.config.use_mag
+        return use is mg.UseMag.TRUE or (use is mg.UseMag.AUTO and self.mag_received > 0)
+
+    def _monitor_values(self) -> dict[str, str]:
+        """Each monitor's level and what it measured."""
+        s = self.stream
+        out = {f"monitor {v.name}": v.level.name for v in s.monitors.verdicts()}
+        ratio = s.gyro_units.ratio
+        out["gyro / accelerometer tilt ratio"] = "nan" if ratio is None else f"{ratio:.3f}"
+        out["input lost (%, last 10 s)"] = f"{100.0 * s.loss.share:.1f}"
+        if s.estimator.USES_MAG and self._field_expected():
+            out.update({f"field readings {k} (total)": str(v) for k, v in s.field_monitor.counts().items()})
+        out.update({f"monitor {k} trips (total)": str(n) for k, n in s.monitors.trips.items()})
+        return out
+
+    def _warn_use_mag(self) -> None:
+        """use_mag true and no field used in the first period: one WARN in the log (and in every WARN status)."""
+        mag = self.stream.mag
+        if (self._use_mag_warned or mag.config.use_mag is not mg.UseMag.TRUE or not self.stream.estimator.USES_MAG
+                or mag.state == mg.FIELD_USED):
+            return
+        self._use_mag_warned = True
+        self.node.get_logger().warning(f"use_mag is true but {mag.state[4:]} on {self.mag_topic}: the heading "
+                                       "follows the gyro (check the magnetometer's topic and driver, or set use_mag "
+                                       "auto)")
+
     def publish(self) -> None:
+        self._warn_use_mag()
         now = time.monotonic()
         status = DiagnosticStatus()
         status.name = f"{self.node.get_name()}: {self.estimator} attitude estimator"

@@ -34,6 +34,7 @@ from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
 from riann_ros.magcal import input as mg
 from riann_ros.magcal.records import MagCalPrior
+from riann_ros.monitors import Level
 from riann_ros.nodes import ros_args, usage
 from riann_ros.nodes.diagnostics import Diagnostics
 from riann_ros.nodes.mag_calibration import SAVE_SERVICE, CalibrationFile
@@ -85,6 +86,7 @@ class EstimatorNode(Node):
         qos = input_qos(p["input_qos"], int(p["input_depth"]))
         self._imu_sub = self.create_subscription(Imu, INPUT_TOPIC, self._on_imu_queue, qos)
         self._mag = mg.MagPairing()
+        self.stream.field_monitor.pairing = self._mag  # (its stale and out-of-order counts)
         self._mag_state = ""  # the field state last logged
         uses_mag = mg.UseMag.parse(p["use_mag"]) is not mg.UseMag.FALSE and self.stream.estimator.USES_MAG
         self._mag_sub = self.create_subscription(MagneticField, MAG_TOPIC, self._on_mag, qos) if uses_mag else None
@@ -215,6 +217,7 @@ class EstimatorNode(Node):
         diag.est_us.append((time.perf_counter_ns() - t1) * 1e-3)
         if self._mag_state != self.stream.mag.state:
             self._log_mag_state()
+        self._log_monitors()
         self._log_gate_result(r)
         if q is None:
             diag.rejected[r.reason or "?"] += 1
@@ -245,6 +248,18 @@ class EstimatorNode(Node):
             self.get_logger().info(text)
         else:
             self.get_logger().warning(text)
+
+    def _log_monitors(self) -> None:
+        """One log line per monitor verdict that changed level (a trip: WARN or ERROR with its cause and fix; a
+        recovery: INFO)."""
+        for v in self.stream.monitors.pop_changes():
+            log = self.get_logger()
+            if v.level == Level.ERROR:
+                log.error(f"{v.name}: {v.message}")
+            elif v.level == Level.WARN:
+                log.warning(f"{v.name}: {v.message}")
+            else:
+                log.info(f"{v.name}: ok again")
 
     def _log_gate_result(self, r: gt.GateResult) -> None:
         for w in r.warnings:
@@ -284,6 +299,7 @@ class EstimatorNode(Node):
         magnetometer's latency fit; the gate's counts)."""
         self.stream = self.diag.stream = self._new_stream(self.stream.mag_prior)
         self._mag.clear()
+        self.stream.field_monitor.pairing = self._mag
         self._mag_state, self._acc_in_g = "", False
         self.get_logger().info("restart requested: estimator built anew, as at start (calibration included)")
         response.success = True
