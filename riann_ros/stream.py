@@ -26,7 +26,7 @@ from riann_ros.magcal.frontend import FrontEndConfig, MagFrontEnd
 from riann_ros.magcal.input import MagConfig, MagInput
 from riann_ros.magcal.records import MagCalibration, MagCalPrior, MagCalStatus
 from riann_ros.monitors import UNTRUSTED_SD_RAD, Monitor, Monitors
-from riann_ros.monitors.field import CalibrationMonitor, FieldMonitor
+from riann_ros.monitors.field import CalibrationMonitor, FieldMonitor, LagMonitor
 from riann_ros.monitors.gyro_units import GyroUnitsMonitor
 from riann_ros.monitors.input_loss import InputLossMonitor
 
@@ -46,7 +46,9 @@ class EstimatorStream:
         #: the magnetometer's front end of an estimator that uses the field (None: a 6D estimator)
         self.front: MagFrontEnd | None = None
         if estimator.USES_MAG:
-            self.front = MagFrontEnd(FrontEndConfig.of(estimator.params), latency=estimator.front_end_latency())
+            timeout = (mag_config or MagConfig()).mag_timeout
+            self.front = MagFrontEnd(FrontEndConfig.of(estimator.params, max_lag_s=timeout),
+                                     latency=estimator.front_end_latency())
             estimator.take_front_end(self.front)
         self.mag = MagInput(mag_config, raw=self.front is not None and self.front.calibrating)
         self.mag_prior: MagCalPrior | None = None  # the prior the calibration started from
@@ -55,7 +57,7 @@ class EstimatorStream:
         self.field_monitor = FieldMonitor(self.mag)
         watch: list[Monitor] = [self.gyro_units, self.loss]
         if estimator.USES_MAG and self.front is not None:
-            watch += [self.field_monitor, CalibrationMonitor(self.front)]
+            watch += [self.field_monitor, CalibrationMonitor(self.front), LagMonitor(self.front)]
         self.monitors = Monitors(watch)
         self.configure_mag(self.mag.config, mag_prior)
         # σ (rad) of the inclination per axis and of the heading (:meth:`AttitudeEstimator.sigma`): of the last

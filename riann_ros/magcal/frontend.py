@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.magcal.changes import ChangeFollower, Realign
+from riann_ros.magcal.lag import LagScan
 from riann_ros.magcal.latency import DelayHistory, LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.magcal.records import (
@@ -66,12 +67,13 @@ class FrontEndConfig:
     soft_iron_model: SoftIronModel = "full"
     hard_iron_sd_t: float = HARD_IRON_PRIOR_SD_T
     test: bool = True
+    max_lag_s: float = 0.5  # s; the lag scan's range: the pairing's mag_timeout (a later reading is never paired)
 
     @classmethod
-    def of(cls, params: Mapping[str, Any]) -> FrontEndConfig:
-        """From an estimator's parameters (their defaults where it has none of them)."""
+    def of(cls, params: Mapping[str, Any], max_lag_s: float = 0.5) -> FrontEndConfig:
+        """From an estimator's parameters (their defaults where it has none of them) and the pairing's timeout."""
         return cls(bool(params.get("mag_calibration", True)), params.get("mag_soft_iron_model", "full"),
-                   float(params.get("mag_hard_iron_sd", HARD_IRON_PRIOR_SD_T)))
+                   float(params.get("mag_hard_iron_sd", HARD_IRON_PRIOR_SD_T)), max_lag_s=max_lag_s)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,6 +112,7 @@ class FrontEndState:
     cal: OnlineMagCalibrator | None
     latency: LatencyEstimator
     delays: DelayHistory
+    lag: LagScan
     tilt: Quat | None
     seen: bool
     follower: ChangeFollower
@@ -126,6 +129,7 @@ class MagFrontEnd:
         self.latency_settings = latency or LatencySettings()
         self.latency = LatencyEstimator()
         self.delays = DelayHistory()
+        self.lag = LagScan(self.config.max_lag_s)
         self.tilt = TiltFilter()
         self.seen = False  # a field has come (rows(): from then on every row goes to the calibration)
         self.cal: OnlineMagCalibrator | None = None
@@ -173,9 +177,15 @@ class MagFrontEnd:
 
     @property
     def delay_s(self) -> float:
-        """s; the latency compensated now: the estimate, or the fixed value when it is not estimated."""
+        """s; the latency the latency fit compensates now: the estimate, or the fixed value when it is not estimated
+        (a field the lag scan finds late is compensated by the scanned lag instead, :attr:`late_s`)."""
         ls = self.latency_settings
         return self.latency.delay(ls.start_s) if ls.estimate else ls.start_s
+
+    @property
+    def late_s(self) -> float | None:
+        """s; the lag of a field the lag scan finds late (beyond the latency fit's range), else None."""
+        return self.lag.late_s
 
     # -- restarts and state ------------------------------------------------------------------------------------
     def restart(self) -> None:
@@ -184,19 +194,20 @@ class MagFrontEnd:
             self.cal.restart()
 
     def reset(self) -> None:
-        """The estimator's reset: :meth:`restart`, and the latency fit and the gyro history anew."""
+        """The estimator's reset: :meth:`restart`, and the latency fit, the lag scan and the gyro history anew."""
         self.latency.reset()
         self.delays.reset()
+        self.lag.reset()
         self.restart()
 
     def snapshot(self) -> FrontEndState:
         """The whole state, as a record independent of this front end (:meth:`restore` takes it back)."""
-        return copy.deepcopy(FrontEndState(self.cal, self.latency, self.delays, self.tilt.q, self.seen,
+        return copy.deepcopy(FrontEndState(self.cal, self.latency, self.delays, self.lag, self.tilt.q, self.seen,
                                            self.follower, self.trusted))
 
     def restore(self, state: FrontEndState) -> None:
         s = copy.deepcopy(state)
-        self.cal, self.latency, self.delays, self.tilt.q = s.cal, s.latency, s.delays, s.tilt
+        self.cal, self.latency, self.delays, self.lag, self.tilt.q = s.cal, s.latency, s.delays, s.lag, s.tilt
         self.seen, self.follower, self.trusted = s.seen, s.follower, s.trusted
 
     # -- per sample --------------------------------------------------------------------------------------------
@@ -205,11 +216,14 @@ class MagFrontEnd:
         """The kernel of both ways in: the raw reading through the calibration (the windows end at the latency
         estimate), then this sample into the latency fit (with the field where ``undisturbed``)."""
         lat = self.latency
+        late = self.lag.late_s
         u = raw
         if self.cal is not None:
-            u = self.cal.update(delta, dt, raw, lat.delay(self.latency_settings.start_s), q, lat.sd(DELAY_SD_S))
+            delay = lat.delay(self.latency_settings.start_s) if late is None else late
+            u = self.cal.update(delta, dt, raw, delay, q, lat.sd(DELAY_SD_S))
         if self.latency_settings.estimate or self.cal is not None:
             lat.add(delta, rv, dt, u if undisturbed else None)
+        self.lag.add(delta, dt, u)
         return u
 
     def step(self, delta: Quat, rv: Vec, dt: float, raw: Vec | None, q: Quat, undisturbed: bool) -> FieldOut:
@@ -225,9 +239,14 @@ class MagFrontEnd:
         ls = self.latency_settings
         if ls.compensate and (ls.estimate or ls.start_s > 0.0):
             r = self.delays.rotation(delta, dt, self.delay_s)
-            if u is not None:
+            if u is not None and self.lag.late_s is None:
                 u = rotate((r[0], -r[1], -r[2], -r[3]), u)
-        return FieldOut(u, switched)
+        return FieldOut(self._late(u), switched)
+
+    def _late(self, u: Vec | None) -> Vec | None:
+        """A field the lag scan finds late rotated back over the scanned lag (:mod:`.lag`); else ``u``."""
+        late = self.lag.late_s
+        return u if late is None or u is None else self.lag.compensated(u, late)
 
     def heading_sd(self, q: Quat, field_world_t: Vec) -> float:
         """rad; the σ the calibration adds to the heading of this sample's field (``q`` its attitude,
@@ -268,7 +287,7 @@ class MagFrontEnd:
                 continue
             delta = from_rotvec(*rv)
             q = self.tilt.step(delta, h, ax, ay, az)
-            u = self._sample(delta, rv, h, field, q, True)
+            u = self._late(self._sample(delta, rv, h, field, q, True))
             s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
             if s >= math.pi and not cal.fixed:  # the field's heading is unknown (the last window contradicted it)
                 u, s = None, 0.0

@@ -98,7 +98,8 @@ class Windower:
     def __init__(self) -> None:
         self.t = 0.0  # s since the first sample
         self.q: Quat = IDENTITY  # the integrated gyro attitude (relative to the first sample)
-        self.hist: deque[tuple[float, Quat]] = deque()  # (t, q) of the last MAX_DELAY_S, for the latency
+        #: (t, q) of the last MAX_DELAY_S (or of the latency, when a late field's is longer: the lag scan's)
+        self.hist: deque[tuple[float, Quat]] = deque()
         self.open = False
         self.m0: Vec = (0.0, 0.0, 0.0)
         self.q0: Quat = IDENTITY  # the attitude the window's first reading saw
@@ -140,7 +141,7 @@ class Windower:
         self.q = qmul(self.q, delta)
         if delay_s > 0.0:
             self.hist.append((self.t, self.q))
-            while len(self.hist) > 2 and self.hist[1][0] < self.t - MAX_DELAY_S:
+            while len(self.hist) > 2 and self.hist[1][0] < self.t - max(MAX_DELAY_S, delay_s):
                 self.hist.popleft()
         if not self.open:
             if mag_ut is not None:

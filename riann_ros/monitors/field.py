@@ -72,3 +72,21 @@ class CalibrationMonitor:
                        "the gyro-aided test rejects the configured magnetometer calibration (mag_calibration is "
                        f"false; the windows point to a hard iron of ({text}) µT): the heading may be off, its σ says "
                        "by how much; set mag_calibration true, or recalibrate (riann-mag-calibrate)")
+
+
+class LagMonitor:
+    """A magnetometer whose readings come later than the latency fit can see (:mod:`riann_ros.magcal.lag`)."""
+
+    NAME = "magnetometer lag"
+
+    def __init__(self, front: MagFrontEnd) -> None:
+        self.front = front
+
+    def verdict(self) -> Verdict:
+        late = self.front.late_s
+        if late is None:
+            return Verdict(self.NAME)
+        return Verdict(self.NAME, Level.WARN,
+                       f"the magnetometer's readings are about {1e3 * late:.0f} ms older than their stamps (the field "
+                       "against the gyro): compensated by the gyro's rotation over that time; fix the driver's stamps "
+                       "(a reading stamped when it was measured)")

@@ -151,6 +151,7 @@ class Heading:
         h = self.mag
         if not h.started:
             return {}
+        late = h.front.late_s
         kind = "estimated" if h.front.latency_settings.estimate else "fixed"
-        return {"magnetic disturbance": "detected" if h.disturbed else "none",
-                "magnetometer latency (ms)": f"{1e3 * h.delay:.1f} ({kind})"}
+        latency = f"{1e3 * late:.0f} (scanned: late)" if late is not None else f"{1e3 * h.delay:.1f} ({kind})"
+        return {"magnetic disturbance": "detected" if h.disturbed else "none", "magnetometer latency (ms)": latency}
