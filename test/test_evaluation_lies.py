@@ -111,22 +111,25 @@ def test_gyro_scale_multiplies_the_gyro_from_the_first_sample():
 @pytest.mark.parametrize("bad", ["gyro:scale:0", "gyro:scale:", "gyro:57.3", "gyro:scale:1,2", "magnetic:lag:0ms",
                                  "magnetic:lag:300", "magnetic:lag:-5ms", "magnetic:lag:1-2s"])
 def test_bad_lag_and_scale_are_refused_naming_the_forms(bad):
-    with pytest.raises(ValueError, match="bad perturbation.*gyro:scale:57.2958.*magnetic:lag:300ms"):
+    with pytest.raises(ValueError, match="bad perturbation") as err:
         pt.parse_perturbation(bad)
+    assert "gyro:scale:57.2958" in str(err.value) and "magnetic:lag:300ms" in str(err.value)
 
 
 def robot_bag(tmp_path, seconds: float = 40.0):
     """A ground robot turning back and forth with an undistorted field: its 9D heading is good as recorded."""
     phases = [("rest", 2.0, 0.0)] + [("turn", 4.0, 90.0), ("turn", 4.0, -90.0)] * int(seconds / 8)
     rec = ground_robot(phases, rate_hz=RATE, mount_rpy_deg=(10.0, -5.0, 0.0), gyr_noise=0.002, seed=1)
-    rec.mag = quat.rotate(quat.conjugate(rec.quat_ref), np.broadcast_to(np.asarray(FIELD_ENU_T), (len(rec), 3)))
+    field = np.broadcast_to(np.asarray(FIELD_ENU_T), (len(rec), 3))
+    rec.mag = quat.rotate(quat.conjugate(rec.quat_ref), field)
     rec.stamps_ns = rec.stamps_ns + 10**9
     return bagio.write_recording(tmp_path / "robot.mcap", rec)
 
 
 def test_lag_and_scale_through_the_command_line(tmp_path, capsys):
     """riann-bag-eval -p magnetic:lag:300ms -p gyro:scale:57.2958 on a 9D recording of a robot turning about the
-    vertical: the late field and the unit slip each turn the heading; results.json records what each did; the --perturb help names both."""
+    vertical: the late field and the unit slip each turn the heading; results.json records what each did; the
+    --perturb help names both."""
     bag = robot_bag(tmp_path)
     out = tmp_path / "eval"
     conditions = ["none", "magnetic:lag:300ms", "gyro:scale:57.2958"]

@@ -122,8 +122,8 @@ def test_a_file_that_is_no_calibration_is_refused_naming_it(tmp_path):
     with pytest.raises(ValueError, match=re.escape(f"mag_calibration_file refused: {params}")):
         ev.parse_estimator(f"riann:mag_calibration_file={params}")
     reflection = save_calibration(tmp_path / "bad.yaml", calibration())
-    reflection.write_text(reflection.read_text().replace("mag_soft_iron: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]",
-                                                         "mag_soft_iron: [-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]"))
+    identity = "mag_soft_iron: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]"
+    reflection.write_text(reflection.read_text().replace(identity, identity.replace("[1.0", "[-1.0")))
     with pytest.raises(ValueError, match=re.escape(f"mag_calibration_file refused: {reflection}")):
         ev.parse_estimator(f"vqf:mag_calibration_file={reflection}")
 
