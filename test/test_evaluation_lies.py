@@ -154,3 +154,19 @@ def test_lag_and_scale_through_the_command_line(tmp_path, capsys):
         main(["--help"])
     help_text = " ".join(capsys.readouterr().out.split())
     assert "gyro:scale:57.2958" in help_text and "magnetic:lag:300ms" in help_text
+
+
+def test_lag_starts_over_where_the_clock_goes_back():
+    rec, _ = known_field(n=400)
+    rec.stamps_ns = np.concatenate([rec.stamps_ns[:200], rec.stamps_ns[:200]])  # back to the start at sample 200
+    p = pt.parse_perturbation("magnetic:lag:100ms")
+    whole, info = run(p, rec)
+    k = round(0.1 * RATE)
+    none = np.isnan(whole.mag).all(axis=1)
+    assert np.array_equal(np.flatnonzero(none), np.r_[0:k, 200:200 + k]) and info["samples_before_lag"] == 2 * k
+    np.testing.assert_allclose(whole.mag[200 + k:], rec.mag[200:-k], rtol=0, atol=1e-20)
+    np.testing.assert_allclose(whole.mag[k:200], rec.mag[:200 - k], rtol=0, atol=1e-20)
+    for chunk in (37, 1, 200):
+        other, other_info = run(p, rec, chunk)
+        np.testing.assert_array_equal(other.mag, whole.mag)
+        assert other_info == info

@@ -4,6 +4,7 @@ slip), a magnetometer offset, soft iron or disturbance and a late magnetometer (
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import Any
 
@@ -169,23 +170,35 @@ class MagneticLag(Perturbation):
 
 class _LagField(Transform):
     """Keeps the recording's samples (stamps, fields) from the last at or before the latest lagged time: all that
-    a later sample's lagged time can fall between (stamps increase), so any chunking gives the same stream."""
+    a later sample's lagged time can fall between (stamps increase), so any chunking gives the same stream. A stamp
+    earlier than the one before it (a clock that went back) starts over: no reading for a lag after it."""
 
     def __init__(self, lag_ns: int) -> None:
         self.lag_ns = lag_ns
         self.t = np.zeros(0, np.int64)
         self.m = np.zeros((0, 3))
         self.samples = 0
-        self.without = 0  # samples before the first lag: no reading delivered yet
+        self.without = 0  # samples given no reading: within a lag of the start (or of a clock going back)
 
     def __call__(self, rec: Recording) -> Recording:
         if rec.mag is None or len(rec) == 0:
             return rec
-        t = np.concatenate([self.t, rec.stamps_ns])
-        m = np.concatenate([self.m, rec.mag])
-        want = rec.stamps_ns - self.lag_ns
+        before = self.t[-1:] if len(self.t) else rec.stamps_ns[:1]
+        back = np.flatnonzero(np.diff(np.concatenate([before, rec.stamps_ns])) < 0)  # the clock went back: at rec[k]
+        out = [self._lagged(rec.stamps_ns[a:b], rec.mag[a:b], a in back)
+               for a, b in itertools.pairwise([0, *back[back > 0], len(rec)])]
+        self.samples += len(rec)
+        return with_samples(rec, mag=np.concatenate(out))
+
+    def _lagged(self, stamps: NDArray[np.int64], mag: NDArray[np.float64], restart: bool) -> NDArray[np.float64]:
+        """The fields at ``stamps - lag`` (NaN rows: none), the samples kept for the next piece."""
+        if restart:
+            self.t, self.m = self.t[:0], self.m[:0]
+        t = np.concatenate([self.t, stamps])
+        m = np.concatenate([self.m, mag])
+        want = stamps - self.lag_ns
         i = np.searchsorted(t, want, side="right") - 1  # the last sample at or before t − lag (-1: none yet)
-        out = np.full((len(rec), 3), np.nan)
+        out = np.full((len(stamps), 3), np.nan)
         ok = i >= 0
         a, b = i[ok], i[ok] + 1  # b exists: t − lag is before the sample's own stamp, which is in t
         w = ((want[ok] - t[a]) / (t[b] - t[a]))[:, None]
@@ -193,9 +206,8 @@ class _LagField(Transform):
         out[ok] = np.where(later, m[a] + w * (m[b] - m[a]), m[a])
         keep = max(0, int(i[-1]))
         self.t, self.m = t[keep:], m[keep:]
-        self.samples += len(rec)
         self.without += int(np.count_nonzero(~ok))
-        return with_samples(rec, mag=out)
+        return out
 
     def info(self) -> dict[str, Any]:
         return {"lag_s": self.lag_ns / NS_PER_S, "samples": self.samples, "samples_before_lag": self.without}
