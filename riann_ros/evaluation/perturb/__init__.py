@@ -49,8 +49,8 @@ sequence, after the scenario and before the estimators:
     A late magnetometer (a slow driver): each field reading carries the field of 300 ms earlier under its own
     stamp. The field at stamp t is the recording's field at t − 0.3 s, linear between the two recording samples
     around that time (the earlier one where the later has no field); in the sequence's first 0.3 s there is no
-    earlier field, so no reading (those samples run 6D, as before a driver's first message). Causal, chunk by
-    chunk; the IMU samples, their stamps and the reference are unchanged.
+    earlier field, so no reading (those samples run 6D, as before a driver's first message; the same after a
+    clock that went back). Causal, chunk by chunk; the IMU samples, their stamps and the reference are unchanged.
 
 Every random draw is seeded per sequence, condition and perturbation (``--seed``), so every estimator
 sees the same perturbed stream and a bag gives the same stream whatever its chunking.
