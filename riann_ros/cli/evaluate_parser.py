@@ -98,8 +98,11 @@ def _scaling(p: argparse.ArgumentParser) -> None:
 def _what_runs(p: argparse.ArgumentParser) -> None:
     """The estimators and the scenarios."""
     p.add_argument("--estimators", "-e", default=None,
-                   help=f"estimator specs (default: those of {DEFAULT_ESTIMATORS} that are installed); 'none': only "
-                   "the --estimate-topic estimates")
+                   help=f"estimator specs NAME[:PARAM=VALUE...], comma-separated (default: those of "
+                   f"{DEFAULT_ESTIMATORS} that are installed); 'none': only the --estimate-topic estimates. PARAM: the "
+                   "estimator's, or the magnetometer calibration as the nodes take it: mag_calibration_file=FILE (a "
+                   "saved calibration), mag_hard_iron=X/Y/Z (T), mag_soft_iron=D11/.../D33 (a vector's numbers "
+                   "between '/'), e.g. riann:mag_calibration_file=my_mag.yaml")
     p.add_argument("--scenarios", "-s", default=None,
                    help="restrictive, partially-restrictive, realistic, as-recorded; paper (the first three) or all "
                    "(comma-separated; default all, or as-recorded with --estimators none)")

@@ -51,6 +51,8 @@ def ros_param(value: Any) -> str:
         return "true" if value else "false"
     if isinstance(value, float):
         return repr(value)  # keeps the decimal point: the nodes declare float parameters
+    if isinstance(value, tuple):  # a float array (mag_hard_iron, mag_soft_iron)
+        return "[" + ", ".join(repr(float(v)) for v in value) + "]"
     return str(value)
 
 
@@ -196,7 +198,7 @@ class LiveRunner:
         remaps = {"__node": f"riann_eval_{i}_{spec.name}", "imu/data_raw": self.input_topic,
                   "imu/mag": LIVE_MAG_TOPIC, att_topic: f"{LIVE_NS}/e{i}/attitude", imu_topic: f"{LIVE_NS}/e{i}/imu"}
         params = {"input_qos": "reliable", "input_depth": 1000, "output_depth": 1000, "nominal_rate": float(rate),
-                  "use_mag": self.use_mag, **spec.kwargs}
+                  "use_mag": self.use_mag, **spec.node_params}
         return [node_executable(spec.name), "--ros-args",
                 *(a for k, v in remaps.items() for a in ("-r", f"{k}:={v}")),
                 *(a for k, v in params.items() for a in ("-p", f"{k}:={ros_param(v)}"))]

@@ -17,7 +17,6 @@ from riann_ros.evaluation.results import RECORDED, RunStats
 from riann_ros.evaluation.sources import Chunk
 from riann_ros.evaluation.specs import EstimatorSpec
 from riann_ros.gate import GateConfig
-from riann_ros.magcal.input import MagConfig, UseMag
 from riann_ros.recording import Recording
 from riann_ros.stream import EstimatorStream
 
@@ -46,8 +45,9 @@ class _OfflineRun:
     fit (:class:`~riann_ros.estimators.magcal_slot.MagCalSlot`). Creating one costs little (RIANN: ~20 ms)."""
 
     def __init__(self, specs: list[EstimatorSpec], gate: GateConfig, use_mag: str = "auto") -> None:
-        mag = MagConfig(use_mag=UseMag.parse(use_mag))
-        self.streams = [EstimatorStream(spec.create(), gate, mag) for spec in specs]
+        # each spec's magnetometer calibration (parameters, a saved file) as the node takes it at start
+        self.streams = [EstimatorStream(spec.create(), gate, spec.mag_config(use_mag), spec.mag_prior)
+                        for spec in specs]
         self.stats = [RunStats(cpu_seconds=0.0) for _ in specs]
         self.sigmas: list[NDArray[np.float64] | None] = []  # of the last feed, per estimator (N, 3): σ, state
 

@@ -33,6 +33,9 @@ sequence, after the scenario and before the estimators:
 ``bias:3,3,0`` / ``bias:random:2``
     A constant gyroscope bias (°/s per axis) from the first sample of the sequence, or one drawn per
     sequence from N(0, (2 °/s)²) per axis.
+``gyro:scale:57.2958`` / ``gyro:scale:0.001``
+    The gyroscope's values multiplied by the factor from the first sample of the sequence: a unit slip (a
+    driver that gives deg/s where rad/s is meant: 57.2958; mdeg/s read as deg/s: 0.001).
 ``dropout:0.1-0.6s@10s``
     Lost messages: holes of a length drawn uniformly from the range, about every 10 s (exponential
     spacing), starting only where the sensor moves (a scored sample); the samples in a hole are removed.
@@ -40,7 +43,14 @@ sequence, after the scenario and before the estimators:
     The magnetometer (recordings without one are left as they are): a constant hard-iron offset (µT
     per sensor axis) from the first sample, or a field of 40 µT fixed in the sensor frame (a magnet or
     a steel part carried with the sensor), in a direction drawn per sequence, from 10 s to 20 s after
-    the sequence's first sample.
+    the sequence's first sample. ``magnetic:soft:D11,D12,...,D33``: a soft iron, each reading multiplied by the
+    row-major 3×3 matrix from the first sample.
+``magnetic:lag:300ms`` / ``magnetic:lag:0.1s``
+    A late magnetometer (a slow driver): each field reading carries the field of 300 ms earlier under its own
+    stamp. The field at stamp t is the recording's field at t − 0.3 s, linear between the two recording samples
+    around that time (the earlier one where the later has no field); in the sequence's first 0.3 s there is no
+    earlier field, so no reading (those samples run 6D, as before a driver's first message; the same after a
+    clock that went back). Causal, chunk by chunk; the IMU samples, their stamps and the reference are unchanged.
 
 Every random draw is seeded per sequence, condition and perturbation (``--seed``), so every estimator
 sees the same perturbed stream and a bag gives the same stream whatever its chunking.
@@ -56,7 +66,7 @@ from riann_ros.evaluation.perturb.conditions import (
     parse_perturbation,
 )
 from riann_ros.evaluation.perturb.dropout import Dropout
-from riann_ros.evaluation.perturb.signal import Bias, Magnetic
+from riann_ros.evaluation.perturb.signal import Bias, GyroScale, Magnetic, MagneticLag
 from riann_ros.evaluation.perturb.timing import Fifo, Jitter, Latency, Rate
 
 __all__ = [
@@ -67,9 +77,11 @@ __all__ = [
     "Condition",
     "Dropout",
     "Fifo",
+    "GyroScale",
     "Jitter",
     "Latency",
     "Magnetic",
+    "MagneticLag",
     "Perturbation",
     "Rate",
     "Transform",

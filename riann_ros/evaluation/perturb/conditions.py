@@ -11,7 +11,7 @@ import numpy as np
 
 from riann_ros.evaluation.perturb.base import NONE, Perturbation, Transform
 from riann_ros.evaluation.perturb.dropout import Dropout
-from riann_ros.evaluation.perturb.signal import Bias, Magnetic
+from riann_ros.evaluation.perturb.signal import Bias, GyroScale, Magnetic, MagneticLag
 from riann_ros.evaluation.perturb.timing import Fifo, Jitter, Latency, Rate
 
 DEFINITIONS = {
@@ -29,13 +29,17 @@ DEFINITIONS = {
     "10 us apart in order; samples and reference unchanged",
     "bias": "bias:X,Y,Z (deg/s) or bias:random:SIGMA (deg/s per axis, drawn per sequence): added to the gyro "
     "from the first sample of the sequence",
+    "gyro": "gyro:scale:F: the gyro's values multiplied by F from the first sample of the sequence (a unit slip: "
+    "deg/s read as rad/s is 57.2958)",
     "dropout": "dropout:LO-HIs@Ts: holes of LO-HI s (uniform) about every T s (exponential spacing), starting at "
     "a scored sample; the samples in a hole are removed",
     "magnetic": "magnetic:offset:X,Y,Z (µT, sensor frame, from the first sample) or magnetic:disturb:B@T0-T1s "
     "(B µT fixed in the sensor frame, direction drawn per sequence, T0-T1 s after the first sample): added "
     "to the magnetometer; magnetic:soft:D11,D12,...,D33 (a soft iron: the reading multiplied by the row-major "
-    "3x3 matrix D from the first sample; before an offset in the same condition: D m + offset); recordings "
-    "without a magnetometer are left as they are",
+    "3x3 matrix D from the first sample; before an offset in the same condition: D m + offset); magnetic:lag:Dms "
+    "(a late magnetometer: each reading carries the field of D earlier under its own stamp, linear between the "
+    "recording's samples; no reading in the sequence's first D; IMU samples, stamps and reference unchanged); "
+    "recordings without a magnetometer are left as they are",
     "seeding": "per sequence, condition and perturbation: sha256 of '<seed>:<sequence>:<condition>:<index>'",
 }
 # the accepted forms of every kind (``points`` is the suffix of jitter and rate), in the order of DEFINITIONS
@@ -47,9 +51,10 @@ EXAMPLES = {
     "latency": ("latency:0-20ms",),
     "fifo": ("fifo:20ms",),
     "bias": ("bias:3,3,0", "bias:random:2 (deg/s)"),
+    "gyro": ("gyro:scale:57.2958",),
     "dropout": ("dropout:0.1-0.6s@10s",),
     "magnetic": ("magnetic:offset:20,0,-10 (µT)", "magnetic:disturb:40@10-20s",
-                 "magnetic:soft:1.15,0.05,0,0,0.85,0.05,0.05,0,1"),
+                 "magnetic:soft:1.15,0.05,0,0,0.85,0.05,0.05,0,1", "magnetic:lag:300ms"),
 }
 
 
@@ -138,6 +143,12 @@ def _bias(args: str) -> Perturbation | None:
     return Bias(dps=(float(m.group(1)), float(m.group(2)), float(m.group(3)))) if m else None
 
 
+def _gyro(args: str) -> Perturbation | None:
+    m = re.fullmatch(rf"scale:(-?{_NUM})", args)
+    factor = float(m.group(1)) if m else 0.0
+    return GyroScale(factor) if factor != 0.0 and np.isfinite(factor) else None
+
+
 def _latency(args: str) -> Perturbation | None:
     m = re.fullmatch(rf"({_NUM})-({_NUM})(ms|s)", args)
     if not m:
@@ -170,6 +181,10 @@ def _magnetic(args: str) -> Perturbation | None:
     m = re.fullmatch(rf"offset:(-?{_NUM}),(-?{_NUM}),(-?{_NUM})", args)
     if m:
         return Magnetic(offset=(float(m.group(1)), float(m.group(2)), float(m.group(3))))
+    m = re.fullmatch(rf"lag:({_NUM})(ms|s)", args)
+    if m:
+        lag = _seconds(m.group(1), m.group(2))
+        return MagneticLag(lag) if lag >= 1e-6 else None
     m = re.fullmatch(rf"disturb:({_NUM})(?:ut)?@({_NUM})-({_NUM})s", args)
     if not m:
         return None
@@ -178,7 +193,7 @@ def _magnetic(args: str) -> Perturbation | None:
 
 
 _PARSERS = {"jitter": _points(_jitter), "rate": _lowpass(_points(_rate)), "latency": _latency, "fifo": _fifo,
-            "bias": _bias, "dropout": _dropout, "magnetic": _magnetic}
+            "bias": _bias, "gyro": _gyro, "dropout": _dropout, "magnetic": _magnetic}
 
 
 def parse_perturbation(text: str) -> Perturbation:
