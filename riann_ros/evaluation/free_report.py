@@ -97,12 +97,23 @@ def _counts(d: dict[str, int]) -> str:
     return ", ".join(f"{k} {v}" for k, v in d.items()) or "–"
 
 
+def monitor_trips(r: SequenceResult) -> dict[str, int]:
+    """Per monitor of the stream (riann_ros.monitors), the most trips of any estimator's run of the input as it is
+    (perturbation none): the monitors test the input, which every estimator is fed alike."""
+    out: dict[str, int] = {}
+    for row in r.rows:
+        if row.perturbation == NONE:
+            for k, v in row.stats.monitor_trips.items():
+                out[k] = max(out.get(k, 0), v)
+    return out
+
+
 def format_health(results: Sequence[SequenceResult], markdown_table: bool = False, every: bool = False) -> str:
     """The stream's health of the inputs without a reference (``every``: of every input), one row each; unit
     warnings and findings below the table."""
     chosen = [r for r in results if not r.error and r.health and (every or not r.has_reference)]
     headers = ["sequence", "rate Hz", "step std ms", "step min–max ms", "holes", "samples missing",
-               "longest hole s", "rejected", "restarts"]
+               "longest hole s", "rejected", "restarts", "monitor trips"]
     cells = []
     notes = []
     for r in chosen:
@@ -110,7 +121,7 @@ def format_health(results: Sequence[SequenceResult], markdown_table: bool = Fals
         cells.append([r.name, _num(h["rate_hz"], ".3f"), _num(h["step_std_ms"], ".3f"),
                       f"{_num(h['step_min_ms'], '.3f')}–{_num(h['step_max_ms'], '.3f')}", str(h["holes"]),
                       str(h["samples_missing"]), _num(h["longest_hole_s"], ".3f"), _counts(h["rejected"]),
-                      _counts(h["restarts"])])
+                      _counts(h["restarts"]), _counts(monitor_trips(r))])
         notes += [f"{r.name}: {w}" for w in [*h["warnings"], *h["unit_findings"]]]
     table = _table("stream health (the IMU stream as recorded; the nodes' input gate at its rate)", headers, cells,
                    markdown_table)

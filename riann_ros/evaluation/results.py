@@ -72,6 +72,8 @@ class RunStats:
     # or it calibrates none; NaN in results.csv)
     mag_converged_after_s: float | None = None
     gyro_bias_dps: list[float] | None = None  # the estimator's gyro-bias estimate at the end (None: it reports none)
+    #: per monitor of the stream (riann_ros.monitors), how often it tripped (went from OK to WARN or ERROR)
+    monitor_trips: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -110,6 +112,7 @@ class ResultRow:
         d.update((k, v) for k, v in asdict(self.score).items() if v is not None)
         d.update({f"rejected_{k}": v for k, v in self.stats.rejected.items()})
         d.update({f"reset_{k}": v for k, v in self.stats.resets.items()})
+        d.update({f"trips_{k.replace(' ', '_')}": v for k, v in self.stats.monitor_trips.items()})
         d.update(self.stats.live or {})
         d["cpu_seconds"] = self.stats.cpu_seconds
         if self.sensors == "9D":
@@ -139,6 +142,8 @@ class ResultRow:
         stats = RunStats(seconds=num(d.get("seconds", 0.0)), cpu_seconds=num(d.get("cpu_seconds")),
                          rejected={k[len("rejected_"):]: int(v) for k, v in d.items() if k.startswith("rejected_")},
                          resets={k[len("reset_"):]: int(v) for k, v in d.items() if k.startswith("reset_")},
+                         monitor_trips={k[len("trips_"):].replace("_", " "): int(v) for k, v in d.items()
+                                        if k.startswith("trips_")},
                          live=live or None,
                          gyro_bias_dps=[float(d[k]) for k in BIAS_KEYS] if all(d.get(k) is not None for k in BIAS_KEYS)
                          else None)

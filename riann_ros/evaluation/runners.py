@@ -71,6 +71,7 @@ class _OfflineRun:
             cal = stream.mag_cal_status()
             stats.mag_converged_after_s = None if cal is None else cal.converged_after_s
             stats.gyro_bias_dps = reported_bias(stream.estimator)
+            stats.monitor_trips = {k: int(v) for k, v in stream.monitors.trips.items() if v}
         return self.stats
 
 
