@@ -188,7 +188,7 @@ def _finishes_within(seconds: float, f, release=None):
     def run():
         try:
             out["value"] = f()
-        except BaseException as e:  # noqa: BLE001 (handed to the test)
+        except BaseException as e:
             out["error"] = e
 
     t = threading.Thread(target=run, daemon=True)
