@@ -60,15 +60,29 @@ def parameter_refusals(values: Mapping[str, Any]) -> dict[str, list[str]]:
     return {name: reasons for name, check in _CHECKS.items() if name in values and (reasons := check(values[name]))}
 
 
-def refused_at_start(values: dict[str, Any]) -> list[tuple[str, str]]:
-    """The start-up values' ``mag_hard_iron`` / ``mag_soft_iron`` checked: a refused one is replaced by its default
-    in ``values``; the warnings ((level, text)) to log."""
-    out = []
+def check_changes(changes: dict[str, Any]) -> dict[str, Any]:
+    """Run-time parameter changes, or ``ValueError`` naming each of ``mag_hard_iron`` / ``mag_soft_iron`` that
+    validation refuses (none is applied then)."""
+    refused = parameter_refusals(changes)
+    if refused:
+        raise ValueError("; ".join(f"{k} refused: {'; '.join(v)}" for k, v in refused.items())
+                         + " (the value in use stays)")
+    return changes
+
+
+def start_file(values: dict[str, Any]) -> tuple[CalibrationFile, list[tuple[str, str]]]:
+    """At start: ``mag_hard_iron`` / ``mag_soft_iron`` of the start-up ``values`` checked (a refused one is replaced
+    by its default), then ``mag_calibration_file`` read (a usable file's hard and soft iron replace them); the file
+    and the parameters' warnings ((level, text)) to log."""
+    refused = []
     for name, reasons in parameter_refusals(values).items():
-        out.append(("warning", f"parameter {name} = {list(values[name])} refused: {'; '.join(reasons)}; the node "
-                    f"runs on its default {list(_DEFAULTS[name])}"))
+        refused.append(("warning", f"parameter {name} = {list(values[name])} refused: {'; '.join(reasons)}; the "
+                        f"node runs on its default {list(_DEFAULTS[name])}"))
         values[name] = _DEFAULTS[name]
-    return out
+    f = CalibrationFile(values["mag_calibration_file"])
+    if f.loaded is not None:
+        values["mag_hard_iron"], values["mag_soft_iron"] = f.loaded.hard_iron_t, f.loaded.soft_iron
+    return f, refused
 
 
 def _vector_ut(v: tuple[float, ...]) -> str:

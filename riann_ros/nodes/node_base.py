@@ -12,6 +12,7 @@ A concrete node only names its estimator and its default output topics.
 
 from __future__ import annotations
 
+import functools
 import gc
 import math
 import os
@@ -36,13 +37,7 @@ from riann_ros.magcal import input as mg
 from riann_ros.magcal.records import MagCalPrior
 from riann_ros.nodes import ros_args, usage
 from riann_ros.nodes.diagnostics import Diagnostics
-from riann_ros.nodes.mag_calibration import (
-    SAVE_FORCE_SERVICE,
-    SAVE_SERVICE,
-    CalibrationFile,
-    parameter_refusals,
-    refused_at_start,
-)
+from riann_ros.nodes.mag_calibration import SAVE_FORCE_SERVICE, SAVE_SERVICE, CalibrationFile, check_changes, start_file
 from riann_ros.nodes.outputs import Outputs, rpy_topic
 from riann_ros.nodes.parameters import NODE_PARAMS, QOS_CHOICES, NodeParameters, collect_changes
 
@@ -97,9 +92,8 @@ class EstimatorNode(Node):
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(Trigger, "~/restart", self._on_restart)
         if self.stream.estimator.USES_MAG:
-            self.create_service(Trigger, SAVE_SERVICE, lambda req, res: self._on_save_mag_calibration(res, False))
-            self.create_service(Trigger, SAVE_FORCE_SERVICE,
-                                lambda req, res: self._on_save_mag_calibration(res, True))
+            for name, force in ((SAVE_SERVICE, False), (SAVE_FORCE_SERVICE, True)):
+                self.create_service(Trigger, name, functools.partial(self._on_save_mag_calibration, force=force))
         self.diag = Diagnostics(self, self.stream, self.ESTIMATOR, INPUT_TOPIC, MAG_TOPIC,
                                 float(p["diagnostics_period"]))
         self.diag.mag_file = self.mag_file
@@ -144,27 +138,18 @@ class EstimatorNode(Node):
                                   mg.MagConfig(**{s.name: p[s.name] for s in mg.MAG_PARAMS}), mag_prior=mag_prior)
 
     def _load_mag_file(self, p: dict[str, Any]) -> CalibrationFile:
-        """Check ``mag_hard_iron`` and ``mag_soft_iron`` by physics (a refused one: its default) and read
-        ``mag_calibration_file``: a usable file's hard and soft iron replace those parameters (set before the
+        """:func:`~riann_ros.nodes.mag_calibration.start_file`; the parameters set to the values it leaves (before the
         run-time callbacks exist: a start-up value, not a change); the node logs the outcome."""
-        refused = refused_at_start(p)
+        f, refused = start_file(p)
         self._params.log += refused
-        f = CalibrationFile(p["mag_calibration_file"])
-        if f.loaded is not None:
-            p["mag_hard_iron"], p["mag_soft_iron"] = f.loaded.hard_iron_t, f.loaded.soft_iron
         if f.loaded is not None or refused:
-            self.set_parameters([Parameter("mag_hard_iron", value=list(p["mag_hard_iron"])),
-                                 Parameter("mag_soft_iron", value=list(p["mag_soft_iron"]))])
+            self.set_parameters([Parameter(k, value=list(p[k])) for k in ("mag_hard_iron", "mag_soft_iron")])
         return f
 
     # -- run-time parameters ----------------------------------------------------------------------
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         try:
-            changes = collect_changes(params, self._params.specs)
-            refused = parameter_refusals(changes)
-            if refused:
-                raise ValueError("; ".join(f"{k} refused: {'; '.join(v)}" for k, v in refused.items())
-                                 + " (the value in use stays)")
+            changes = check_changes(collect_changes(params, self._params.specs))
             values = {**self._values, **changes}
             new_gate = gt.GateConfig(**{s.name: values[s.name] for s in gt.GATE_PARAMS})
             new_mag = mg.MagConfig(**{s.name: values[s.name] for s in mg.MAG_PARAMS})
@@ -308,7 +293,8 @@ class EstimatorNode(Node):
                             "calibration as at start; initialising from the next sample")
         return response
 
-    def _on_save_mag_calibration(self, response: Trigger.Response, force: bool) -> Trigger.Response:
+    def _on_save_mag_calibration(self, request: Trigger.Request, response: Trigger.Response,
+                                 force: bool) -> Trigger.Response:
         response.success, response.message = self.mag_file.save(self.stream.mag_calibration(), force)
         text = f"{SAVE_FORCE_SERVICE if force else SAVE_SERVICE}: {response.message}"
         if response.success:  # (one severity per call site: rclpy refuses a call site that changes it)
