@@ -29,7 +29,7 @@ from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
 from riann_ros.magcal.input import MagConfig, pair_fields
 from riann_ros.magcal.records import CALIBRATED, IDENTITY_9, STATES, UT, MagCalibration, MagCalPrior
-from riann_ros.magcal.store import load_calibration, save_calibration, to_yaml
+from riann_ros.magcal.store import less_certain, load_calibration, save_calibration, to_yaml
 from riann_ros.nodes.mag_calibration import SAVE_FORCE_SERVICE, SAVE_SERVICE, CalibrationFile
 from riann_ros.nodes.vqf_node import VqfNode
 from riann_ros.stream import EstimatorStream, GateConfig
@@ -124,14 +124,20 @@ def test_saved_once_loaded_at_the_next_start(ros, start_node, tmp_path):
     log = node2.output()
     assert f"mag_calibration_file {path} loaded: {cal.state}" in log
     config = MagConfig(mag_hard_iron=cal.hard_iron_t, mag_soft_iron=cal.soft_iron)
-    equal_quats(q_node2, offline("riann", stamps2, acc2, gyr2, raw2, sent2, config,
-                                 MagCalPrior.from_calibration(cal)))
+    q_off2, stream2 = offline_run("riann", stamps2, acc2, gyr2, raw2, sent2, config, MagCalPrior.from_calibration(cal))
+    equal_quats(q_node2, q_off2)
     _, values2 = diag_values(diags2, "riann_node")
     assert values2["mag calibration file"] == f"{path} (loaded at start)"
     assert int(values2["mag calibration windows (used / rejected)"].split(" / ")[0]) >= cal.windows
-    # saved again: the same file, replaced (it is a calibration file)
+    # saved again: this run's estimate (learnt from the broad prior, not from the file's σ, over 6 s of motion) is
+    # less certain than the file's (8 s), so the file is kept; the force service replaces it (a calibration file)
+    now = stream2.mag_calibration()
+    assert now is not None and less_certain(now, cal) is not None
     res2 = save(ros, "riann_node")
-    assert res2.success and load_calibration(path).windows >= cal.windows
+    assert not res2.success and res2.message.startswith("kept the file: the file's hard iron is known to ±")
+    assert load_calibration(path) == cal
+    res3 = trigger(ros, "riann_node", SAVE_FORCE_SERVICE)
+    assert res3.success and load_calibration(path).windows >= cal.windows
 
 
 def test_a_bad_file_is_refused_and_never_replaced(ros, start_node, tmp_path):
