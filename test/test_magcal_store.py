@@ -261,18 +261,13 @@ def test_a_replaced_file_keeps_its_mode_a_new_one_gets_the_umask(tmp_path: Path)
     os.chmod(path, 0o640)
     save_calibration(path, calibration(windows=99))
     assert (path.stat().st_mode & 0o777) == 0o640 and load_calibration(path).windows == 99
-    old = os.umask(0o077)
-    try:
-        new = save_calibration(tmp_path / "new.yaml", calibration())
-    finally:
-        os.umask(old)
-    assert (new.stat().st_mode & 0o777) == 0o600
-    old = os.umask(0o022)
-    try:
-        new2 = save_calibration(tmp_path / "new2.yaml", calibration())
-    finally:
-        os.umask(old)
-    assert (new2.stat().st_mode & 0o777) == 0o644
+    for umask, mode in ((0o077, 0o600), (0o022, 0o644)):
+        old = os.umask(umask)
+        try:
+            new = save_calibration(tmp_path / f"new{umask:o}.yaml", calibration())
+        finally:
+            os.umask(old)
+        assert (new.stat().st_mode & 0o777) == mode
 
 
 def test_temporary_files_left_by_a_cut_off_save_are_removed(tmp_path: Path):

@@ -162,8 +162,13 @@ def _temporary(target: Path, folder: Path, mode: int | None) -> tuple[int, Path]
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666)
         except FileExistsError:
             continue
-        if mode is not None:
-            os.fchmod(fd, mode)
+        try:
+            if mode is not None:
+                os.fchmod(fd, mode)
+        except OSError:
+            os.close(fd)
+            tmp.unlink(missing_ok=True)
+            raise
         return fd, tmp
 
 
