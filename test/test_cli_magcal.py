@@ -5,6 +5,7 @@ offset is recovered within 1.5 µT, and bad input ends in a clear message with n
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -196,3 +197,69 @@ def test_a_foreign_bag_with_its_own_topics_and_a_slower_magnetometer(tmp_path, c
     assert f"{len(mags)} magnetometer readings" in capsys.readouterr().out  # each reading once
     cal = load_calibration(out)
     assert np.linalg.norm(np.array(cal.hard_iron_t) / UT - H_TRUE) < 1.0
+
+
+# ---- validation by physics: a --prior or a result that is no calibration is refused -------------------------------
+def _calibration_file(path: Path, hard_iron_ut, soft_iron=None) -> Path:
+    """A calibration file (YAML written directly: the store writes no calibration validation refuses)."""
+    from riann_ros.magcal.records import CALIBRATED, IDENTITY_9, MagCalibration
+    from riann_ros.magcal.store import to_yaml
+
+    cov = np.diag(np.r_[np.full(9, 1e-4), np.full(3, (0.5 * UT) ** 2)])
+    cal = MagCalibration(hard_iron_t=tuple(np.asarray(hard_iron_ut) * UT), soft_iron=soft_iron or IDENTITY_9,
+                         covariance=tuple(cov.reshape(144)), state=CALIBRATED, windows=12, converged_after_s=1.0,
+                         soft_iron_model="full")
+    path.write_text(to_yaml(cal))
+    return path
+
+
+def _one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+def test_a_prior_validation_refuses_is_refused_and_nothing_written(rich_bag, tmp_path, capsys):
+    out = tmp_path / "my_mag.yaml"
+    run = [str(rich_bag), "--out", str(out), "--mag-delay", "0"]
+    # the issue's 999 µT file: refused as a file, before the bag is read
+    p999 = _calibration_file(tmp_path / "p999.yaml", [999.0, 0.0, 0.0])
+    assert magcal.main([*run, "--prior", str(p999)]) == 1
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith(f"riann-mag-calibrate: --prior {p999}: mag_hard_iron |h| = 999 µT is over 933 µT")
+    assert line.endswith("; nothing written")
+    # a reflection, and a FIFO (refused without being opened: the command returns)
+    refl = _calibration_file(tmp_path / "refl.yaml", [0.0, 0.0, 0.0], (-1.0, 0, 0, 0, -1.0, 0, 0, 0, 1.0))
+    assert magcal.main([*run, "--prior", str(refl)]) == 1
+    assert "holds a rotation of 180.0°" in _one_line(capsys.readouterr().err)
+    fifo = tmp_path / "fifo.yaml"
+    os.mkfifo(fifo)
+    assert magcal.main([*run, "--prior", str(fifo)]) == 1
+    assert f"--prior {fifo}: is a FIFO (named pipe)" in _one_line(capsys.readouterr().err)
+    # a file fine by itself whose calibrated field on this bag is no Earth field (another robot's 500 µT)
+    p500 = _calibration_file(tmp_path / "p500.yaml", [0.0, 500.0, 0.0])
+    assert magcal.main([*run, "--prior", str(p500)]) == 1
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith(f"riann-mag-calibrate: --prior {p500}: refused on rich.mcap's readings: the calibrated "
+                           "field |m| = 5")
+    assert "is outside 15–100 µT" in line and line.endswith("nothing written")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo.yaml", "p500.yaml", "p999.yaml", "refl.yaml"]
+
+
+@pytest.mark.slow
+def test_a_result_validation_refuses_is_not_written(tmp_path, capsys):
+    """A driver whose field is three times the Earth's (a scale slip): the fit is consistent, its calibrated field
+    |m| ≈ 134 µT is no Earth field."""
+    rec = generate(duration=30.0, rate=100, motion="rotation", seed=2)
+    rec.mag = 3.0 * distort(rec.quat_ref, H_TRUE * UT, noise_t=0.3e-6, seed=2)
+    bag = bagio.write_recording(tmp_path / "scaled.mcap", rec)
+    out = tmp_path / "my_mag.yaml"
+    assert magcal.main([str(bag), "--out", str(out), "--mag-delay", "0"]) == 1
+    captured = capsys.readouterr()
+    line = _one_line(captured.err)
+    assert line.startswith(f"riann-mag-calibrate: {bag}: the fitted calibration is refused: the calibrated field |m| = "
+                           "13")
+    assert line.endswith("is outside 15–100 µT (the Earth's field is 22–67 µT): it does not describe this sensor; "
+                         "nothing written")
+    assert "field |m|: raw σ" in captured.out  # the fit is printed: the user sees the sphere's radius
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scaled.mcap"]

@@ -83,11 +83,15 @@ def _good_doc() -> dict:
     (lambda d: d.pop("mag_calibration"), "no mag_calibration section"),
     (lambda d: d["mag_calibration"].update(format="riann_ros.magcal/99"), "format"),
     (lambda d: d.update(mag_hard_iron=[1.0, 2.0]), "mag_hard_iron must be a list of 3 numbers"),
-    (lambda d: d.update(mag_hard_iron=[20.0, 0.0, -10.0]), "over 0.001 T"),
+    (lambda d: d.update(mag_hard_iron=[20.0, 0.0, -10.0]), "is over 933 µT"),
+    (lambda d: d.update(mag_hard_iron=[999e-6, 0.0, 0.0]), "is over 933 µT"),  # the issue's "999 µT" file
     (lambda d: d.update(mag_hard_iron=[float("nan"), 0.0, 0.0]), "finite"),
     (lambda d: d.update(mag_hard_iron=["a", 0.0, 0.0]), "list of 3 numbers"),
     (lambda d: d.update(mag_soft_iron=[1, 0, 0, 0, 1, 0, 0, 0, 0]), "singular"),
     (lambda d: d.update(mag_soft_iron=[-1, 0, 0, 0, 1, 0, 0, 0, 1]), "reflection"),
+    (lambda d: d.update(mag_soft_iron=[-1, 0, 0, 0, -1, 0, 0, 0, 1]), "rotation of 180.0°"),
+    (lambda d: d.update(mag_soft_iron=[1500, 0, 0, 0, 1500, 0, 0, 0, 1500]), "scales the field by 1500"),
+    (lambda d: d["mag_calibration"].update(covariance=[1e308] * 144), "over its bound"),
     (lambda d: d["mag_calibration"].update(covariance=[0.0] * 143), "covariance must be a list of 144"),
     (lambda d: d["mag_calibration"].update(covariance=(-np.eye(12)).reshape(144).tolist()), "positive semi-definite"),
     (lambda d: d["mag_calibration"].update(state="great"), "state must be one of"),
@@ -171,3 +175,129 @@ def test_a_saved_calibration_still_learns_a_changed_magnetic_situation():
     assert not cal2.trusted
     assert np.abs(np.array(cal2.calibration().hard_iron_t) / UT - changed).max() < 1.0
     assert math.degrees(math.sqrt(float(np.mean(err[-2000:] ** 2)))) < 2.0  # the last 20 s: calibrated again
+
+
+# ---- reads bounded in size and time; the file's mode; temporary files; never a downgrade ---------------------------
+def _finishes_within(seconds: float, f, release=None):
+    """``f()``'s result or exception, failing if it has not returned after ``seconds`` (``release()`` then unblocks
+    it, so that the test does not hang)."""
+    import threading
+
+    out: dict = {}
+
+    def run():
+        try:
+            out["value"] = f()
+        except BaseException as e:
+            out["error"] = e
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    t.join(seconds)
+    if t.is_alive():
+        if release is not None:
+            release()
+        t.join(5.0)
+        pytest.fail(f"did not return within {seconds} s")
+    return out
+
+
+def _release_fifo(path: Path):
+    def release():
+        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+        os.close(fd)
+    return release
+
+
+def not_regular(tmp_path: Path) -> dict[str, tuple[Path, str]]:
+    """Files that are not regular files, and what the refusal calls them."""
+    fifo = tmp_path / "fifo.yaml"
+    os.mkfifo(fifo)
+    folder = tmp_path / "folder.yaml"
+    folder.mkdir()
+    return {"fifo": (fifo, "is a FIFO (named pipe)"), "dev_zero": (Path("/dev/zero"), "is a character device"),
+            "folder": (folder, "is a folder")}
+
+
+def test_only_regular_files_are_read_never_blocking(tmp_path: Path):
+    for path, kind in not_regular(tmp_path).values():
+        release = _release_fifo(path) if kind.startswith("is a FIFO") else None
+        out = _finishes_within(1.0, lambda p=path: load_calibration(p), release)
+        assert isinstance(out.get("error"), CalibrationFileError), out
+        assert str(out["error"]) == f"{path}: {kind}, not a calibration file (not read)"
+        assert _finishes_within(1.0, lambda p=path: store.is_calibration_file(p), release)["value"] is False
+    # a FIFO or a folder at the target is never replaced
+    fifo = tmp_path / "fifo.yaml"
+    with pytest.raises(CalibrationFileError, match="is a FIFO"):
+        save_calibration(fifo, calibration(), replace_other=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo.yaml", "folder.yaml"]
+
+
+def test_reads_are_bounded_in_size(tmp_path: Path):
+    huge = tmp_path / "huge.yaml"
+    with huge.open("wb") as f:  # 4 GiB, sparse: nothing of it is read
+        f.truncate(4 << 30)
+    out = _finishes_within(1.0, lambda: load_calibration(huge))
+    assert str(out["error"]) == f"{huge}: is {4 << 30} bytes, over the 64 KiB a calibration file can be (not read)"
+    # a calibration with a comment that makes it just too large; the same just within the bound loads
+    text = to_yaml(calibration())
+    padded = tmp_path / "padded.yaml"
+    padded.write_text(text + "#" * (store.MAX_FILE_BYTES - len(text.encode())) + "\n")
+    with pytest.raises(CalibrationFileError, match="over the 64 KiB"):
+        load_calibration(padded)
+    padded.write_text(text + "#" * (store.MAX_FILE_BYTES - len(text.encode()) - 1) + "\n")
+    assert load_calibration(padded) == calibration()
+    # nesting as deep as 64 KiB allows (libyaml crashes composing it) is refused, flow and block style alike
+    deep = _write(tmp_path, "[" * 30000 + "]" * 30000)
+    with pytest.raises(CalibrationFileError, match="nested over 8 deep"):
+        load_calibration(deep)
+    with pytest.raises(CalibrationFileError, match="nested over 8 deep"):
+        load_calibration(_write(tmp_path, "- " * 30000 + "x\n"))
+    assert not store.is_calibration_file(deep)
+
+
+def test_a_replaced_file_keeps_its_mode_a_new_one_gets_the_umask(tmp_path: Path):
+    path = save_calibration(tmp_path / "mag.yaml", calibration())
+    os.chmod(path, 0o640)
+    save_calibration(path, calibration(windows=99))
+    assert (path.stat().st_mode & 0o777) == 0o640 and load_calibration(path).windows == 99
+    for umask, mode in ((0o077, 0o600), (0o022, 0o644)):
+        old = os.umask(umask)
+        try:
+            new = save_calibration(tmp_path / f"new{umask:o}.yaml", calibration())
+        finally:
+            os.umask(old)
+        assert (new.stat().st_mode & 0o777) == mode
+
+
+def test_temporary_files_left_by_a_cut_off_save_are_removed(tmp_path: Path):
+    path = save_calibration(tmp_path / "mag.yaml", calibration())
+    left = tmp_path / ".mag.yaml.1a2b3c4d.tmp"
+    left.write_text("half a calibra")
+    other = tmp_path / ".other.yaml.1a2b3c4d.tmp"  # another file's: not ours to remove
+    other.write_text("x")
+    link = tmp_path / ".mag.yaml.link.tmp"  # a link is no file a save wrote
+    link.symlink_to(path)
+    assert store.remove_temporaries(path) == [left]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".mag.yaml.link.tmp", ".other.yaml.1a2b3c4d.tmp", "mag.yaml"]
+    assert store.remove_temporaries(tmp_path / "missing" / "mag.yaml") == []
+
+
+def test_a_refused_calibration_is_never_written(tmp_path: Path):
+    bad = calibration(soft_iron=(-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0))
+    with pytest.raises(CalibrationFileError, match="the calibration is refused: mag_soft_iron holds a rotation of 180"):
+        save_calibration(tmp_path / "mag.yaml", bad)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_less_certain():
+    file = calibration()  # calibrated, 0.5 µT per axis
+    assert store.less_certain(calibration(state="converging"), file) == \
+        "the file's calibration is calibrated, the current one converging"
+    assert store.less_certain(calibration(state="uncalibrated"), calibration(state="converging")) is not None
+    assert store.less_certain(calibration(state="calibrated"), calibration(state="converging")) is None
+    wider = np.diag(np.r_[np.full(9, 1e-4), np.full(3, (0.8e-6) ** 2)])
+    why = store.less_certain(calibration(covariance=tuple(wider.reshape(144))), file)
+    assert why == "the file's hard iron is known to ±0.87 µT, the current one's to ±1.39 µT (both calibrated)"
+    assert store.less_certain(file, calibration(covariance=tuple(wider.reshape(144)))) is None
+    assert store.less_certain(calibration(windows=400), file) is None  # as certain: the newer one is written

@@ -7,14 +7,21 @@ calibration starts again from the file read at start (which it leaves as it is),
 
 from __future__ import annotations
 
+import os
+import stat
+import threading
+import time
+
 import numpy as np
 import pytest
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped
+from rcl_interfaces.msg import ParameterType
 from sensor_msgs.msg import Imu, MagneticField
 from std_srvs.srv import Trigger
 from test_nodes_node_base import RATE, motion, send
-from test_nodes_parameters import set_param
+from test_nodes_parameters import get_params, set_param, started
 
 from conftest import wait_for, wait_matched
 from helpers_ros import quats, stamp_ns
@@ -22,8 +29,8 @@ from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
 from riann_ros.magcal.input import MagConfig, pair_fields
 from riann_ros.magcal.records import CALIBRATED, IDENTITY_9, STATES, UT, MagCalibration, MagCalPrior
-from riann_ros.magcal.store import load_calibration, save_calibration
-from riann_ros.nodes.mag_calibration import SAVE_SERVICE
+from riann_ros.magcal.store import less_certain, load_calibration, save_calibration, to_yaml
+from riann_ros.nodes.mag_calibration import SAVE_FORCE_SERVICE, SAVE_SERVICE, CalibrationFile
 from riann_ros.nodes.vqf_node import VqfNode
 from riann_ros.stream import EstimatorStream, GateConfig
 
@@ -117,14 +124,20 @@ def test_saved_once_loaded_at_the_next_start(ros, start_node, tmp_path):
     log = node2.output()
     assert f"mag_calibration_file {path} loaded: {cal.state}" in log
     config = MagConfig(mag_hard_iron=cal.hard_iron_t, mag_soft_iron=cal.soft_iron)
-    equal_quats(q_node2, offline("riann", stamps2, acc2, gyr2, raw2, sent2, config,
-                                 MagCalPrior.from_calibration(cal)))
+    q_off2, stream2 = offline_run("riann", stamps2, acc2, gyr2, raw2, sent2, config, MagCalPrior.from_calibration(cal))
+    equal_quats(q_node2, q_off2)
     _, values2 = diag_values(diags2, "riann_node")
     assert values2["mag calibration file"] == f"{path} (loaded at start)"
     assert int(values2["mag calibration windows (used / rejected)"].split(" / ")[0]) >= cal.windows
-    # saved again: the same file, replaced (it is a calibration file)
+    # saved again: this run's estimate (learnt from the broad prior, not from the file's σ, over 6 s of motion) is
+    # less certain than the file's (8 s), so the file is kept; the force service replaces it (a calibration file)
+    now = stream2.mag_calibration()
+    assert now is not None and less_certain(now, cal) is not None
     res2 = save(ros, "riann_node")
-    assert res2.success and load_calibration(path).windows >= cal.windows
+    assert not res2.success and res2.message.startswith("kept the file: the file's hard iron is known to ±")
+    assert load_calibration(path) == cal
+    res3 = trigger(ros, "riann_node", SAVE_FORCE_SERVICE)
+    assert res3.success and load_calibration(path).windows >= cal.windows
 
 
 def test_a_bad_file_is_refused_and_never_replaced(ros, start_node, tmp_path):
@@ -257,3 +270,134 @@ def test_restart_starts_the_calibration_again_from_mag_hard_iron_set_since(ros, 
     q_file = offline("vqf", stamps, acc, gyr, raw, sent, at_start, MagCalPrior.from_calibration(cal))
     assert quat_distance(q_h2, q_file) > 1e-2
     assert quat_distance(q_h2, offline("vqf", stamps, acc, gyr, raw, sent, MagConfig(), None)) > 1e-2
+
+
+# ---- files and values that are no calibration: one WARN, the node runs on its parameters, never an exit or a hang --
+def _doc_file(path, change) -> str:
+    """A calibration file with ``change`` applied to its YAML document (written as text: the store writes no
+    calibration validation refuses)."""
+    cov = np.diag(np.r_[np.full(9, 1e-4), np.full(3, (0.5 * UT) ** 2)])
+    doc = yaml.safe_load(to_yaml(MagCalibration(hard_iron_t=tuple(H_UT * UT), soft_iron=IDENTITY_9,
+                                                covariance=tuple(cov.reshape(144)), state=CALIBRATED, windows=12,
+                                                converged_after_s=41.5, soft_iron_model="full")))
+    change(doc)
+    path.write_text(yaml.safe_dump(doc))
+    return str(path)
+
+
+def _fifo(path) -> str:
+    os.mkfifo(path)
+    return str(path)
+
+
+def _folder(path) -> str:
+    path.mkdir()
+    return str(path)
+
+
+def _huge(path) -> str:
+    with path.open("wb") as f:  # 4 GiB, sparse
+        f.truncate(4 << 30)
+    return str(path)
+
+
+#: the issue's list: (how to make it, what the refusal says)
+BAD_FILES = {
+    "covariance_1e308": (lambda p: _doc_file(p, lambda d: d["mag_calibration"].update(covariance=[1e308] * 144)),
+                         "covariance: a standard deviation is over its bound"),
+    "hard_iron_999uT": (lambda p: _doc_file(p, lambda d: d.update(mag_hard_iron=[999e-6, 0.0, 0.0])),
+                        "mag_hard_iron |h| = 999 µT is over 933 µT"),
+    "soft_iron_reflection": (lambda p: _doc_file(p, lambda d: d.update(mag_soft_iron=[-1, 0, 0, 0, -1, 0, 0, 0, 1])),
+                             "mag_soft_iron holds a rotation of 180.0°"),
+    "soft_iron_1500": (lambda p: _doc_file(p, lambda d: d.update(mag_soft_iron=[1500, 0, 0, 0, 1500, 0, 0, 0, 1500])),
+                       "mag_soft_iron scales the field by 1500–1500"),
+    "fifo": (_fifo, "is a FIFO (named pipe), not a calibration file (not read)"),
+    "dev_zero": (lambda p: "/dev/zero", "is a character device, not a calibration file (not read)"),
+    "folder": (_folder, "is a folder, not a calibration file (not read)"),
+    "huge": (_huge, f"is {4 << 30} bytes, over the 64 KiB a calibration file can be (not read)"),
+}
+
+
+@pytest.mark.parametrize(("name", "bad"), [("riann", "covariance_1e308"), ("vqf", "covariance_1e308"),
+                                           ("vqf", "hard_iron_999uT"), ("riann", "soft_iron_reflection"),
+                                           ("vqf", "soft_iron_1500"), ("riann", "fifo"), ("vqf", "dev_zero"),
+                                           ("vqf", "folder"), ("vqf", "huge")])
+def test_a_file_that_is_no_calibration_is_refused_and_the_node_runs(ros, start_node, tmp_path, name, bad):
+    make, reason = BAD_FILES[bad]
+    path = make(tmp_path / "mag.yaml")
+    # what the node runs at start, timed: it returns (no hang) within 1 s, with one warning
+    box: dict = {}
+    reader = threading.Thread(target=lambda: box.update(file=CalibrationFile(path)), daemon=True)
+    t0 = time.monotonic()
+    reader.start()
+    reader.join(1.0)
+    assert not reader.is_alive(), f"reading {path} did not return within 1 s"
+    assert time.monotonic() - t0 < 1.0
+    assert [level for level, _ in box["file"].log] == ["warning"] and box["file"].loaded is None
+    node = start_node(f"{name}_node", "-p", "input_qos:=reliable", "-p", f"nominal_rate:={RATE}",
+                      "-p", f"mag_calibration_file:={path}", "-p", "diagnostics_period:=0.2")
+    stamps, acc, gyr, raw, sent, q_node, diags = run_node(ros, node, name, 2.0, seed=4)
+    log = node.output()
+    assert log.count("mag_calibration_file refused") == 1 and log.count("WARN") == 1, log
+    assert f"mag_calibration_file refused: {path}: {reason}" in log and "running on the parameters" in log
+    equal_quats(q_node, offline(name, stamps, acc, gyr, raw, sent, MagConfig(), None))  # on its parameters
+    level, values = diag_values(diags, f"{name}_node")
+    assert level == DiagnosticStatus.WARN and values["mag calibration file"].endswith("(refused at start: see the log)")
+    assert node.stop() == 0  # SIGINT ends it at once (a node blocked on a FIFO ignored it)
+    if bad == "fifo":
+        assert stat.S_ISFIFO(os.stat(path).st_mode)  # left as it was
+
+
+def test_refused_parameter_values_at_start_and_at_run_time(ros, start_node):
+    """At start a refused ``mag_hard_iron`` / ``mag_soft_iron`` is replaced by its default (one WARN each); at run time
+    a refused value is not applied (the set fails with the reason, one WARN) and the value in use stays."""
+    node = start_node("vqf_node", "-p", "input_qos:=reliable", "-p", f"nominal_rate:={RATE}",
+                      "-p", "mag_soft_iron:=[-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0]",
+                      "-p", "mag_hard_iron:=[0.000999, 0.0, 0.0]")
+    stamps, acc, gyr, raw, sent, q_node, _ = run_node(ros, node, "vqf", 2.0, seed=5)
+    log = node.output()
+    assert log.count("WARN") == 2, log
+    assert ("parameter mag_soft_iron = [-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0] refused: mag_soft_iron holds a "
+            "rotation of 180.0°") in log
+    assert "the node runs on its default [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]" in log
+    assert "parameter mag_hard_iron = [0.000999, 0.0, 0.0] refused: mag_hard_iron |h| = 999 µT" in log
+    assert get_params(ros, "/vqf_node", ["mag_hard_iron", "mag_soft_iron"]) == {
+        "mag_hard_iron": (ParameterType.PARAMETER_DOUBLE_ARRAY, (0.0, 0.0, 0.0)),
+        "mag_soft_iron": (ParameterType.PARAMETER_DOUBLE_ARRAY, IDENTITY_9)}
+    equal_quats(q_node, offline("vqf", stamps, acc, gyr, raw, sent, MagConfig(), None))
+    ok, reason = set_param(ros, "/vqf_node", "mag_soft_iron", (6.0, 0.0, 0.0, 0.0, 6.0, 0.0, 0.0, 0.0, 6.0))
+    assert not ok and reason.startswith("mag_soft_iron refused: mag_soft_iron scales the field by 6–6")
+    assert reason.endswith("(the value in use stays)")
+    wait_for(lambda: node.output().count("WARN") == 3, 5, "the warning")
+    assert f"parameters not changed: {reason}" in node.output()
+    assert get_params(ros, "/vqf_node", ["mag_soft_iron"])["mag_soft_iron"][1] == IDENTITY_9
+    assert set_param(ros, "/vqf_node", "mag_hard_iron", (20e-6, 0.0, -10e-6)) == (True, "")  # a good one is taken
+
+
+def test_the_save_service_never_downgrades_unless_forced(ros, start_node, tmp_path):
+    """Started with a calibrated file and given no data, ``~/save_mag_calibration`` keeps the file as it was (bytes,
+    mode, time) and says so; ``~/save_mag_calibration_force`` replaces it, keeping its mode. A temporary file a cut-off
+    save left beside it is removed at the start."""
+    folder = tmp_path / "cal"
+    folder.mkdir()
+    path = folder / "mag.yaml"
+    saved(path, H_UT)
+    os.chmod(path, 0o640)
+    left = folder / ".mag.yaml.0badc0de.tmp"
+    left.write_text("half a calibra")
+    before = path.read_bytes(), path.stat().st_mode, path.stat().st_mtime_ns
+    node = start_node("riann_node", "-p", f"mag_calibration_file:={path}")
+    started(node)
+    res = save(ros, "riann_node")
+    assert f"removed {left}: a temporary file left by a save of {path} that was cut off" in node.output()
+    assert [p.name for p in folder.iterdir()] == ["mag.yaml"]
+    assert not res.success
+    assert res.message == (f"kept the file: the current calibration adds no window of rotation to the 12 of the file "
+                           f"loaded at start; {path} not written (~/save_mag_calibration_force replaces it)")
+    assert (path.read_bytes(), path.stat().st_mode, path.stat().st_mtime_ns) == before
+    res = trigger(ros, "riann_node", SAVE_FORCE_SERVICE)
+    assert res.success and res.message.startswith(f"wrote {path}: converging, hard iron"), res.message
+    assert load_calibration(path).state == "converging" and (path.stat().st_mode & 0o777) == 0o640
+    assert [p.name for p in folder.iterdir()] == ["mag.yaml"]
+    assert f"{SAVE_FORCE_SERVICE}: wrote {path}" in node.output()
+    assert node.stop() == 0  # a refusal then a write (a warning, then an info) leave it running

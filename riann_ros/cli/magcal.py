@@ -9,7 +9,9 @@ The command line (options, exit status) is :mod:`riann_ros.cli.magcal_parser`. T
 samples the nodes' way); the fit and its checks are :func:`riann_ros.magcal.bag_fit.calibrate_recording`, the file
 :func:`riann_ros.magcal.store.save_calibration` (atomic; an existing calibration file is replaced only with
 ``--force``, any other file never), the figures :mod:`riann_ros.magcal.plots`. Nothing is written when the input
-cannot be read or gives nothing to calibrate from (exit status 1). Reference: docs/magnetometer.md.
+cannot be read or gives nothing to calibrate from, or when validation by physics (:mod:`riann_ros.magcal.validate`)
+refuses the ``--prior`` (its file, or its calibrated field on this recording) or the result (exit status 1, one line
+naming the file and the reason). Reference: docs/magnetometer.md.
 """
 
 from __future__ import annotations
@@ -18,6 +20,9 @@ import argparse
 import math
 import sys
 from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
 
 from riann_ros.cli.magcal_parser import (
     EXIT_CALIBRATED,
@@ -81,6 +86,32 @@ def _prior(args: argparse.Namespace) -> MagCalPrior | None:
     return None if args.prior is None else MagCalPrior.from_calibration(load_calibration(args.prior))
 
 
+class Refused(ValueError):
+    """A calibration validation refuses (message: which file, why)."""
+
+
+def _check_prior(args: argparse.Namespace, prior: MagCalPrior | None, mag: NDArray[np.float64] | None) -> None:
+    """Refuse a ``--prior`` whose calibrated field on this recording's readings is not an Earth field."""
+    from riann_ros.magcal.validate import field_norm_refusals, typical_field_norm_t
+
+    norm = None if prior is None or mag is None else typical_field_norm_t(prior.hard_iron_t, prior.soft_iron, mag)
+    reasons = [] if norm is None else field_norm_refusals(norm)
+    if reasons:
+        raise Refused(f"--prior {args.prior}: refused on {args.bag.name}'s readings: {'; '.join(reasons)}; nothing "
+                      "written")
+
+
+def _check_result(args: argparse.Namespace, rf: RecordingFit) -> None:
+    """Refuse a fitted calibration that validation refuses (its calibrated readings' norm included)."""
+    from riann_ros.magcal.validate import calibration_refusals, typical_field_norm_t
+
+    cal = rf.fit.calibration
+    norm = typical_field_norm_t(cal.hard_iron_t, cal.soft_iron, rf.raw_ut * UT)
+    reasons = calibration_refusals(cal, norm)
+    if reasons:
+        raise Refused(f"{args.bag}: the fitted calibration is refused: {'; '.join(reasons)}; nothing written")
+
+
 def format_fit(rf: RecordingFit) -> str:
     """The fit as printed: the estimate with its σ, the state, the residual and the checks."""
     f = rf.fit
@@ -121,8 +152,12 @@ def _run(args: argparse.Namespace) -> int:
     try:
         prior = _prior(args)
         rec = read_whole(args.bag, topics)
+        _check_prior(args, prior, rec.mag)
         rf = calibrate_recording(rec, gyro_motion, prior, args.soft_iron_model, _delay(args))
-    except (EvalError, CalibrationFileError) as exc:
+    except CalibrationFileError as exc:
+        _err(f"--prior {exc}; nothing written")
+        return EXIT_FAILED
+    except (EvalError, Refused) as exc:
         _err(str(exc))
         return EXIT_FAILED
     except NotCalibratable as exc:
@@ -130,6 +165,11 @@ def _run(args: argparse.Namespace) -> int:
         _err(f"{args.bag}: {exc}{hint}; nothing written")
         return EXIT_FAILED
     print(format_fit(rf))
+    try:
+        _check_result(args, rf)
+    except Refused as exc:
+        _err(str(exc))
+        return EXIT_FAILED
     if args.out is not None:
         try:
             save_calibration(args.out, rf.fit.calibration)

@@ -37,5 +37,5 @@ heading's σ; once they reject it the estimate and its σ take over (docs/magnet
 
 Modules: :mod:`.records` (frozen records and the physical constants), :mod:`.windows`, :mod:`.model`,
 :mod:`.solver`, :mod:`.hypothesis`, :mod:`.online`, :mod:`.offline`, :mod:`.store` (the YAML file),
-:mod:`.synthetic` (test sensors).
+:mod:`.validate` (validation by physics of any calibration taken), :mod:`.synthetic` (test sensors).
 """

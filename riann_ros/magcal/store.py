@@ -13,30 +13,45 @@
       soft_iron_model: symmetric
       covariance: [...]            # 144 numbers: 12x12 row-major over (soft iron row-major, hard iron in T)
 
-:func:`save_calibration` writes atomically (a temporary file in the same folder, flushed and synced, then renamed
-over the target): a crash leaves the old file or the new one, never half of one. It only writes the path it is
-given, and refuses to replace a file there that is not a calibration file (a parameter file given by mistake, say)
-unless told to. :func:`load_calibration` refuses a file that is not one, or whose numbers are not a usable
-calibration, with a :class:`CalibrationFileError` naming the file and the problem; the node then runs on its
-parameters.
+:func:`save_calibration` writes atomically (a temporary file ``.<name>.<random>.tmp`` in the same folder, flushed
+and synced, then renamed over the target): a crash leaves the old file or the new one, never half of one, and at
+worst the temporary file, which :func:`remove_temporaries` removes (the node does at its next start). The new file
+keeps the mode of the one it replaces (a new one gets the process's umask). It only writes the path it is given,
+never a calibration :mod:`~riann_ros.magcal.validate` refuses, and refuses to replace a file there that is not a
+calibration file (a parameter file given by mistake, say) unless told to, and anything but a regular file always.
+
+:func:`load_calibration` refuses a file that is not one, or whose numbers are not a usable calibration
+(:func:`riann_ros.magcal.validate.refusals`), with a :class:`CalibrationFileError` naming the file and the problem;
+the node then runs on its parameters. Reading is bounded in size and time: only a regular file is opened (a FIFO, a
+device such as ``/dev/zero``, a folder or a socket is refused from its ``stat``, and the open itself cannot block),
+and only up to :data:`MAX_FILE_BYTES`.
+
+:func:`less_certain` says whether a calibration would downgrade the one in a file (the node's save service keeps
+the file then, unless forced).
 """
 
 from __future__ import annotations
 
 import math
 import os
-import tempfile
+import secrets
+import stat
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
-from riann_ros.magcal.records import SOFT_IRON_MODELS, STATES, USABLE_MAX_T, MagCalibration
+from riann_ros.magcal.records import SOFT_IRON_MODELS, STATES, UT, MagCalibration
+from riann_ros.magcal.validate import calibration_refusals
 
 FORMAT = "riann_ros.magcal/1"
 SECTION = "mag_calibration"
-MAX_CONDITION = 1e3  # a soft-iron matrix more ill-conditioned than this is not a calibration (an axis ~lost)
+#: bytes; the largest file read as a calibration. A calibration file is about 4 KB (156 numbers and a header); 16
+#: times that leaves room for comments, and YAML of this size parses in about 0.05 s (libyaml; 0.6 s without it).
+MAX_FILE_BYTES = 64 * 1024
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's parser where PyYAML was built with it
+#: the deepest YAML nesting read: the format nests three deep (the file, its section, the covariance list)
+MAX_DEPTH = 8
 HEADER = ("# magnetometer calibration (riann_ros.magcal); load it with the node parameter mag_calibration_file\n"
           "# mag_hard_iron: T, sensor frame; mag_soft_iron: row-major S, the field used is S (m_raw - mag_hard_iron)\n"
           "# covariance: 12x12 row-major over (soft iron row-major, hard iron in T)\n")
@@ -59,26 +74,144 @@ def to_yaml(cal: MagCalibration) -> str:
     return HEADER + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=10_000)
 
 
-def is_calibration_file(path: Path) -> bool:
-    """Whether ``path`` holds a calibration file of this format (False for anything unreadable)."""
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def read_text(path: str | os.PathLike[str]) -> str:
+    """The text of the file at ``path``, read bounded in size and time (module docstring); CalibrationFileError
+    naming the file when it is not a regular file, is over :data:`MAX_FILE_BYTES`, cannot be read or is not
+    UTF-8."""
+    where = str(path)
     try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):
+            raise CalibrationFileError(f"{where}: is {_kind(st.st_mode)}, not a calibration file (not read)")
+        if st.st_size > MAX_FILE_BYTES:
+            raise CalibrationFileError(f"{where}: is {st.st_size} bytes, over the {MAX_FILE_BYTES // 1024} KiB a "
+                                       "calibration file can be (not read)")
+        # non-blocking: a FIFO swapped in after the stat opens at once, and is refused by the fstat below
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | getattr(os, "O_NOCTTY", 0))
+        try:
+            mode = os.fstat(fd).st_mode
+            if not stat.S_ISREG(mode):
+                raise CalibrationFileError(f"{where}: is {_kind(mode)}, not a calibration file (not read)")
+            chunks, size = [], 0
+            while size <= MAX_FILE_BYTES and (chunk := os.read(fd, MAX_FILE_BYTES + 1 - size)):
+                chunks.append(chunk)
+                size += len(chunk)
+        finally:
+            os.close(fd)
+    except OSError as e:
+        raise CalibrationFileError(f"{where}: cannot be read ({e.strerror or e})") from None
+    if size > MAX_FILE_BYTES:
+        raise CalibrationFileError(f"{where}: is over the {MAX_FILE_BYTES // 1024} KiB a calibration file can be")
+    try:
+        return b"".join(chunks).decode("utf-8")
+    except UnicodeDecodeError:
+        raise CalibrationFileError(f"{where}: is not valid YAML (not UTF-8 text)") from None
+
+
+def _depth(text: str) -> int:
+    """How deep the YAML ``text`` nests, counted on its event stream (iterative: no recursion) up to one past
+    :data:`MAX_DEPTH`."""
+    depth = deepest = 0
+    for event in yaml.parse(text, Loader=_LOADER):
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            deepest = max(deepest, depth)
+            if depth > MAX_DEPTH:
+                break
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+    return deepest
+
+
+def _parse(path: str | os.PathLike[str]) -> Any:
+    text = read_text(path)
+    try:
+        if _depth(text) > MAX_DEPTH:  # (libyaml's composer recurses in C: a deep enough nesting crashes it)
+            raise CalibrationFileError(f"{path}: not a magnetometer calibration file (YAML nested over {MAX_DEPTH} "
+                                       "deep)")
+        return yaml.load(text, Loader=_LOADER)  # a safe loader (no Python objects)
+    except (yaml.YAMLError, RecursionError) as e:
+        raise CalibrationFileError(f"{path}: is not valid YAML ({str(e).splitlines()[0]})") from None
+
+
+def is_calibration_file(path: Path) -> bool:
+    """Whether ``path`` holds a calibration file of this format (False for anything unreadable, or not a regular
+    file)."""
+    try:
+        doc = _parse(path)
+    except CalibrationFileError:
         return False
     return isinstance(doc, dict) and isinstance(doc.get(SECTION), dict) and doc[SECTION].get("format") == FORMAT
 
 
-def save_calibration(path: str | os.PathLike[str], cal: MagCalibration, replace_other: bool = False) -> Path:
-    """Write ``cal`` to ``path`` atomically (module docstring). An existing file there is replaced only if it is a
-    calibration file, or ``replace_other``; otherwise :class:`CalibrationFileError`. Returns the path written."""
+def _temporary(target: Path, folder: Path, mode: int | None) -> tuple[int, Path]:
+    """A new temporary file beside ``target`` (open for writing): created with 0o666 less the umask, then given
+    ``mode`` (the replaced file's) when there is one."""
+    while True:
+        tmp = folder / f".{target.name}.{secrets.token_hex(4)}.tmp"
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666)
+        except FileExistsError:
+            continue
+        try:
+            if mode is not None:
+                os.fchmod(fd, mode)
+        except OSError:
+            os.close(fd)
+            tmp.unlink(missing_ok=True)
+            raise
+        return fd, tmp
+
+
+def remove_temporaries(path: str | os.PathLike[str]) -> list[Path]:
+    """Remove the temporary files a save of ``path`` left when it was cut off (``.<name>.<random>.tmp`` beside it;
+    regular files only); returns those removed."""
     target = Path(path)
-    if target.is_dir():
-        raise CalibrationFileError(f"{target}: is a folder, not a calibration file")
-    if target.exists() and not replace_other and not is_calibration_file(target):
+    folder = target.parent if str(target.parent) else Path(".")
+    prefix = f".{target.name}."
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return []
+    for e in entries:
+        if e.name.startswith(prefix) and e.name.endswith(".tmp") and e.is_file(follow_symlinks=False):
+            try:
+                os.unlink(e.path)
+            except OSError:
+                continue
+            removed.append(Path(e.path))
+    return removed
+
+
+def save_calibration(path: str | os.PathLike[str], cal: MagCalibration, replace_other: bool = False) -> Path:
+    """Write ``cal`` to ``path`` atomically (module docstring). A calibration that validation refuses is not written;
+    an existing file there is replaced only if it is a calibration file, or ``replace_other`` (and never when it is
+    not a regular file); otherwise :class:`CalibrationFileError`. Returns the path written."""
+    target = Path(path)
+    reasons = calibration_refusals(cal)
+    if reasons:
+        raise CalibrationFileError(f"{target}: the calibration is refused: {'; '.join(reasons)}")
+    try:
+        st: os.stat_result | None = os.stat(target)
+    except FileNotFoundError:
+        st = None
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        raise CalibrationFileError(f"{target}: is {_kind(st.st_mode)}, not a calibration file; not replaced")
+    if st is not None and not replace_other and not is_calibration_file(target):
         raise CalibrationFileError(f"{target}: exists and is not a magnetometer calibration file; not replaced")
     text = to_yaml(cal)
     folder = target.parent if str(target.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    fd, tmp = _temporary(target, folder, None if st is None else stat.S_IMODE(st.st_mode))
     try:
         with os.fdopen(fd, "w") as f:
             f.write(text)
@@ -86,7 +219,7 @@ def save_calibration(path: str | os.PathLike[str], cal: MagCalibration, replace_
             os.fsync(f.fileno())
         os.replace(tmp, target)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
     try:  # the rename itself survives a power loss once the folder is synced
         dfd = os.open(folder, os.O_RDONLY)
@@ -112,28 +245,10 @@ def _numbers(doc: dict[str, Any], key: str, n: int, where: str) -> tuple[float, 
     return out
 
 
-def _check(hard: tuple[float, ...], soft: tuple[float, ...], cov: tuple[float, ...], where: str) -> None:
-    if math.sqrt(sum(v * v for v in hard)) > USABLE_MAX_T:
-        raise CalibrationFileError(f"{where}: mag_hard_iron is over {USABLE_MAX_T} T (a field in µT or gauss?)")
-    s = np.asarray(soft).reshape(3, 3)
-    if np.linalg.det(s) <= 0.0 or np.linalg.cond(s) > MAX_CONDITION:
-        raise CalibrationFileError(f"{where}: mag_soft_iron is singular, a reflection or ill-conditioned "
-                                   f"(condition > {MAX_CONDITION:g})")
-    c = np.asarray(cov).reshape(12, 12)
-    scale = max(float(np.abs(c).max()), 1e-300)
-    if not np.allclose(c, c.T, rtol=1e-6, atol=1e-9 * scale) or np.linalg.eigvalsh(0.5 * (c + c.T))[0] < -1e-9 * scale:
-        raise CalibrationFileError(f"{where}: covariance is not symmetric positive semi-definite")
-
-
 def load_calibration(path: str | os.PathLike[str]) -> MagCalibration:
     """Read a calibration file (module docstring); :class:`CalibrationFileError` when it cannot be used."""
     where = str(path)
-    try:
-        doc = yaml.safe_load(Path(path).read_text())
-    except OSError as e:
-        raise CalibrationFileError(f"{where}: cannot be read ({e.strerror or e})") from None
-    except (UnicodeDecodeError, yaml.YAMLError) as e:
-        raise CalibrationFileError(f"{where}: is not valid YAML ({str(e).splitlines()[0]})") from None
+    doc = _parse(path)
     if not isinstance(doc, dict) or not isinstance(doc.get(SECTION), dict):
         raise CalibrationFileError(f"{where}: not a magnetometer calibration file (no {SECTION} section)")
     sec = doc[SECTION]
@@ -152,7 +267,28 @@ def load_calibration(path: str | os.PathLike[str]) -> MagCalibration:
         raise CalibrationFileError(f"{where}: windows must be a whole number >= 0")
     if conv is not None and (isinstance(conv, bool) or not isinstance(conv, int | float) or not conv >= 0.0):
         raise CalibrationFileError(f"{where}: converged_after_s must be a number >= 0 or null")
-    _check(hard, soft, cov, where)
-    return MagCalibration(hard_iron_t=hard, soft_iron=soft, covariance=cov, state=state,  # type: ignore[arg-type]
-                          windows=windows, converged_after_s=None if conv is None else float(conv),
-                          soft_iron_model=model)
+    cal = MagCalibration(hard_iron_t=hard, soft_iron=soft, covariance=cov, state=state,  # type: ignore[arg-type]
+                         windows=windows, converged_after_s=None if conv is None else float(conv),
+                         soft_iron_model=model)
+    reasons = calibration_refusals(cal)
+    if reasons:
+        raise CalibrationFileError(f"{where}: {'; '.join(reasons)}")
+    return cal
+
+
+def _hard_iron_var(cal: MagCalibration) -> float:
+    """T²; the hard iron's total variance (the trace of its 3×3 covariance)."""
+    return sum(v * v for v in cal.hard_iron_sd_t)
+
+
+def less_certain(new: MagCalibration, old: MagCalibration) -> str | None:
+    """Why ``new`` would downgrade ``old`` (a file's), or None when it would not: its state ranks lower
+    (uncalibrated < converging < calibrated), or at the same state its hard iron is less certain (a larger total
+    variance)."""
+    rank_new, rank_old = STATES.index(new.state), STATES.index(old.state)
+    if rank_new != rank_old:
+        return None if rank_new > rank_old else f"the file's calibration is {old.state}, the current one {new.state}"
+    if _hard_iron_var(new) > _hard_iron_var(old):
+        return (f"the file's hard iron is known to ±{math.sqrt(_hard_iron_var(old)) / UT:.2f} µT, the current one's "
+                f"to ±{math.sqrt(_hard_iron_var(new)) / UT:.2f} µT (both {new.state})")
+    return None

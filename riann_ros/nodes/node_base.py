@@ -12,6 +12,7 @@ A concrete node only names its estimator and its default output topics.
 
 from __future__ import annotations
 
+import functools
 import gc
 import math
 import os
@@ -37,7 +38,7 @@ from riann_ros.magcal.records import MagCalPrior
 from riann_ros.monitors import Level
 from riann_ros.nodes import ros_args, usage
 from riann_ros.nodes.diagnostics import Diagnostics
-from riann_ros.nodes.mag_calibration import SAVE_SERVICE, CalibrationFile
+from riann_ros.nodes.mag_calibration import SAVE_FORCE_SERVICE, SAVE_SERVICE, CalibrationFile, check_changes, start_file
 from riann_ros.nodes.outputs import Outputs, rpy_topic
 from riann_ros.nodes.parameters import NODE_PARAMS, QOS_CHOICES, NodeParameters, collect_changes
 
@@ -93,7 +94,8 @@ class EstimatorNode(Node):
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(Trigger, "~/restart", self._on_restart)
         if self.stream.estimator.USES_MAG:
-            self.create_service(Trigger, SAVE_SERVICE, self._on_save_mag_calibration)
+            for name, force in ((SAVE_SERVICE, False), (SAVE_FORCE_SERVICE, True)):
+                self.create_service(Trigger, name, functools.partial(self._on_save_mag_calibration, force=force))
         self.diag = Diagnostics(self, self.stream, self.ESTIMATOR, INPUT_TOPIC, MAG_TOPIC,
                                 float(p["diagnostics_period"]))
         self.diag.mag_file = self.mag_file
@@ -138,19 +140,18 @@ class EstimatorNode(Node):
                                   mg.MagConfig(**{s.name: p[s.name] for s in mg.MAG_PARAMS}), mag_prior=mag_prior)
 
     def _load_mag_file(self, p: dict[str, Any]) -> CalibrationFile:
-        """Read ``mag_calibration_file``: a usable file's hard and soft iron replace the parameters of those names
-        (set before the run-time callbacks exist: a start-up value, not a change); the node logs the outcome."""
-        f = CalibrationFile(p["mag_calibration_file"])
-        if f.loaded is not None:
-            p["mag_hard_iron"], p["mag_soft_iron"] = f.loaded.hard_iron_t, f.loaded.soft_iron
-            self.set_parameters([Parameter("mag_hard_iron", value=list(f.loaded.hard_iron_t)),
-                                 Parameter("mag_soft_iron", value=list(f.loaded.soft_iron))])
+        """:func:`~riann_ros.nodes.mag_calibration.start_file`; the parameters set to the values it leaves (before the
+        run-time callbacks exist: a start-up value, not a change); the node logs the outcome."""
+        f, refused = start_file(p)
+        self._params.log += refused
+        if f.loaded is not None or refused:
+            self.set_parameters([Parameter(k, value=list(p[k])) for k in ("mag_hard_iron", "mag_soft_iron")])
         return f
 
     # -- run-time parameters ----------------------------------------------------------------------
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         try:
-            changes = collect_changes(params, self._params.specs)
+            changes = check_changes(collect_changes(params, self._params.specs))
             values = {**self._values, **changes}
             new_gate = gt.GateConfig(**{s.name: values[s.name] for s in gt.GATE_PARAMS})
             new_mag = mg.MagConfig(**{s.name: values[s.name] for s in mg.MAG_PARAMS})
@@ -158,6 +159,7 @@ class EstimatorNode(Node):
             if est_changes:
                 self.stream.estimator.set_params(**est_changes)
         except (ValueError, TypeError) as e:
+            self.get_logger().warning(f"parameters not changed: {e}")
             return SetParametersResult(successful=False, reason=str(e))
         self._values = values
         self.stream.gate.config = new_gate
@@ -307,10 +309,14 @@ class EstimatorNode(Node):
                             "calibration as at start; initialising from the next sample")
         return response
 
-    def _on_save_mag_calibration(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        response.success, response.message = self.mag_file.save(self.stream.mag_calibration())
-        log = self.get_logger()
-        (log.info if response.success else log.warning)(f"{SAVE_SERVICE}: {response.message}")
+    def _on_save_mag_calibration(self, request: Trigger.Request, response: Trigger.Response,
+                                 force: bool) -> Trigger.Response:
+        response.success, response.message = self.mag_file.save(self.stream.mag_calibration(), force)
+        text = f"{SAVE_FORCE_SERVICE if force else SAVE_SERVICE}: {response.message}"
+        if response.success:  # (one severity per call site: rclpy refuses a call site that changes it)
+            self.get_logger().info(text)
+        else:
+            self.get_logger().warning(text)
         return response
 
 
@@ -331,7 +337,8 @@ def help_text(node_cls: type[EstimatorNode]) -> str:
     ]
     if est.USES_MAG:
         topics.append(("srv", SAVE_SERVICE, "std_srvs/Trigger: write the magnetometer calibration to "
-                       "mag_calibration_file"))
+                       "mag_calibration_file, unless that would downgrade the file's"))
+        topics.append(("srv", SAVE_FORCE_SERVICE, "std_srvs/Trigger: write it even over a more certain one"))
     doc = sys.modules[node_cls.__module__].__doc__ or node_cls.NODE_NAME
     return usage.usage(node_cls.NODE_NAME, doc.strip().splitlines()[0], topics, NODE_PARAMS, node_cls.ESTIMATOR,
                        est.PARAMS)
