@@ -18,13 +18,13 @@ from test_nodes_parameters import set_param
 
 from conftest import wait_for, wait_matched
 from helpers_ros import quats, stamp_ns
-from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
 from riann_ros.mag import MagConfig, pair_fields
 from riann_ros.magcal.records import CALIBRATED, IDENTITY_9, STATES, UT, MagCalibration, MagCalPrior
 from riann_ros.magcal.store import load_calibration, save_calibration
 from riann_ros.nodes.mag_calibration import SAVE_SERVICE
 from riann_ros.nodes.vqf_node import VqfNode
+from riann_ros.ros.services import call_service
 from riann_ros.stream import EstimatorStream, GateConfig
 
 pytestmark = pytest.mark.ros

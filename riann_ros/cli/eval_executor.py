@@ -1,5 +1,6 @@
 """``riann-bag-eval``'s executor options: where the inputs run, decided from ``--live``, ``--scheduler`` and
-``--jobs`` as an explicit :class:`~riann_ros.evaluation.executors.ExecutorSetting`, and the runner of ``--live``."""
+``--jobs`` as an explicit :class:`~riann_ros.evaluation.executors.ExecutorSetting`, and the runner of ``--live``
+(the evaluator's runner over the ROS layer's DDS replay: this module wires them, importing no ROS package itself)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from contextlib import AbstractContextManager, nullcontext
 
 from riann_ros import evaluation as ev
 from riann_ros.evaluation import executors
+from riann_ros.evaluation.live import LiveRunner
 from riann_ros.evaluation.runners import Runner
 
 # why --live runs in this process, whatever else is asked
@@ -41,12 +43,14 @@ def executor_setting(args: argparse.Namespace) -> executors.ExecutorSetting:
 
 
 def runner(args: argparse.Namespace) -> AbstractContextManager[Runner | None]:
-    """The live DDS runner of --live (ev.EvalError without ROS), else none (in-process)."""
+    """The runner of --live: the evaluator's :class:`~riann_ros.evaluation.live.LiveRunner` over the ROS layer's
+    :class:`~riann_ros.ros.dds_replay.DdsReplay` (ev.EvalError without ROS); else none (each input's own in-process
+    runs)."""
     if not args.live:
         return nullcontext()
     try:
-        from riann_ros.cli.live import LiveRunner
+        from riann_ros.ros.dds_replay import DdsReplay
     except ImportError as exc:
         raise ev.EvalError(f"--live needs rclpy and the ROS message packages: {exc}") from exc
     topics = args.live_topics.split(",") if args.live_topics else None
-    return LiveRunner(speed=args.speed, input_topic=args.live_input, topics=topics, use_mag=args.use_mag)
+    return LiveRunner(DdsReplay(speed=args.speed, input_topic=args.live_input, topics=topics, use_mag=args.use_mag))

@@ -13,8 +13,8 @@ rosbag2 bag with ``--imu-topic`` / ``--ground-truth-topic``, or BROAD trial file
 Full reference: docs/evaluation.md. Exit status: 0 all inputs evaluated, 1 some input failed
 (named on stderr, the others are still evaluated and reported), 130 interrupted, 2 bad command line.
 This module turns the command line (:mod:`riann_ros.cli.evaluate_parser`) into settings and prints; the work is
-one library call, :func:`riann_ros.evaluation.session.evaluate` (with :mod:`riann_ros.cli.live`'s runner for
-``--live``).
+one library call, :func:`riann_ros.evaluation.session.evaluate`. Where the inputs run (the executor setting) and the
+runner of ``--live``: :mod:`riann_ros.cli.eval_executor`.
 """
 
 from __future__ import annotations
