@@ -210,3 +210,72 @@ def test_scheduler_does_not_combine_with_jobs_or_live(capsys):
     assert "does not combine with --jobs" in capsys.readouterr().err
     assert executors.parse_scheduler("local:3") == ("local", 3)
     assert executors.parse_scheduler(" tcp://10.0.0.1:8786 ") == ("tcp://10.0.0.1:8786", 0)
+
+
+def _rows_without_timing(rep) -> list[dict]:
+    return [{k: v for k, v in row.to_dict().items() if k not in TIMING} for row in rep.rows]
+
+
+@pytest.mark.slow
+def test_in_process_pool_and_dask_give_identical_results_on_the_bundled_bags():
+    """The one loop over the inputs (executors.map_inputs) on each executor setting: the same rows, number for number
+    (NaN where one is NaN), in input order."""
+    from riann_ros import evaluation as ev
+    from riann_ros.evaluation.executors import ExecutorSetting
+    from riann_ros.evaluation.fleet import Scale
+    from riann_ros.evaluation.session import EvalRun
+    from riann_ros.evaluation.session import evaluate as run_session
+
+    bags = tuple(sorted(str(p) for p in (ROOT / "bags").glob("synthetic_*.mcap")))
+    settings = ev.EvalSettings(ev.parse_estimators("madgwick,vqf"), scenarios=[ev.REALISTIC, ev.AS_RECORDED],
+                               conditions=[ev.parse_condition("none"), ev.parse_condition("bias:3,3,0")])
+    got = {}
+    for setting in (ExecutorSetting.in_process(), ExecutorSetting.pool(2), ExecutorSetting.dask("local:2")):
+        rep = run_session(EvalRun(bags, settings, scale=Scale(setting)))
+        assert not rep.failures, rep.failures
+        got[setting.kind.value] = _rows_without_timing(rep)
+    ref = got.pop("in-process")
+    assert len(ref) == len(bags) * 2 * 2 * 2  # inputs × estimators × scenarios × conditions
+    assert [r["source"] for r in ref[::8]] == list(bags)
+    for kind, rows_ in got.items():
+        assert len(rows_) == len(ref), kind
+        for a, b in zip(ref, rows_, strict=True):
+            assert a.keys() == b.keys(), kind
+            for k in a:
+                same = a[k] == b[k] or (isinstance(a[k], float) and math.isnan(a[k]) and math.isnan(b[k]))
+                assert same, (kind, a["sequence"], a["estimator"], k, a[k], b[k])
+
+
+def test_a_runner_of_this_process_is_refused_on_another_executor(tmp_path):
+    """A runner given to a run (the live DDS replay is one) lives in this process: a pool or cluster setting with one
+    is refused before any work, saying so."""
+    from riann_ros import evaluation as ev
+    from riann_ros.evaluation.executors import ExecutorSetting, InProcess, LocalPool, map_inputs
+    from riann_ros.evaluation.fleet import Fleet, Scale
+
+    settings = ev.EvalSettings(ev.parse_estimators("madgwick"))
+    bags = [str(ROOT / "bags" / "synthetic_rotation_100hz.mcap")] * 2
+    with pytest.raises(ev.EvalError, match="runs in-process only, not pool"):
+        Fleet(Scale(ExecutorSetting.pool(2)), bags, settings, runner=ev.OfflineRunner())
+    with pytest.raises(ev.EvalError, match="runs in-process only"):
+        map_inputs(ev.evaluate_source, list(enumerate(bags)), settings, LocalPool(2), lambda i, r: None,
+                   runner=ev.OfflineRunner())
+    with Fleet(Scale(ExecutorSetting.pool(2)), bags, settings) as fleet:  # without a runner: the pool
+        assert isinstance(fleet.executor(2), LocalPool) and fleet.executor(2).jobs == 2
+        assert isinstance(fleet.executor(1), InProcess)  # one input: nothing to share
+    with Fleet(Scale(ExecutorSetting.in_process()), bags, settings, runner=ev.OfflineRunner()) as fleet:
+        assert isinstance(fleet.executor(2), InProcess)
+
+
+@pytest.mark.parametrize("fields, why", [
+    ({"kind": "pool", "jobs": 0}, "pool takes N >= 1"),
+    ({"kind": "in-process", "jobs": 2}, "the others 1"),
+    ({"kind": "dask"}, "a Dask cluster needs one"),
+    ({"kind": "in-process", "scheduler": "local:2"}, "a scheduler belongs to a Dask cluster"),
+    ({"kind": "dask", "scheduler": "local:0"}, "N >= 1"),
+])
+def test_an_executor_setting_that_does_not_fit_its_kind_is_refused(fields, why):
+    from riann_ros.evaluation.executors import ExecutorKind, ExecutorSetting
+
+    with pytest.raises(ValueError, match=why):
+        ExecutorSetting(**{**fields, "kind": ExecutorKind(fields["kind"])})

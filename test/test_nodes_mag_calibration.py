@@ -25,13 +25,13 @@ from test_nodes_parameters import get_params, set_param, started
 
 from conftest import wait_for, wait_matched
 from helpers_ros import quats, stamp_ns
-from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
 from riann_ros.magcal.input import MagConfig, pair_fields
 from riann_ros.magcal.records import CALIBRATED, IDENTITY_9, STATES, UT, MagCalibration, MagCalPrior
 from riann_ros.magcal.store import less_certain, load_calibration, save_calibration, to_yaml
 from riann_ros.nodes.mag_calibration import SAVE_FORCE_SERVICE, SAVE_SERVICE, CalibrationFile
 from riann_ros.nodes.vqf_node import VqfNode
+from riann_ros.ros.services import call_service
 from riann_ros.stream import EstimatorStream, GateConfig
 
 pytestmark = pytest.mark.ros

@@ -17,9 +17,9 @@ from conftest import ROOT, rmse, wait_for, wait_matched
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
 from riann_ros import quaternion as quat
 from riann_ros import stamps as st_ns
-from riann_ros.cli.live import call_service
 from riann_ros.estimators import create
 from riann_ros.magcal.input import FIELD_STALE, FIELD_USED, MagConfig, pair_fields
+from riann_ros.ros.services import call_service
 from riann_ros.stream import EstimatorStream, GateConfig
 
 pytestmark = pytest.mark.ros

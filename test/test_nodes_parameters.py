@@ -28,11 +28,11 @@ from test_nodes_node_base import mag_msg, motion
 from conftest import ROOT, wait_for, wait_matched
 from helpers_ros import imu_msg, publish_paced, quats, stamp_ns
 from riann_ros import frames
-from riann_ros.cli.live import call_service
 from riann_ros.estimators import create, estimator_class
 from riann_ros.magcal.input import MagConfig, pair_fields
 from riann_ros.nodes.outputs import gravity_in_sensor, yaw_rotated
 from riann_ros.nodes.parameters import NODE_PARAMS
+from riann_ros.ros.services import call_service
 from riann_ros.stream import EstimatorStream, GateConfig
 
 pytestmark = pytest.mark.ros

@@ -1,22 +1,29 @@
 """The package's shape, read from the source with ``ast`` (imports at any level, inside functions too).
 
+Folder rules:
+
 - no import cycle between ``riann_ros`` modules (a deferred import inside a function counts: it is still a cycle);
-- rclpy and the ROS message/service packages only in the ROS layer (``riann_ros/nodes/``) and the CLIs
-  (``riann_ros/cli/``, whose ``--live`` replay is ROS glue);
-- the ROS layer imports the core only, never the evaluator or the CLIs;
+- rclpy and the ROS message/service packages (and ``launch``, ``ament_index_python``, …) only in the ROS layer:
+  ``riann_ros/nodes/`` (the nodes) and ``riann_ros/ros/`` (the tools that talk to them over DDS);
+- none of them under ``riann_ros/cli/``: a command wires in the ROS layer where it needs it, importing no ROS
+  package itself;
+- the ROS layer imports the core and itself only, never the evaluator or the CLIs;
 - the core (everything else) imports neither the ROS layer nor the CLIs;
-- no module over 400 lines, no function (or method) over 60, no class over 250;
 - the magnetometer wing (``riann_ros/magcal/``) imports nothing above it: no estimator, node, evaluator or CLI module;
   the estimators reach it through its front end (``magcal/frontend.py``) and its records, and no module but the
   front end (and the offline fit, which runs one over a whole recording) drives the online calibrator;
-- in the magnetometer wing and RIANN's heading stage (``estimators/riann/s7*.py``) no module over 350 lines and no
-  class over 200.
+- the README's "Layout" table names every package folder under ``riann_ros/`` (nested ones too), and no folder that
+  is not there.
+
+Sizes: no module over 400 lines, no function (or method) over 60, no class over 250; in the magnetometer wing and
+RIANN's heading stage (``estimators/riann/s7*.py``) no module over 350 lines and no class over 200.
 """
 
 from __future__ import annotations
 
 import ast
-from collections.abc import Iterator
+import re
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -36,7 +43,9 @@ ABOVE_MAGCAL = ("riann_ros.estimators", "riann_ros.nodes", "riann_ros.evaluation
 SIZE_ALLOWLIST: set[str] = set()
 ROS_ROOTS = {"rclpy", "rosidl_runtime_py", "rosidl_parser", "launch", "launch_ros", "ament_index_python", "rmw"}
 ROS_SUFFIXES = ("_msgs", "_srvs", "_interfaces")
-ROS_ROOMS = ("riann_ros.nodes", "riann_ros.cli")
+ROS_LAYER = ("riann_ros.nodes", "riann_ros.ros")
+CLI = "riann_ros.cli"
+README = ROOT / "README.md"
 
 
 def module_name(path: Path) -> str:
@@ -121,7 +130,8 @@ def is_ros(name: str) -> bool:
 
 
 def test_the_scan_sees_the_package():
-    assert {"riann_ros.stream", "riann_ros.evaluation.run", "riann_ros.nodes.riann_node"} <= set(MODULES)
+    assert {"riann_ros.stream", "riann_ros.evaluation.run", "riann_ros.nodes.riann_node",
+            "riann_ros.ros.dds_replay"} <= set(MODULES)
     assert "riann_ros.stream" in internal_edges()["riann_ros.nodes.node_base"]
 
 
@@ -134,25 +144,67 @@ def test_no_import_cycle():
     assert cycles(internal_edges()) == []
 
 
-def test_ros_imports_only_in_the_ros_layer_and_clis():
-    bad = [f"{mod}:{line} imports {name}" for mod, path in MODULES.items()
-           if not any(in_room(mod, r) for r in ROS_ROOMS)
-           for name, line in imports(mod, path) if is_ros(name)]
-    assert bad == []
+def in_ros_layer(mod: str) -> bool:
+    return any(in_room(mod, r) for r in ROS_LAYER)
 
 
-def test_ros_layer_imports_the_core_only():
-    bad = [f"{mod}:{line} imports {name}" for mod, path in MODULES.items() if in_room(mod, "riann_ros.nodes")
+def ros_imports(where: Callable[[str], bool]) -> list[str]:
+    """Every import of a ROS package by a module ``where`` says yes to (``module:line imports name``)."""
+    return [f"{mod}:{line} imports {name}" for mod, path in MODULES.items() if where(mod)
+            for name, line in imports(mod, path) if is_ros(name)]
+
+
+def test_no_ros_import_under_cli():
+    assert ros_imports(lambda mod: in_room(mod, CLI)) == []
+
+
+def test_ros_imports_only_in_the_ros_layer():
+    assert ros_imports(lambda mod: not in_ros_layer(mod)) == []
+    for room in ROS_LAYER:  # the scan finds them where they are
+        assert ros_imports(lambda mod, room=room: in_room(mod, room))
+
+
+def test_ros_layer_imports_the_core_and_itself_only():
+    bad = [f"{mod}:{line} imports {name}" for mod, path in MODULES.items() if in_ros_layer(mod)
            for name, line in imports(mod, path)
-           if in_room(name, "riann_ros.evaluation") or in_room(name, "riann_ros.cli")]
+           if in_room(name, "riann_ros.evaluation") or in_room(name, CLI)]
     assert bad == []
 
 
-def test_core_imports_neither_nodes_nor_clis():
+def test_core_imports_neither_the_ros_layer_nor_clis():
     bad = [f"{mod}:{line} imports {name}" for mod, path in MODULES.items()
-           if not any(in_room(mod, r) for r in ROS_ROOMS)
-           for name, line in imports(mod, path) if any(in_room(name, r) for r in ROS_ROOMS)]
+           if not in_ros_layer(mod) and not in_room(mod, CLI)
+           for name, line in imports(mod, path) if in_ros_layer(name) or in_room(name, CLI)]
     assert bad == []
+
+
+def layout_table(readme: str) -> str:
+    """The table of the README's "## Layout" section."""
+    section = readme.split("\n## Layout\n", 1)[1].split("\n## ", 1)[0]
+    return "\n".join(line for line in section.splitlines() if line.startswith("|"))
+
+
+def named_folders(table: str) -> set[str]:
+    """The folders a table names in backticks (``riann_ros/cli/``, ``estimators/riann/``), relative to riann_ros/."""
+    names = {n.removeprefix("riann_ros/").rstrip("/") for n in re.findall(r"`([\w/]+/)`", table)}
+    return names - {"riann_ros", ""}
+
+
+def package_folders() -> set[str]:
+    return {p.parent.relative_to(PKG).as_posix() for p in PKG.rglob("__init__.py") if p.parent != PKG}
+
+
+def test_layout_check_reads_the_folders_of_a_table():
+    table = "| core | `riann_ros/`: `estimators/` (in `estimators/riann/`), `gate.py` |\n| tools | `riann_ros/cli/` |"
+    assert named_folders(table) == {"estimators", "estimators/riann", "cli"}
+    assert named_folders(layout_table(f"# x\n\n## Layout\n\n{table}\n\n## Next\n| `other/` |")) == named_folders(table)
+
+
+def test_readme_layout_table_names_every_package_folder():
+    named, there = named_folders(layout_table(README.read_text())), package_folders()
+    assert {"cli", "nodes", "ros", "magcal", "estimators/riann"} <= there
+    assert sorted(there - named) == [], "package folders the README's Layout table does not name"
+    assert sorted(named - there) == [], "folders the README's Layout table names that are not in riann_ros/"
 
 
 def oversized(text: str) -> list[str]:

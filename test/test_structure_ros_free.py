@@ -1,4 +1,5 @@
-"""The core stays ROS-free: it imports and runs with rclpy and the message packages unavailable."""
+"""The core stays ROS-free: it imports and runs with rclpy and the message packages unavailable; so do the CLIs,
+which import the ROS layer only when a verb that needs it runs (``riann-bag-eval --live``, ``riann-topic``)."""
 
 from __future__ import annotations
 
@@ -8,16 +9,19 @@ import sys
 
 import riann_ros
 
-# every module but the ROS layer (riann_ros.nodes); the CLIs too (cli.live imports rclpy only when --live runs)
+# every module but the ROS layer (riann_ros.nodes, riann_ros.ros); the CLIs too
+ROS_LAYER = ("riann_ros.nodes", "riann_ros.ros")
 CORE = sorted(
     m.name.removeprefix("riann_ros.")
     for m in pkgutil.walk_packages(riann_ros.__path__, "riann_ros.")
-    if not m.name.startswith("riann_ros.nodes")
+    if not any(m.name == r or m.name.startswith(r + ".") for r in ROS_LAYER)
 )
 
 
 def test_core_list_is_complete():
-    assert {"stream", "bagio", "evaluation.run", "estimators.riann", "cli.evaluate"} <= set(CORE)
+    assert {"stream", "bagio", "evaluation.run", "evaluation.live", "replay", "estimators.riann", "cli.evaluate",
+            "cli.topic", "cli.eval_executor"} <= set(CORE)
+    assert not any(m.startswith(("nodes", "ros.")) or m == "ros" for m in CORE)
 
 
 def test_core_imports_without_ros():

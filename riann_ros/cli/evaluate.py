@@ -13,8 +13,8 @@ rosbag2 bag with ``--imu-topic`` / ``--ground-truth-topic``, or BROAD trial file
 Full reference: docs/evaluation.md. Exit status: 0 all inputs evaluated, 1 some input failed
 (named on stderr, the others are still evaluated and reported), 130 interrupted, 2 bad command line.
 This module turns the command line (:mod:`riann_ros.cli.evaluate_parser`) into settings and prints; the work is
-one library call, :func:`riann_ros.evaluation.session.evaluate` (with :mod:`riann_ros.cli.live`'s runner for
-``--live``).
+one library call, :func:`riann_ros.evaluation.session.evaluate`. Where the inputs run (the executor setting) and the
+runner of ``--live``: :mod:`riann_ros.cli.eval_executor`.
 """
 
 from __future__ import annotations
@@ -23,18 +23,16 @@ import argparse
 import shlex
 import sys
 import time
-from contextlib import AbstractContextManager, nullcontext
 
 from riann_ros import evaluation as ev
-from riann_ros.cli import eval_inputs, input_lists
+from riann_ros.cli import eval_executor, eval_inputs, input_lists
 from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, SETTING_OPTIONS, build_parser
 from riann_ros.cli.pipe import quiet_when_reader_leaves
 from riann_ros.cli.progress import Progress
-from riann_ros.evaluation import executors, free_report, outdir, perturb, report, seq_tables, session, store
+from riann_ros.evaluation import free_report, outdir, perturb, report, seq_tables, session, store
 from riann_ros.evaluation.estimate_bags import write_estimate_bags
 from riann_ros.evaluation.estimate_files import parse_formats, write_estimate_files
 from riann_ros.evaluation.fleet import Scale
-from riann_ros.evaluation.runners import Runner
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
 
 
@@ -59,16 +57,12 @@ def _err(msg: str) -> None:
 
 def _settings(args: argparse.Namespace) -> ev.EvalSettings:
     """The evaluation settings of the command line (ValueError / ImportError on bad usage)."""
-    if args.live and (args.tune or args.jobs > 1):
-        raise ValueError("--live runs one replay at a time: it does not combine with --tune or --jobs")
     parse_formats(args.write_format)
     if args.tune_scenario not in ev.SCENARIOS:
         raise ValueError(f"unknown --tune-scenario {args.tune_scenario!r}; known: {', '.join(ev.SCENARIOS)}")
     for t in args.tune:
         ev.parse_grid(t)
-    if args.jobs < 1:
-        raise ValueError("--jobs must be at least 1")
-    _check_scaling(args)
+    _check_resume(args)
     if not 0 <= args.offset_steps <= 50:
         raise ValueError("--offset-steps must be 0 (no search) to 50")
     have = ev.available_estimators()
@@ -100,22 +94,13 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
     return settings
 
 
-def _check_scaling(args: argparse.Namespace) -> None:
-    """--scheduler and --resume with the options they go with (ValueError otherwise)."""
+def _check_resume(args: argparse.Namespace) -> None:
+    """--resume with the options it goes with (ValueError otherwise)."""
     if args.resume and not args.out:
         raise ValueError("--resume continues the run kept in an --out folder: give --out")
     if args.resume and (args.force or args.write_estimates):
         raise ValueError("--resume does not combine with --force (which starts over) or --write-estimates (the "
                          "estimates of the inputs finished earlier are not kept)")
-    if args.scheduler is not None:
-        if args.live or args.jobs > 1:
-            raise ValueError("--scheduler runs the inputs on a Dask cluster's workers: it does not combine with "
-                             "--jobs (the cluster's workers are the parallelism) or --live")
-        executors.parse_scheduler(args.scheduler)
-        try:
-            executors.require_dask()
-        except ev.EvalError as exc:
-            raise ValueError(str(exc)) from exc
 
 
 def _plotted(args: argparse.Namespace) -> tuple[str, ...] | None:
@@ -129,18 +114,6 @@ def _plotted(args: argparse.Namespace) -> tuple[str, ...] | None:
         raise ValueError(f"--plot-perturb {unknown[0]} is not an evaluated condition (--perturb: "
                          f"{', '.join(evaluated)})")
     return labels
-
-
-def _runner(args: argparse.Namespace) -> AbstractContextManager[Runner | None]:
-    """The live DDS runner of --live (ev.EvalError without ROS), else none (in-process)."""
-    if not args.live:
-        return nullcontext()
-    try:
-        from riann_ros.cli.live import LiveRunner
-    except ImportError as exc:
-        raise ev.EvalError(f"--live needs rclpy and the ROS message packages: {exc}") from exc
-    topics = args.live_topics.split(",") if args.live_topics else None
-    return LiveRunner(speed=args.speed, input_topic=args.live_input, topics=topics, use_mag=args.use_mag)
 
 
 def _hooks(args: argparse.Namespace, n_sources: int) -> session.Hooks:
@@ -309,7 +282,7 @@ def _evaluate(args: argparse.Namespace, run: session.EvalRun) -> report.Report |
     KeyboardInterrupt."""
     started = time.perf_counter()  # the run's time includes the start of the --live nodes
     try:
-        with _runner(args) as runner:
+        with eval_executor.runner(args) as runner:
             return session.evaluate(run, runner, _hooks(args, len(run.sources)), started)
     except ev.EvalError as exc:
         _err(str(exc))
@@ -338,8 +311,9 @@ def _main(argv: list[str] | None) -> int:
     if args.select or args.select_a or args.select_b or args.metric != "rmse":
         parser.error("--select, --select-a, --select-b and --metric belong to --compare A B")
     try:
-        run = session.EvalRun(tuple(inputs), _settings(args), args.jobs, tuple(args.tune), args.tune_scenario,
-                              "riann-bag-eval " + shlex.join(argv_list), Scale(args.scheduler, args.out, _mode(args)))
+        scale = Scale(eval_executor.executor_setting(args), args.out, _mode(args))
+        run = session.EvalRun(tuple(inputs), _settings(args), tuple(args.tune), args.tune_scenario,
+                              "riann-bag-eval " + shlex.join(argv_list), scale)
         _check_out(args, run)
     except (ValueError, ImportError) as exc:
         _err(str(exc))

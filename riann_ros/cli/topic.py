@@ -7,35 +7,32 @@ Example::
     riann-topic echo /diagnostics
     riann-topic hz imu/attitude --duration 10
 
-It runs one rclpy node of its own in the DDS domain of the environment (``ROS_DOMAIN_ID``,
-``ROS_AUTOMATIC_DISCOVERY_RANGE``), finds a topic's type from the graph and imports its message class
-(any type installed in this Python: ``QuaternionStamped``, ``Imu``, ``Vector3Stamped``,
+It runs one rclpy node of its own (the ROS layer's :class:`riann_ros.ros.topics.TopicTool`) in the DDS domain of
+the environment (``ROS_DOMAIN_ID``, ``ROS_AUTOMATIC_DISCOVERY_RANGE``), finds a topic's type from the graph and
+imports its message class (any type installed in this Python: ``QuaternionStamped``, ``Imu``, ``Vector3Stamped``,
 ``DiagnosticArray``, ``MagneticField``, …). ``echo`` prints each message as YAML, like ``ros2 topic echo``;
 ``hz`` prints the receive rate every second, like ``ros2 topic hz``, and for stamped messages the rate of
 their header stamps. Exit status: 0 ok, 1 no such topic / type / no message in time, 2 bad command line,
-130 interrupted. ROS glue only: nothing in the core imports it.
+130 interrupted. This module is the command (its options, what it prints); it imports the ROS layer when it runs.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import math
 import os
 import statistics
 import sys
 import time
 from collections import deque
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
+if TYPE_CHECKING:
+    from riann_ros.ros.topics import TopicTool
+
 QOS_CHOICES = ("auto", "reliable", "best_effort")
-GIVEN_WAIT_S = 2.0  # with --type: how long to look for the topic in the graph before subscribing anyway
-
-
-class TopicError(Exception):
-    """A topic, type or message that is not there; the text says which."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -65,18 +62,6 @@ def build_parser() -> argparse.ArgumentParser:
             s.add_argument("--duration", type=float, default=0.0, metavar="S", help="exit after S seconds")
             s.add_argument("--window", type=int, default=10000, metavar="N", help="messages per statistic (10000)")
     return p
-
-
-def message_class(type_name: str) -> Any:
-    """The message class of ``pkg/msg/Name`` (or ``pkg/Name``)."""
-    parts = type_name.split("/")
-    if len(parts) not in (2, 3):
-        raise TopicError(f"message type must be pkg/msg/Name, got {type_name!r}")
-    pkg, name = parts[0], parts[-1]
-    try:
-        return getattr(importlib.import_module(f"{pkg}.msg"), name)
-    except (ImportError, AttributeError):
-        raise TopicError(f"message type {type_name} is not installed in this Python") from None
 
 
 def plain(value: Any) -> Any:
@@ -134,91 +119,6 @@ class RateStats:
     def report(self) -> list[str]:
         lines = [self._line(self.arrivals, "average rate"), self._line(self.stamps, "header stamps")]
         return [line for line in lines if line is not None]
-
-
-class TopicTool:
-    """One rclpy node in its own context, spun in the calling thread."""
-
-    def __init__(self) -> None:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node(f"riann_topic_{os.getpid()}", context=self.context,
-                                      start_parameter_services=False)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
-
-    def spin_for(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end and self.context.ok():
-            self.executor.spin_once(timeout_sec=max(0.0, min(0.05, end - time.monotonic())))
-
-    def topics(self) -> dict[str, list[str]]:
-        return dict(self.node.get_topic_names_and_types())
-
-    def resolve(self, topic: str) -> str:
-        return self.node.resolve_topic_name(topic)
-
-    def topic_type(self, topic: str, given: str | None, timeout: float) -> str:
-        """The topic's type from the graph (waiting up to ``timeout``), or ``given`` (checked against the graph once
-        the topic shows up; taken as it is when it has not shown up within ``GIVEN_WAIT_S``)."""
-        start = time.monotonic()
-        while True:
-            types = self.topics().get(topic)
-            if types and given is not None:
-                if given not in types and _short(given) not in map(_short, types):
-                    raise TopicError(f"{topic} has type {', '.join(types)}, not {given}")
-                return given
-            if types:
-                if len(types) > 1:
-                    raise TopicError(f"{topic} has several types ({', '.join(types)}): choose one with --type")
-                return types[0]
-            waited = time.monotonic() - start
-            if given is not None and waited >= min(timeout, GIVEN_WAIT_S):
-                return given
-            if waited >= timeout:
-                raise TopicError(f"no topic {topic} after {timeout:g} s ({_domain_text()}); riann-topic list shows "
-                                 "what there is")
-            self.spin_for(0.1)
-
-    def no_message(self, topic: str, type_name: str, timeout: float) -> TopicError:
-        """The error when nothing came: a type the topic's publishers have (they may have shown up only after the
-        subscription, on a slow discovery; the graph's type list would include this reader's own type) is named,
-        else that no message came."""
-        types = sorted({i.topic_type for i in self.node.get_publishers_info_by_topic(topic)})  # not our own reader
-        if types and type_name not in types and _short(type_name) not in map(_short, types):
-            return TopicError(f"{topic} has type {', '.join(types)}, not {type_name}")
-        return TopicError(f"no message on {topic} ({type_name}) in {timeout:g} s")
-
-    def qos(self, topic: str, kind: str) -> Any:
-        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-        if kind == "auto":
-            infos = self.node.get_publishers_info_by_topic(topic)
-            best_effort = any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos)
-            kind = "best_effort" if best_effort else "reliable"
-        reliability = ReliabilityPolicy.RELIABLE if kind == "reliable" else ReliabilityPolicy.BEST_EFFORT
-        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=reliability,
-                          durability=DurabilityPolicy.VOLATILE)
-
-    def subscribe(self, topic: str, type_name: str, qos_kind: str, callback: Any) -> None:
-        self.node.create_subscription(message_class(type_name), topic, callback, self.qos(topic, qos_kind))
-
-
-def _short(type_name: str) -> str:
-    return type_name.split("/")[-1]
-
-
-def _domain_text() -> str:
-    return (f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0 (unset)')}, ROS_AUTOMATIC_DISCOVERY_RANGE="
-            f"{os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '(unset)')}")
 
 
 def cmd_list(tool: TopicTool, args: argparse.Namespace) -> int:
@@ -283,6 +183,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.verb != "list" and not math.isfinite(args.timeout):
         print("riann-topic: error: --timeout must be finite", file=sys.stderr)
         return 2
+    from riann_ros.ros.topics import TopicError, TopicTool
+
     keep_stdout_clean()
     tool = TopicTool()
     try:

@@ -101,19 +101,19 @@ def best_of(rows: Iterable[ResultRow], specs: list[EstimatorSpec], scenario: str
     return {"scenario": scenario, "best": table[0], "grid": table}
 
 
-def tune(text: str, sources: Sequence[str], scenario: str, seed: int, jobs: int | Executor = 1,
+def tune(text: str, sources: Sequence[str], scenario: str, seed: int, executor: Executor | None = None,
          progress: Progress | None = None, like: EvalSettings | None = None) -> tuple[dict[str, Any], EstimatorSpec]:
     """Grid-search the estimator of tuning spec ``text`` (``"madgwick"``, ``"mahony:kp=0.5/1:ki=0/0.3"``) for the
     lowest mean RMSE on ``sources`` in ``scenario``: (the grid's results, the best spec labelled ``… tuned``).
     ``like``: the evaluation's settings, whose bag topics, rest, chunk size and ``use_mag`` (6D or 9D) the tuning
-    uses."""
+    uses; ``executor``: where the grid's runs go (None: this process)."""
     name, grid = parse_grid(text)
     specs = grid_specs(name, grid)
     settings = EvalSettings(estimators=specs, scenarios=[scenario], seed=seed, offset_steps=0)  # no offset search
     if like is not None:
         settings.topics = replace(like.topics, estimates=())
         settings.rest, settings.chunk, settings.use_mag = like.rest, like.chunk, like.use_mag
-    results = evaluate_sources(sources, settings, jobs, progress)
+    results = evaluate_sources(sources, settings, executor, progress)
     best = best_of([r for res in results if not res.error for r in res.rows], specs, scenario)
     best["estimator"] = name
     params = best["best"]["params"]

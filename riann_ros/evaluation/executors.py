@@ -1,12 +1,16 @@
 """Where the evaluator's unit of work runs (ROS-free): one input with all its rates, scenarios, perturbation
 conditions and estimators — :func:`riann_ros.evaluation.run.evaluate_source` — in this process
 (:class:`InProcess`), in a pool of local worker processes (:class:`LocalPool`, ``--jobs``), or on a Dask cluster
-(:class:`DaskCluster`, ``--scheduler``). Every executor gives the very same per-input results; they come back as
-each input finishes, with the input's index, so a caller can keep them in input order and write each at once.
+(:class:`DaskCluster`, ``--scheduler``). Which one is an explicit setting, :class:`ExecutorSetting` (its
+:class:`ExecutorKind` and, when it was forced, why); the command line decides it
+(:func:`riann_ros.cli.eval_executor.executor_setting`). Every executor gives the very same per-input results; they come
+back as each input finishes, with the input's index, so a caller can keep them in input order and write each at
+once. :func:`map_inputs` is the one loop over them.
 
 The unit is a function ``unit(source, settings) -> SequenceResult`` of the module level (pickled by reference); an
 executor treats its result as an opaque record. A unit that raises, or a worker that dies, gives a failure for that
-input only: ``SequenceResult(source, error=...)``.
+input only: ``SequenceResult(source, error=...)``. A runner given to the run (the live DDS replay) is an object of
+this process: only the in-process executor runs it.
 
 Dask (:mod:`distributed`) is an optional dependency (``pip install 'riann_ros[cluster]'``); without it
 :class:`DaskCluster` raises :class:`~riann_ros.evaluation.errors.EvalError` saying how to install it.
@@ -18,17 +22,20 @@ import os
 import socket
 import uuid
 from collections.abc import Callable, Generator, Sequence
-from contextlib import AbstractContextManager
+from contextlib import AbstractContextManager, closing
+from dataclasses import dataclass
+from enum import Enum
 from functools import partial
 from typing import Any, Protocol
 
 from riann_ros.evaluation.errors import EvalError
-from riann_ros.evaluation.results import EvalSettings, SequenceResult
+from riann_ros.evaluation.results import EvalSettings, Progress, SequenceResult
 from riann_ros.evaluation.runners import Runner
 
 Unit = Callable[[str, EvalSettings], SequenceResult]
 Item = tuple[int, str]  # (index in the input list, input path)
 Results = Generator[tuple[int, SequenceResult], None, None]  # (index, result) as each input finishes
+Keep = Callable[[int, SequenceResult], None]  # takes each finished input's (index, result)
 INSTALL_HINT = ("--scheduler needs Dask's distributed scheduler: pip install 'riann_ros[cluster]' "
                 "(or pip install -r requirements-cluster.txt from the source tree)")
 LOCAL_PREFIX = "local:"
@@ -39,6 +46,56 @@ WORKER_WAIT_S = 60.0  # how long a run waits for the first worker of a cluster
 # queued behind another on a busy worker while the other idles is the tail of a run of few inputs)
 LOCAL_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.scheduler.worker-saturation": 1.0}
 MIN_WINDOW = 64  # inputs submitted to a cluster ahead of those finished (more with more than 16 worker threads)
+
+
+class ExecutorKind(Enum):
+    """Where a run's inputs are evaluated."""
+
+    IN_PROCESS = "in-process"  # one after the other in this process
+    POOL = "pool"  # local worker processes (--jobs N)
+    DASK = "dask"  # a Dask cluster's workers (--scheduler)
+
+
+RUNNER_IN_PROCESS = ("a runner given to the run (the live DDS replay) is an object of this process: it runs "
+                     "in-process only")
+
+
+@dataclass(frozen=True)
+class ExecutorSetting:
+    """Where a run's inputs are evaluated, chosen explicitly: in this process, in a pool of ``jobs`` local worker
+    processes, or on the Dask cluster of ``scheduler`` (``tcp://HOST:PORT`` or ``local:N``); ``why``: the reason
+    when the choice was forced (e.g. ``--live``, whose replay runs in this process). ValueError when the fields do
+    not fit the kind."""
+
+    kind: ExecutorKind = ExecutorKind.IN_PROCESS
+    jobs: int = 1  # worker processes of a pool (1 otherwise)
+    scheduler: str | None = None  # a Dask cluster's scheduler (None otherwise)
+    why: str = ""
+
+    def __post_init__(self) -> None:
+        if self.jobs < 1 or (self.kind is not ExecutorKind.POOL and self.jobs != 1):
+            raise ValueError(f"{self.kind.value}: {self.jobs} worker processes (a pool takes N >= 1, the others 1)")
+        if (self.scheduler is not None) != (self.kind is ExecutorKind.DASK):
+            raise ValueError(f"{self.kind.value}: a scheduler belongs to a Dask cluster, and a Dask cluster needs one")
+        if self.scheduler is not None:
+            parse_scheduler(self.scheduler)
+
+    @classmethod
+    def in_process(cls, why: str = "") -> ExecutorSetting:
+        return cls(ExecutorKind.IN_PROCESS, why=why)
+
+    @classmethod
+    def pool(cls, jobs: int) -> ExecutorSetting:
+        return cls(ExecutorKind.POOL, jobs=jobs)
+
+    @classmethod
+    def dask(cls, scheduler: str) -> ExecutorSetting:
+        return cls(ExecutorKind.DASK, scheduler=scheduler)
+
+    def check_runner(self, runner: Runner | None) -> None:
+        """EvalError when a runner is given to a run that is not in this process."""
+        if runner is not None and self.kind is not ExecutorKind.IN_PROCESS:
+            raise EvalError(f"{RUNNER_IN_PROCESS}, not {self.kind.value}")
 
 
 class Executor(Protocol):
@@ -107,19 +164,31 @@ class LocalPool:
         pool.shutdown(wait=True)
 
 
-def local_executor(jobs: int, n_inputs: int, runner: Runner | None) -> InProcess | LocalPool:
-    """The executor of ``--jobs``: a pool when it has more than one input to share among more than one worker and the
-    estimates come from in-process runs (the live runner replays one input at a time, here)."""
-    if jobs <= 1 or n_inputs <= 1 or (runner is not None and not runner.interleaved):
+def local_executor(setting: ExecutorSetting, n_inputs: int) -> InProcess | LocalPool:
+    """The executor of an in-process or pool setting for ``n_inputs`` inputs: a pool of ``setting.jobs`` processes
+    when there is more than one input to share among more than one worker, else this process (one input or one
+    worker gains nothing from worker processes; the results are the same)."""
+    if setting.kind is ExecutorKind.DASK:
+        raise ValueError("a Dask setting's executor is its cluster (DaskCluster)")
+    if setting.kind is ExecutorKind.IN_PROCESS or setting.jobs <= 1 or n_inputs <= 1:
         return InProcess()
-    return LocalPool(jobs)
+    return LocalPool(setting.jobs)
 
 
-def unit_for(unit: Unit, executor: Executor, runner: Runner | None) -> Unit:
-    """``unit`` bound to ``runner`` when it runs in this process; a pool or cluster runs every input in-process."""
-    if runner is not None and isinstance(executor, InProcess):
-        return partial(unit, runner=runner)  # type: ignore[call-arg]
-    return unit
+def map_inputs(unit: Unit, items: Sequence[Item], settings: EvalSettings, executor: Executor, keep: Keep,
+               progress: Progress | None = None, runner: Runner | None = None) -> None:
+    """The one loop over a run's inputs, whatever the executor: ``unit`` on every ``(index, input)`` item (bound to
+    ``runner`` when one is given: in this process only, EvalError otherwise), each result handed to ``keep`` as it
+    finishes, then to ``progress``. Stopped early (an error, Ctrl-C), the executor stops what is left."""
+    if runner is not None:
+        if not isinstance(executor, InProcess):
+            raise EvalError(RUNNER_IN_PROCESS)
+        unit = partial(unit, runner=runner)  # type: ignore[call-arg]
+    with closing(executor.map(unit, items, settings)) as finished:
+        for done, (i, res) in enumerate(finished, 1):
+            keep(i, res)
+            if progress:
+                progress(done, len(items), res)
 
 
 def on_worker(unit: Unit, source: str, settings: EvalSettings) -> SequenceResult:

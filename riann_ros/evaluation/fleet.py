@@ -1,5 +1,6 @@
 """A run over many inputs (ROS-free): where its units of work run (:mod:`~riann_ros.evaluation.executors`: this
-process, ``--jobs`` processes, a Dask cluster) and, with an output folder, each finished input's result kept there
+process, ``--jobs`` processes, a Dask cluster, as its :class:`~riann_ros.evaluation.executors.ExecutorSetting`
+says) and, with an output folder, each finished input's result kept there
 at once (:mod:`~riann_ros.evaluation.store`), so a run stopped at any point keeps what it finished and a resumed run
 evaluates only the rest.
 
@@ -12,12 +13,19 @@ The stored shards hold exactly what is kept, so a resumed run writes the same fi
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from contextlib import AbstractContextManager, closing
-from dataclasses import dataclass, replace
+from contextlib import AbstractContextManager
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from riann_ros.evaluation.executors import DaskCluster, Executor, local_executor, unit_for
+from riann_ros.evaluation.executors import (
+    DaskCluster,
+    Executor,
+    ExecutorKind,
+    ExecutorSetting,
+    local_executor,
+    map_inputs,
+)
 from riann_ros.evaluation.results import EvalSettings, Progress, SequenceResult
 from riann_ros.evaluation.run import evaluate_source, evaluate_sources
 from riann_ros.evaluation.runners import Runner
@@ -30,7 +38,7 @@ Note = Callable[[str], None]
 class Scale:
     """Where a run's inputs are evaluated and kept."""
 
-    scheduler: str | None = None  # a Dask scheduler, tcp://HOST:PORT, or local:N; None: this process or --jobs
+    executor: ExecutorSetting = field(default_factory=ExecutorSetting)  # this process, a pool, a Dask cluster
     out: Path | None = None  # keep each finished input's result in out/shards as it comes (None: in memory only)
     mode: str = NEW  # for out: store.NEW, store.REPLACE (--force) or store.RESUME (--resume)
 
@@ -72,21 +80,23 @@ class _Kept:
 
 
 class Fleet(AbstractContextManager["Fleet"]):
-    """One run's executor and shard store, opened before any work: the store refuses an output folder it must not
-    write into (:class:`~riann_ros.evaluation.store.RunMismatch`), the cluster is connected (EvalError when it
-    cannot be)."""
+    """One run's executor and shard store, opened before any work: a runner (the live DDS replay) with an executor
+    setting other than in-process is refused (EvalError), the store refuses an output folder it must not write into
+    (:class:`~riann_ros.evaluation.store.RunMismatch`), the cluster is connected (EvalError when it cannot be)."""
 
-    def __init__(self, scale: Scale, sources: Sequence[str], settings: EvalSettings, jobs: int = 1,
-                 runner: Runner | None = None, tune: Sequence[str] = (), tune_scenario: str = "",
-                 note: Note | None = None) -> None:
-        self.scale, self.sources, self.jobs, self.runner = scale, list(sources), jobs, runner
+    def __init__(self, scale: Scale, sources: Sequence[str], settings: EvalSettings, runner: Runner | None = None,
+                 tune: Sequence[str] = (), tune_scenario: str = "", note: Note | None = None) -> None:
+        scale.executor.check_runner(runner)
+        self.scale, self.sources, self.runner = scale, list(sources), runner
         self.note = note or (lambda _: None)
         fp = fingerprint(settings, tune, tune_scenario)
         self.store = ShardStore(scale.out, fp, scale.mode, self.sources) if scale.out is not None else None
-        self.cluster = DaskCluster(scale.scheduler, self.note) if scale.scheduler else None
+        dask = scale.executor.scheduler if scale.executor.kind is ExecutorKind.DASK else None
+        self.cluster = DaskCluster(dask, self.note) if dask is not None else None
 
-    def executor(self) -> Executor:
-        return self.cluster if self.cluster is not None else local_executor(self.jobs, len(self.sources), self.runner)
+    def executor(self, n_inputs: int) -> Executor:
+        """The executor for a pass over ``n_inputs`` inputs (the cluster, a pool, or this process)."""
+        return self.cluster if self.cluster is not None else local_executor(self.scale.executor, n_inputs)
 
     def saved_tuning(self) -> Any:
         """The tuning a resumed run saved before (None: tune)."""
@@ -100,8 +110,8 @@ class Fleet(AbstractContextManager["Fleet"]):
         """Every input not finished yet (``progress(n)``: the callback of a pass over n inputs); all results in
         input order."""
         if self.store is None:
-            return evaluate_sources(self.sources, settings, self.executor(), progress(len(self.sources)),
-                                    self.runner)
+            return evaluate_sources(self.sources, settings, self.executor(len(self.sources)),
+                                    progress(len(self.sources)), self.runner)
         kept = _Kept(len(self.sources), settings.series_for, self.store)
         earlier = self.store.load() if self.scale.mode == RESUME else {}
         for i in sorted(earlier):
@@ -111,18 +121,9 @@ class Fleet(AbstractContextManager["Fleet"]):
         if self.scale.mode == RESUME:
             self.note(f"resuming {self.scale.out}: {len(self.sources) - len(todo)} of {len(self.sources)} input(s) "
                       f"finished earlier; evaluating {len(todo)}")
-        self._run(todo, settings, kept, progress(len(todo)) if todo else None)
+        map_inputs(evaluate_source, todo, settings, self.executor(len(todo)), kept.add,
+                   progress(len(todo)) if todo else None, self.runner)
         return [r for r in kept.results if r is not None]
-
-    def _run(self, todo: list[tuple[int, str]], settings: EvalSettings, kept: _Kept,
-             progress: Progress | None) -> None:
-        executor = self.cluster if self.cluster is not None else local_executor(self.jobs, len(todo), self.runner)
-        unit = unit_for(evaluate_source, executor, self.runner)
-        with closing(executor.map(unit, todo, settings)) as finished:
-            for done, (i, res) in enumerate(finished, 1):
-                kept.add(i, res)
-                if progress:
-                    progress(done, len(todo), res)
 
     def close(self) -> None:
         if self.cluster is not None:

@@ -14,8 +14,9 @@ The runner is where the estimates come from:
   :class:`riann_ros.stream.EstimatorStream` with the sequence's rate as ``nominal_rate``: the very code
   path of the ROS node, so offline scores are node scores. Its runs can be fed alternately, so one pass
   over a bag serves all scenarios.
-* :class:`riann_ros.cli.live.LiveRunner` replays the sequences over DDS to the estimator nodes; one
-  replay at a time (a pass per scenario).
+* :class:`~riann_ros.evaluation.live.LiveRunner` replays the sequences over DDS to the estimator nodes (through
+  the ROS layer's replay, :mod:`riann_ros.ros.dds_replay`); one replay at a time (a pass per scenario), in this
+  process only.
 * :class:`~riann_ros.evaluation.runners.RecordedRunner` serves the estimates a user's own filter recorded in the bag
   (``--estimate-topic``), which the source aligned onto each chunk's samples; they exist for the recording
   as it is only, so they join the as-recorded scenario, unperturbed, at the native rate, beside the other
@@ -29,12 +30,11 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
-from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
 
 from riann_ros.evaluation.errors import EvalError
-from riann_ros.evaluation.executors import Executor, local_executor, unit_for
+from riann_ros.evaluation.executors import Executor, InProcess, map_inputs
 from riann_ros.evaluation.first_pass import Summary, summarise
 from riann_ros.evaluation.health import StreamHealth
 from riann_ros.evaluation.input_hints import BROAD_SUFFIXES
@@ -225,16 +225,14 @@ def _evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, run
     return res
 
 
-def evaluate_sources(sources: Sequence[str], settings: EvalSettings, jobs: int | Executor = 1,
+def evaluate_sources(sources: Sequence[str], settings: EvalSettings, executor: Executor | None = None,
                      progress: Progress | None = None, runner: Runner | None = None) -> list[SequenceResult]:
-    """Evaluate inputs, in ``jobs`` worker processes when > 1 (offline only) or on an executor (a Dask cluster,
-    :mod:`~riann_ros.evaluation.executors`); results in input order."""
-    executor = local_executor(jobs, len(sources), runner) if isinstance(jobs, int) else jobs
+    """Evaluate inputs on ``executor`` (:mod:`~riann_ros.evaluation.executors`; None: in this process, the only one
+    that runs a given ``runner``); results in input order."""
     results: list[SequenceResult | None] = [None] * len(sources)
-    unit = unit_for(evaluate_source, executor, runner)
-    with closing(executor.map(unit, list(enumerate(sources)), settings)) as finished:
-        for done, (i, res) in enumerate(finished, 1):
-            results[i] = res
-            if progress:
-                progress(done, len(sources), res)
+
+    def keep(i: int, res: SequenceResult) -> None:
+        results[i] = res
+
+    map_inputs(evaluate_source, list(enumerate(sources)), settings, executor or InProcess(), keep, progress, runner)
     return [r for r in results if r is not None]

@@ -1,7 +1,7 @@
 """Where the estimates come from (ROS-free): a :class:`Runner` starts one :class:`Run` per sequence × scenario,
 fed the (perturbed) chunks in order. :class:`OfflineRunner` runs the estimators in-process through the node's
 :class:`~riann_ros.stream.EstimatorStream`; :class:`RecordedRunner` serves estimates recorded in the bag; the DDS
-replay (``--live``) is :class:`riann_ros.cli.live.LiveRunner`. See :mod:`riann_ros.evaluation.run`."""
+replay (``--live``) is :class:`riann_ros.evaluation.live.LiveRunner`. See :mod:`riann_ros.evaluation.run`."""
 
 from __future__ import annotations
 

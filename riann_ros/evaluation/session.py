@@ -29,15 +29,14 @@ from riann_ros.evaluation.scenarios import REALISTIC
 
 @dataclass(frozen=True)
 class EvalRun:
-    """What to evaluate: the inputs, the settings, the worker processes, and the grids to tune first."""
+    """What to evaluate: the inputs, the settings, the grids to tune first, and where it runs (``scale``)."""
 
     sources: tuple[str, ...]
     settings: EvalSettings
-    jobs: int = 1  # worker processes (one per input) for the in-process runner
     tune: tuple[str, ...] = ()  # tuning specs, NAME or NAME:PARAM=V1/V2/...; each best spec joins the estimators
     tune_scenario: str = REALISTIC  # the scenario whose mean RMSE the tuning minimises
     command: str = ""  # how the run was asked for (results.json: settings.command)
-    scale: Scale = field(default_factory=Scale)  # a Dask cluster instead of jobs; results kept as they come (resume)
+    scale: Scale = field(default_factory=Scale)  # the executor setting; results kept as they come (resume)
 
 
 def _no_progress(total: int) -> Progress | None:
@@ -68,7 +67,7 @@ def _tuned(run: EvalRun, settings: EvalSettings, fleet: Fleet, hooks: Hooks) -> 
     tuned = []
     for text in run.tune:
         hooks.tuning(text)
-        tuned.append(tune(text, list(run.sources), run.tune_scenario, settings.seed, fleet.executor(),
+        tuned.append(tune(text, list(run.sources), run.tune_scenario, settings.seed, fleet.executor(len(run.sources)),
                           hooks.progress(len(run.sources)), like=settings))
         hooks.tuned(tuned[-1][0])
     if tuned:
@@ -79,8 +78,9 @@ def _tuned(run: EvalRun, settings: EvalSettings, fleet: Fleet, hooks: Hooks) -> 
 def evaluate(run: EvalRun, runner: Runner | None = None, hooks: Hooks | None = None,
              started: float | None = None) -> Report:
     """Tune the grids of ``run.tune`` (each best spec is added to the estimators unless one of that label is there),
-    then evaluate every input (``runner``: None in-process, or e.g. the live DDS runner; ``run.scale``: on a Dask
-    cluster, and each finished input kept in an output folder, where a resumed run finds what is done), each under a
+    then evaluate every input (``runner``: None, each input's own in-process runs, or e.g. the live DDS runner, which
+    needs the in-process executor; ``run.scale``: the executor setting — this process, a pool, a Dask cluster — and
+    each finished input kept in an output folder, where a resumed run finds what is done), each under a
     name of its own (:func:`~riann_ros.evaluation.names.unique_names`); the report with the time it took since
     ``started`` (a ``time.perf_counter()`` value; None: now, e.g. earlier when the runner's start-up counts).
     EvalError when the run cannot go on; an input that fails is a failure in the report.
@@ -90,11 +90,12 @@ def evaluate(run: EvalRun, runner: Runner | None = None, hooks: Hooks | None = N
     t0 = time.perf_counter() if started is None else started
     sources = list(run.sources)
     settings = replace(run.settings, estimators=list(run.settings.estimators))
-    with Fleet(run.scale, sources, run.settings, run.jobs, runner, run.tune, run.tune_scenario, hooks.note) as fleet:
+    with Fleet(run.scale, sources, run.settings, runner, run.tune, run.tune_scenario, hooks.note) as fleet:
         tuned = _tuned(run, settings, fleet, hooks)
         for _, spec in tuned:
             if spec.label not in {e.label for e in settings.estimators}:
                 settings.estimators.append(spec)
         results = fleet.evaluate(settings, hooks.progress)
     unique_names(results)  # two inputs never print as one (each renamed result warns)
-    return Report(run.command, sources, settings, results, time.perf_counter() - t0, run.jobs, [t for t, _ in tuned])
+    return Report(run.command, sources, settings, results, time.perf_counter() - t0, run.scale.executor.jobs,
+                  [t for t, _ in tuned])
