@@ -242,16 +242,7 @@ class OnlineMagCalibrator:
     # -------------------------------------------------------------------------------------------------- outputs
     def calibration(self) -> MagCalibration:
         """The calibration :attr:`in_use` as a record (for the saved file and the node)."""
-        theta = self.in_use
-        a, h = self.model.split(theta)
-        cov = self.model.output_covariance(theta, self.covariance)
-        scale = np.r_[np.ones(9), np.full(3, UT)]
-        cov = cov * np.outer(scale, scale)
-        return MagCalibration(hard_iron_t=tuple(float(v) * UT for v in h),  # type: ignore[arg-type]
-                              soft_iron=tuple(float(v) for v in a.reshape(9)),
-                              covariance=tuple(float(v) for v in cov.reshape(144)), state=self.state,
-                              windows=self.windows, converged_after_s=self.converged_after_s,
-                              soft_iron_model=self.model.model)
+        return _record(self)
 
     def status(self) -> MagCalStatus:
         """The diagnostics record (module docstring)."""
@@ -260,3 +251,18 @@ class OnlineMagCalibrator:
                             heading_sd_bound_rad=self.s.bound, windows=self.windows, rejected=self.rejected,
                             unit_weight=self.unit_weight, converged_after_s=self.converged_after_s,
                             prior_holds=self.trusted)
+
+
+def _record(cal: OnlineMagCalibrator) -> MagCalibration:
+    """The calibration ``cal`` uses (:attr:`OnlineMagCalibrator.in_use`) as a record: ``S``, ``h`` in T and their
+    covariance in the record's units."""
+    theta = cal.in_use
+    a, h = cal.model.split(theta)
+    cov = cal.model.output_covariance(theta, cal.covariance)
+    scale = np.r_[np.ones(9), np.full(3, UT)]
+    cov = cov * np.outer(scale, scale)
+    return MagCalibration(hard_iron_t=tuple(float(v) * UT for v in h),  # type: ignore[arg-type]
+                          soft_iron=tuple(float(v) for v in a.reshape(9)),
+                          covariance=tuple(float(v) for v in cov.reshape(144)), state=cal.state,
+                          windows=cal.windows, converged_after_s=cal.converged_after_s,
+                          soft_iron_model=cal.model.model)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import functools
 import gc
-import math
 import os
 import sys
 import time
@@ -23,7 +22,6 @@ from typing import Any, ClassVar
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, MagneticField
@@ -35,16 +33,13 @@ from riann_ros import stream as st
 from riann_ros.estimators import create, estimator_class
 from riann_ros.magcal import input as mg
 from riann_ros.magcal.records import MagCalPrior
-from riann_ros.monitors import Level
 from riann_ros.nodes import ros_args, usage
 from riann_ros.nodes.diagnostics import Diagnostics
 from riann_ros.nodes.mag_calibration import SAVE_FORCE_SERVICE, SAVE_SERVICE, CalibrationFile, check_changes, start_file
+from riann_ros.nodes.node_log import INPUT_TOPIC, MAG_TOPIC, NodeLog
 from riann_ros.nodes.outputs import Outputs, rpy_topic
 from riann_ros.nodes.parameters import NODE_PARAMS, QOS_CHOICES, NodeParameters, collect_changes
 
-INPUT_TOPIC = "imu/data_raw"
-MAG_TOPIC = "imu/mag"
-THROTTLE_S = 5.0  # at most one warning per rejection reason in this many seconds
 DRAIN_MAX = 64  # IMU messages already queued that one callback takes on (the executor's per-message overhead)
 
 
@@ -56,7 +51,7 @@ def input_qos(kind: str, depth: int) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-class EstimatorNode(Node):
+class EstimatorNode(NodeLog):
     """Subscribe IMU samples, estimate attitude, publish it. Subclasses set the class attributes.
 
     ``params_files`` (the ``--params-file`` paths of the command line) lets the node warn about sections of those
@@ -101,35 +96,6 @@ class EstimatorNode(Node):
         self.diag.mag_file = self.mag_file
         self.diag.world = self.outputs.world
         self._log_start(p, uses_mag, params_files or [], notes or [])
-
-    def _log_start(self, p: dict[str, Any], uses_mag: bool, params_files: list[str], notes: list[str]) -> None:
-        log = self.get_logger()
-        mag_text = (f"; magnetometer on '{self.resolve_topic_name(MAG_TOPIC)}' (use_mag={p['use_mag']})"
-                    if uses_mag else "; magnetometer not used")
-        log.info(
-            f"{self.ESTIMATOR} estimator on '{self.resolve_topic_name(INPUT_TOPIC)}' -> "
-            + ", ".join(f"'{self.resolve_topic_name(t)}'" for t in self.outputs.topics)
-            + f"; orientation in {self.outputs.world.upper()} (world_frame), imu/attitude in frame "
-            f"'{self.outputs.fixed_frame}'" + mag_text
-            + "; parameters: " + ", ".join(f"{k}={v}" for k, v in p.items())
-        )
-        for text in notes:
-            log.info(f"arguments: {text}")
-        warnings = []
-        for level, text in [*self._params.log, *self.mag_file.log]:
-            if level == "warning":  # (rclpy's logger wants one severity per call site)
-                log.warning(text)
-                warnings.append(text)
-            else:
-                log.info(text)
-        fqn = self.get_fully_qualified_name()
-        for path, key, names in ros_args.foreign_sections(params_files, fqn):
-            text = (f"parameter file {path}: section '{key}' does not apply to this node ({fqn}); its parameters "
-                    f"{', '.join(names)} are not used (key the section '/**' or '{self.get_name()}', or start the "
-                    f"node under that name: --ros-args -r __node:={key.rsplit('/', 1)[-1]})")
-            log.warning(text)
-            warnings.append(text)
-        self.diag.config_warnings = warnings  # WARN in /diagnostics too: values written but not applied
 
     def _new_stream(self, mag_prior: MagCalPrior | None) -> st.EstimatorStream:
         """The estimator behind its gate as built at start, from the current parameters; its online magnetometer
@@ -238,53 +204,6 @@ class EstimatorNode(Node):
         f = msg.magnetic_field
         self._mag.push(stamps.to_ns(msg.header.stamp), (f.x, f.y, f.z))
         self.diag.mag_received = self._mag.received
-
-    def _log_mag_state(self) -> None:
-        """Log the switches between 9D and 6D (auto: as they happen; the reason is in /diagnostics too)."""
-        old, new = self._mag_state, self.stream.mag.state
-        self._mag_state = new
-        if new == mg.FIELD_NONE and old in ("", mg.FIELD_NONE):
-            return  # no magnetometer so far: nothing to say (the start-up line names the topic)
-        text = f"magnetometer: {new}" + ("" if new == mg.FIELD_USED else " (heading held by the gyro)")
-        if new == mg.FIELD_USED or self.stream.mag.config.use_mag is mg.UseMag.AUTO:
-            self.get_logger().info(text)
-        else:
-            self.get_logger().warning(text)
-
-    def _log_monitors(self) -> None:
-        """One log line per monitor verdict that changed level (a trip: WARN or ERROR with its cause and fix; a
-        recovery: INFO)."""
-        for v in self.stream.monitors.pop_changes():
-            log = self.get_logger()
-            if v.level == Level.ERROR:
-                log.error(f"{v.name}: {v.message}")
-            elif v.level == Level.WARN:
-                log.warning(f"{v.name}: {v.message}")
-            else:
-                log.info(f"{v.name}: ok again")
-
-    def _log_gate_result(self, r: gt.GateResult) -> None:
-        for w in r.warnings:
-            self.get_logger().warning(gt.WARNING_TEXT[w])
-        if self._acc_in_g != self.stream.gate.acc_in_g:
-            self._acc_in_g = not self._acc_in_g
-            if not self._acc_in_g:  # (the warning itself came with r.warnings)
-                self.get_logger().info(f"accelerometer: median |acc| {self.stream.gate.acc_median:.2f} m/s² after "
-                                       "the (re)start, in m/s² as REP-145 wants")
-        if r.reset in (gt.GAP, gt.CLOCK_JUMP):
-            self.get_logger().info(f"{r.reset.replace('_', ' ')} at stamp {r.stamp_ns * 1e-9:.6f} s: estimator "
-                                   "restarted, re-initialised from this sample")
-
-    def _check_rate(self) -> None:
-        nominal = self.stream.gate.config.nominal_rate
-        if self.diag.rate.mismatch(nominal) is not None:
-            self.get_logger().warning(self.diag.rate.text(nominal))
-
-    def _warn_throttled(self, key: str, text: str) -> None:
-        now = time.monotonic()
-        if now - self._last_warn.get(key, -math.inf) >= THROTTLE_S:
-            self._last_warn[key] = now
-            self.get_logger().warning(text + " (throttled: one message per reason every 5 s; counts in /diagnostics)")
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.stream.reset()
