@@ -16,7 +16,7 @@ from riann_ros.estimators import create
 from riann_ros.gate import GateConfig
 from riann_ros.magcal.frontend import FrontEndConfig, MagFrontEnd
 from riann_ros.magcal.input import MagConfig, MagInput
-from riann_ros.magcal.records import CALIBRATED, UT, MagCalPrior
+from riann_ros.magcal.records import CALIBRATED, IDENTITY_9, UT, MagCalibration, MagCalPrior
 from riann_ros.magcal.synthetic import distort, ground_robot
 from riann_ros.stream import EstimatorStream
 
@@ -195,3 +195,27 @@ def test_the_classical_filters_calibration_tilt_is_not_tilted_by_a_linear_accele
         up = quat.rotate(np.asarray(front.tilt.q)[None], np.array([[0.0, 0.0, 1.0]]))[0]
         worst = max(worst, math.degrees(math.acos(min(1.0, up[2]))))
     assert 1.0 < worst < 6.0
+
+
+@pytest.mark.parametrize("name", ESTIMATORS)
+@pytest.mark.parametrize("calibrate", [True, False])
+def test_a_saved_calibration_20_ut_off_is_covered_from_the_first_second(name, calibrate):
+    """A calibration saved on another run, 20 µT off the hard iron there now (its covariance says ±0.5 µT): until the
+    windows have tested it the heading's σ is the doubt an untested calibration carries, so it covers the error from
+    the first second, at rest and while the first turns test it; with mag_calibration off (the test as a monitor)
+    too."""
+    rec, _ = robot(turns=3)
+    raw = distort(rec.quat_ref, H_TRUE_UT * UT, noise_t=0.4e-6, seed=2)
+    wrong = tuple(float(v) for v in (H_TRUE_UT + np.array([20.0, 0.0, 0.0])) * UT)
+    saved = MagCalibration(hard_iron_t=wrong, soft_iron=IDENTITY_9,  # type: ignore[arg-type]
+                           covariance=tuple(float(v) for v in np.diag([1e-6] * 9 + [(0.5 * UT) ** 2] * 3).ravel()),
+                           state=CALIBRATED, windows=200, converged_after_s=30.0, soft_iron_model="full")
+    s = EstimatorStream(create(name, mag_calibration=calibrate), GateConfig(nominal_rate=100.0), MagConfig(),
+                        MagCalPrior.from_calibration(saved))
+    q, ok = s.process_batch(rec.stamps_ns, rec.acc, rec.gyr, raw)
+    err = heading_error_deg(rec.quat_ref, q)
+    sig = np.degrees(s.batch_sigma[:, 1])
+    t = (rec.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    first = ok & (t >= 1.0) & (t < 20.0)
+    assert np.abs(err[first]).max() > 10.0  # the file is wrong enough to matter
+    assert np.mean(np.abs(err[first]) <= 1.96 * sig[first]) >= 0.9
