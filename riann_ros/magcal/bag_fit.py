@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from riann_ros import quaternion as quat
 from riann_ros.bagio.layout import MAG_TOPIC
+from riann_ros.magcal.heading import heading_angles
 from riann_ros.magcal.offline import OfflineFit, fit_recording, fit_windows, windows_of
 from riann_ros.magcal.records import HARD_IRON_PRIOR_SD_T, MAX_DELAY_S, UT, MagCalPrior, SoftIronModel
 from riann_ros.recording import Recording
@@ -125,8 +126,7 @@ def fresh_readings(mag: Array) -> NDArray[np.bool_]:
 
 def _north(q: Array, field: Array) -> Array:
     """The heading (rad, from world +y toward +x: magnetic north in ENU) of ``field`` (sensor frame) at ``q``."""
-    w = quat.rotate(q, field)
-    return np.arctan2(w[:, 0], w[:, 1])
+    return heading_angles(quat.rotate(q, field))
 
 
 def residual_rms_ut(gyr: Array, dt: Array, mag_t: Array, delay_s: float, prior: MagCalPrior | None = None,

@@ -11,12 +11,20 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+from numpy.typing import NDArray
+
 from riann_ros.rotations import Quat, Vec, rotate
 
 
 def heading_angle(wx: float, wy: float) -> float:
     """rad; the heading of a world-frame horizontal direction ``(wx, wy)``: its angle from +y toward +x."""
     return math.atan2(wx, wy)
+
+
+def heading_angles(w: NDArray[np.float64]) -> NDArray[np.float64]:
+    """rad; :func:`heading_angle` of world-frame fields ``w`` (N, 3), vectorised."""
+    return np.arctan2(w[:, 0], w[:, 1])
 
 
 def field_heading(q: Quat, m: Vec) -> float | None:
