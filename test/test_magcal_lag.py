@@ -1,0 +1,50 @@
+"""The magnetometer's lag scanned over 0 … mag_timeout (riann_ros.magcal.lag): a field 300 ms late is found and
+rotated back over its lag for every estimator (the heading right again), a lag the latency fit covers changes
+nothing, and the lag monitor says so."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers_mag import delayed_field, field_of, moving
+
+from riann_ros import quaternion as quat
+from riann_ros.estimators import create
+from riann_ros.magcal.lag import LagScan
+from riann_ros.monitors import Level
+from riann_ros.stream import EstimatorStream, GateConfig
+
+
+def _run(name: str, delay_ms: int, seconds: float = 40.0):
+    rec = moving(duration=seconds, seed=3)
+    k = round(delay_ms * 1e-3 * rec.rate_hz)
+    mag = delayed_field(rec, k) if k else field_of(rec.quat_ref, 0.2e-6, seed=5)
+    s = EstimatorStream(create(name), GateConfig(nominal_rate=rec.rate_hz))
+    q, _ = s.process_batch(rec.stamps_ns, rec.acc, rec.gyr, mag)
+    t = (rec.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    err = np.degrees(np.abs(quat.heading_error(rec.quat_ref, q)))
+    return s, float(np.sqrt(np.nanmean(err[t > 20.0] ** 2)))
+
+
+@pytest.mark.parametrize("name", ["vqf", "madgwick"])
+def test_a_field_300_ms_late_is_found_and_compensated(name):
+    s, rms = _run(name, 300)
+    assert s.front is not None and s.front.late_s == pytest.approx(0.3, abs=0.015)
+    assert rms < 2.0  # (without the scan: 24–25°)
+    lag = next(v for v in s.monitors.verdicts() if v.name == "magnetometer lag")
+    assert lag.level == Level.WARN and "300 ms" in lag.message
+
+
+def test_a_lag_the_latency_fit_covers_changes_nothing():
+    s, _ = _run("vqf", 30, seconds=30.0)
+    assert s.front is not None and s.front.late_s is None
+    assert s.front.lag.lag_s == pytest.approx(0.03, abs=0.015)
+
+
+def test_the_scan_needs_rotation():
+    """At rest (no window turns 10°) the scan says nothing, whatever the field does."""
+    scan = LagScan(0.5)
+    rng = np.random.default_rng(0)
+    for _ in range(3000):
+        scan.add((1.0, 0.0, 0.0, 0.0), 0.01, tuple(rng.normal(0.0, 1e-6, 3) + (20e-6, 0.0, -40e-6)))
+    assert scan.windows == 0.0 and scan.lag_s is None and scan.late_s is None
