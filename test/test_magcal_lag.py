@@ -46,5 +46,5 @@ def test_the_scan_needs_rotation():
     scan = LagScan(0.5)
     rng = np.random.default_rng(0)
     for _ in range(3000):
-        scan.add((1.0, 0.0, 0.0, 0.0), 0.01, tuple(rng.normal(0.0, 1e-6, 3) + (20e-6, 0.0, -40e-6)))
+        scan.add((1.0, 0.0, 0.0, 0.0), 0.01, tuple(rng.normal(0.0, 1e-6, 3) + np.array([20e-6, 0.0, -40e-6])))
     assert scan.windows == 0.0 and scan.lag_s is None and scan.late_s is None
