@@ -158,3 +158,43 @@ def test_input_loss_over_dds_is_a_warning(ros, start_node):
     assert 12.0 < float(values["input lost (%, last 10 s)"]) < 24.0
     assert node.output().count("input loss:") == 1
     ros.destroy(pub, out, diag)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("what", ["nan", "stale"])
+def test_field_readings_the_node_cannot_use_are_counted_and_named(ros, start_node, what):
+    """Magnetometer readings that arrive but cannot be used (NaN, or stamped a second before the IMU's) are counted
+    by cause and named in /diagnostics (WARN), not reported as "no field received"."""
+    from sensor_msgs.msg import MagneticField
+
+    from riann_ros import stamps as st_ns
+
+    node = start_node("vqf_node", "-p", "input_qos:=reliable", "-p", f"nominal_rate:={RATE}",
+                      "-p", "diagnostics_period:=0.3")
+    pub = ros.publisher(Imu, "imu/data_raw", reliable=True)
+    pub_mag = ros.publisher(MagneticField, "imu/mag", reliable=True)
+    out = ros.collect(Imu, "imu/vqf/data")
+    diag = ros.collect(DiagnosticArray, "/diagnostics")
+    wait_matched([pub, pub_mag], [out, diag], f"node to connect (log: {node.output()})")
+    stamps, acc, gyr = tilting(seconds=3.0)
+    for k, (s, a, g) in enumerate(zip(stamps, acc, gyr, strict=True)):
+        if k % 2 == 0:
+            m = MagneticField()
+            st_ns.set_ns(m.header.stamp, int(s) - (1_000_000_000 if what == "stale" else 0))
+            v = (math.nan,) * 3 if what == "nan" else (20e-6, 0.0, -40e-6)
+            m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z = v
+            pub_mag.publish(m)
+        pub.publish(imu_msg(int(s), a, g))
+        while k - len(out.messages) >= 50:
+            wait_for(lambda k=k: k - len(out.messages) < 50, 30.0, "the node to keep up")
+    cause = "not finite" if what == "nan" else "stale"
+
+    def named() -> bool:
+        return any(s.level == DiagnosticStatus.WARN and "magnetometer readings" in s.message and cause in s.message
+                   for s in _statuses(diag, "vqf_node"))
+
+    wait_for(named, 30.0, f"a WARN naming '{cause}' (log: {node.output()})")
+    values = {kv.key: kv.value for kv in _statuses(diag, "vqf_node")[-1].values}
+    assert int(values[f"field readings {cause} (total)"]) > 100
+    assert "no field received" not in values["magnetometer"]
+    ros.destroy(pub, pub_mag, out, diag)

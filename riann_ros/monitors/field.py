@@ -39,17 +39,26 @@ class FieldMonitor:
         return {"not finite": self.mag.non_finite, "implausible norm": self.mag.implausible,
                 "stale": p.stale if p is not None else 0, "out of order": p.out_of_order if p is not None else 0}
 
-    def verdict(self) -> Verdict:
+    def state(self) -> str:
+        """The field's state of the last sample (:mod:`riann_ros.magcal.input`), saying so where readings came but
+        none could be paired or used (the input alone calls that "no field received")."""
         state = self.mag.state
-        if state not in (mg.FIELD_BAD, mg.FIELD_NONFINITE, mg.FIELD_STALE):
+        received = self.pairing.received if self.pairing is not None else 0
+        if state == mg.FIELD_NONE and received:
+            return f"6D: {received} readings received, none used"
+        return state
+
+    def verdict(self) -> Verdict:
+        state = self.state()
+        if state not in (mg.FIELD_BAD, mg.FIELD_NONFINITE, mg.FIELD_STALE) and not state.endswith("none used"):
             return Verdict(self.NAME)
         n = {k: v for k, v in self.counts().items() if v}
         counted = ", ".join(f"{v} {k}" for k, v in n.items()) or "none counted"
         fix = {mg.FIELD_BAD: "check the magnetometer's unit (sensor_msgs/MagneticField is tesla) and that it is not "
                              "saturated by a magnet",
-               mg.FIELD_NONFINITE: "the driver publishes NaN or inf: check the sensor",
-               mg.FIELD_STALE: "the readings come slower or later than mag_timeout: check the magnetometer's rate and "
-                               "stamps, or raise mag_timeout"}[state]
+               mg.FIELD_NONFINITE: "the driver publishes NaN or inf: check the sensor"}.get(
+                   state, "the readings come slower or later than mag_timeout, or are stamped out of order: check the "
+                          "magnetometer's rate and stamps (they must share the IMU's clock), or raise mag_timeout")
         return Verdict(self.NAME, Level.WARN, f"{state[4:]} (readings not used: {counted}); the heading follows the "
                                               f"gyro: {fix}")
 

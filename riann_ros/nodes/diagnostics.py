@@ -151,7 +151,7 @@ class Diagnostics:
             "processing time p99 (us)": _stat(self.proc_us, "p99"),
             "processing time max (us)": _stat(self.proc_us, "max"),
             "world frame": self.world,
-            "magnetometer": self.stream.mag.state if est.USES_MAG else "not used by this estimator",
+            "magnetometer": self.stream.field_monitor.state() if est.USES_MAG else "not used by this estimator",
             "field readings received (total)": str(self.mag_received),
             "heading": "magnetic (9D)" if est.heading_observed() else "gyro only",
         }
