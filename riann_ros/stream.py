@@ -120,6 +120,7 @@ class EstimatorStream:
         ax, ay, az = (float(v) for v in acc)  # type: ignore[union-attr, arg-type]
         gx, gy, gz = (float(v) for v in gyr)  # type: ignore[union-attr, arg-type]
         self.gyro_units.step(ax, ay, az, gx, gy, gz, dt)
+        self.loss.nominal_rate_hz = self.gate.config.nominal_rate  # (a run-time change of the parameter)
         self.loss.step(stamp_ns)
 
     def _watch_rows(self, rows: NDArray[np.intp], acc: NDArray[np.float64], gyr: NDArray[np.float64],
@@ -128,6 +129,7 @@ class EstimatorStream:
         :meth:`process` takes them; per row whether a verdict then says the estimate is not to be trusted."""
         a, g, d, st = acc[rows].tolist(), gyr[rows].tolist(), dts[rows].tolist(), self._stamps[rows].tolist()
         out = np.zeros(len(rows), dtype=bool)
+        self.loss.nominal_rate_hz = self.gate.config.nominal_rate
         step, loss, monitors = self.gyro_units.step, self.loss.step, self.monitors
         for k in range(len(rows)):
             (ax, ay, az), (gx, gy, gz) = a[k], g[k]
