@@ -10,7 +10,8 @@ best of ``--rounds`` runs of ``--samples`` calls, in a fresh process per run; wi
 another version, e.g. ``git worktree add /tmp/ref <commit>``) the two versions alternate in one session, so the
 ratio is measured on the same machine state. ONNX Runtime runs with one thread. ``--mag X,Y,Z`` (µT) passes a
 magnetometer field (9D: a 50 µT field seen through the swing, plus that hard-iron offset; ``0,0,0``: a calibrated
-sensor), so the online magnetometer calibration runs where the version has one (its default parameters).
+sensor), so the online magnetometer calibration runs where the version has one (its default parameters; where the
+calibration is the stream's magnetometer front end, the estimator is given one as the stream gives it).
 """
 
 from __future__ import annotations
@@ -49,6 +50,9 @@ for kind in STREAMS:
     acc = np.column_stack([np.zeros(n), 9.81 * np.sin(roll), 9.81 * np.cos(roll)])
     gyr = np.column_stack([np.pi * np.cos(2 * math.pi * t), np.zeros(n), np.zeros(n)])
     est = create("riann", ensemble=copies)
+    if off is not None and hasattr(est, "take_front_end"):  # the magnetometer's front end, as the stream gives it
+        from riann_ros.magcal.frontend import FrontEndConfig, MagFrontEnd
+        est.take_front_end(MagFrontEnd(FrontEndConfig.of(est.params), latency=est.front_end_latency()))
     a, g, d = acc.tolist(), gyr.tolist(), dt.tolist()
     if off is None:
         m = [None] * n
