@@ -40,8 +40,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.magcal.changes import ChangeFollower, Realign
-from riann_ros.magcal.lag import LagScan
-from riann_ros.magcal.latency import DelayHistory, LatencyEstimator
+from riann_ros.magcal.lag import RESOLUTION_S, LagScan
+from riann_ros.magcal.latency import MAX_DELAY, DelayHistory, LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.magcal.records import (
     DELAY_SD_S,
@@ -244,8 +244,10 @@ class MagFrontEnd:
         return FieldOut(self._late(u), switched)
 
     def _late(self, u: Vec | None) -> Vec | None:
-        """A field the lag scan finds late rotated back over the scanned lag (:mod:`.lag`); else ``u``."""
-        late = self.lag.late_s
+        """A field the lag scan finds later than the estimator compensates itself, rotated back over the scanned lag
+        (:mod:`.lag`); else ``u``."""
+        covered = MAX_DELAY if self.latency_settings.compensate else RESOLUTION_S
+        late = self.lag.late(covered)
         return u if late is None or u is None else self.lag.compensated(u, late)
 
     def heading_sd(self, q: Quat, field_world_t: Vec) -> float:

@@ -33,8 +33,10 @@ STEP_S = 0.01
 TAU_S = 30.0
 #: windows before the scan says anything
 MIN_WINDOWS = 8
-#: the scanned lag's residual must be below this share of the least residual within the latency fit's range
+#: the scanned lag's residual must be below this share of the least residual within the range compensated otherwise
 CLEAR = 0.5
+#: s; a lag the scan tells from none: three steps of its grid (the sensor's own latency, BROAD's 10 ms, is not one)
+RESOLUTION_S = 3 * STEP_S
 _COS_MIN_TURN = math.cos(math.radians(MIN_TURN_DEG) / 2.0)
 
 
@@ -54,7 +56,7 @@ class LagScan:
         self.sums = [0.0] * len(self.lags)
         self.windows = 0.0  # forgotten count
         self.lag_s: float | None = None  # the lag of the least sum (None: too few windows)
-        self.late_s: float | None = None  # s; the scanned lag when the field is late (module docstring), else None
+        self._late: dict[float, float | None] = {}  # late_s per range, since the last window
 
     def add(self, delta: Quat, dt: float, mag: Vec | None) -> None:
         """One sample: its gyro increment over ``dt`` s, its field (any unit; None: none)."""
@@ -98,15 +100,27 @@ class LagScan:
         if self.windows >= MIN_WINDOWS:
             k = min(range(len(self.lags)), key=self.sums.__getitem__)
             self.lag_s = self.lags[k]
-            self.late_s = self._late(k)
+        self._late = {}
 
-    def _late(self, k: int) -> float | None:
-        """The lag of index ``k`` (the least sum) if the field is late by it (module docstring), else None."""
-        lag = self.lags[k]
-        if lag <= MAX_DELAY + 0.5 * STEP_S:
+    @property
+    def late_s(self) -> float | None:
+        """s; the scanned lag when the field is late beyond the latency fit's range (:data:`~.latency.MAX_DELAY`),
+        else None."""
+        return self.late(MAX_DELAY)
+
+    def late(self, covered_s: float) -> float | None:
+        """s; the scanned lag when it is beyond ``covered_s`` (what the estimator compensates itself) and clearly
+        (its residual below :data:`CLEAR` times the least residual within ``covered_s``), else None."""
+        if covered_s not in self._late:
+            self._late[covered_s] = self._beyond(covered_s)
+        return self._late[covered_s]
+
+    def _beyond(self, covered_s: float) -> float | None:
+        lag = self.lag_s
+        if lag is None or lag <= covered_s + 0.5 * STEP_S:
             return None
-        near = min(s for s, x in zip(self.sums, self.lags, strict=True) if x <= MAX_DELAY)
-        return lag if self.sums[k] < CLEAR * near else None
+        near = min(s for s, x in zip(self.sums, self.lags, strict=True) if x <= covered_s + 0.5 * STEP_S)
+        return lag if self.sums[self.lags.index(lag)] < CLEAR * near else None
 
     def compensated(self, m: Vec, lag_s: float) -> Vec:
         """The field ``m`` read ``lag_s`` before the current sample, as the sensor sees it now: rotated by the gyro's
