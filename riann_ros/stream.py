@@ -109,7 +109,7 @@ class EstimatorStream:
         q = self.estimator.update(acc, gyr, r.dt, field)
         if not _is_unit(q):
             return None, self._fault(r)
-        self.monitors.check()
+        self.monitors.tick()
         self.sigma = self.monitors.widened(self.estimator.sigma(np.array([field is not None]))[0])
         if self.mag.note(field is not None) and self.mag.config.declination_deg != 0.0:
             q = self.mag.declination_applied(q[None, :], np.ones(1, dtype=bool))[0]
@@ -135,7 +135,7 @@ class EstimatorStream:
             (ax, ay, az), (gx, gy, gz) = a[k], g[k]
             step(ax, ay, az, gx, gy, gz, d[k])
             loss(st[k])
-            monitors.check()
+            monitors.tick()
             out[k] = monitors.untrusted
         return out
 

@@ -53,18 +53,32 @@ class Monitor(Protocol):
         ...
 
 
+#: samples between two looks at the verdicts (:meth:`Monitors.tick`): a verdict is a judgement over seconds of input,
+#: and a look at every sample would cost as much as a classical filter's step
+CHECK_EVERY = 8
+
+
 class Monitors:
     """A stream's monitors: their verdicts, the trips each made, the σ they widen."""
 
     def __init__(self, monitors: list[Monitor]) -> None:
         self.monitors = monitors
+        self._ticks = 0
         self.trips: Counter[str] = Counter()  # per monitor, how often it went from OK to WARN or ERROR
         self._levels = {m.NAME: Level.OK for m in monitors}
         self._new: list[Verdict] = []  # trips (and recoveries) not yet taken by pop_changes()
         self.untrusted = False  # a verdict says the estimate is not to be trusted
 
+    def tick(self) -> None:
+        """After each sample: :meth:`check` every :data:`CHECK_EVERY` samples (the same samples in the node's path and
+        the evaluator's: both tick per sample)."""
+        self._ticks += 1
+        if self._ticks >= CHECK_EVERY:
+            self._ticks = 0
+            self.check()
+
     def check(self) -> None:
-        """Take every monitor's verdict now (after each sample or batch)."""
+        """Take every monitor's verdict now."""
         untrusted = False
         for m in self.monitors:
             v = m.verdict()

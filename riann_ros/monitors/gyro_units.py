@@ -36,6 +36,8 @@ from riann_ros.datasets.units import GYR_SCALES, TILT_MIN_COUNT
 from riann_ros.gate import G_CHECK_SAMPLES
 from riann_ros.monitors.base import Level, Verdict
 
+#: s; the test takes the means of blocks this long (100 Hz: the motion it looks at lies below 10 Hz)
+BLOCK_S = 0.01
 #: the last this many tilts' ratios make the verdict (a unit fixed at run time clears it within as many tilts)
 KEEP = 9
 #: the unit slips tested, by the factor they scale the gyro's turn: a value in deg/s, mrad/s or mdeg/s read as rad/s,
@@ -161,6 +163,7 @@ class GyroUnitsMonitor:
         g-units check takes it). The ratios are kept (the same sensor)."""
         self.acc_rest: float | None = None
         self._norms: list[float] = []
+        self._block = [0.0] * 8  # Σ acc·dt, Σ gyr·dt, Σ dt, count of the open block
         self._win: deque[tuple[float, float, float, float, float, float, float]] = deque()  # acc, gyr, dt
         self._span = 0.0  # s covered by the window's steps
         self._sum = [0.0, 0.0, 0.0]  # Σ acc over the window
@@ -170,10 +173,31 @@ class GyroUnitsMonitor:
         self.loose.restart()
 
     def step(self, ax: float, ay: float, az: float, gx: float, gy: float, gz: float, dt: float) -> None:
-        """One accepted sample (acc in any unit, gyr as read, dt s)."""
+        """One accepted sample (acc in any unit, gyr as read, dt s): into the block of :data:`BLOCK_S`, whose means
+        the test takes (the motion it looks at is below 10 Hz; a 1 kHz stream costs it a tenth of its samples)."""
+        b = self._block
+        b[0] += ax * dt
+        b[1] += ay * dt
+        b[2] += az * dt
+        b[3] += gx * dt
+        b[4] += gy * dt
+        b[5] += gz * dt
+        b[6] += dt
+        b[7] += 1.0
+        if b[6] < BLOCK_S:
+            return
+        h = b[6]
+        if h > 0.0:
+            self._sample(b[0] / h, b[1] / h, b[2] / h, b[3] / h, b[4] / h, b[5] / h, h)
+        else:  # (steps of 0: a block of first samples after restarts)
+            self._sample(ax, ay, az, gx, gy, gz, 0.0)
+        self._block = [0.0] * 8
+
+    def _sample(self, ax: float, ay: float, az: float, gx: float, gy: float, gz: float, dt: float) -> None:
+        """One block's means (acc, gyr) over its ``dt`` s."""
         if self.acc_rest is None:
             self._norms.append(math.sqrt(ax * ax + ay * ay + az * az))
-            if len(self._norms) == G_CHECK_SAMPLES:
+            if len(self._norms) == G_CHECK_SAMPLES:  # (of blocks: their means' norms)
                 self.acc_rest = statistics.median(self._norms)
         win, sm = self._win, self._sum
         win.append((ax, ay, az, gx, gy, gz, dt))
