@@ -79,7 +79,7 @@ def _stopped_run(bags: list[str], out: Path, lose: list[int]) -> None:
 
 @pytest.mark.slow
 def test_every_finished_input_is_kept_at_once(bags, uninterrupted):
-    shards = sorted(p.name for p in (uninterrupted / store.SHARDS).glob("*.pkl"))
+    shards = sorted(p.name for p in (uninterrupted / store.SHARDS).glob(f"*{store.SUFFIX}"))
     assert shards == sorted(name for _, name in store.shard_keys(bags))
     assert json.loads((uninterrupted / store.SHARDS / store.MANIFEST).read_text())["format"] == store.FORMAT
 
@@ -111,7 +111,7 @@ def test_resume_with_other_settings_is_refused_naming_what_differs(bags, uninter
     assert "cannot resume" in err
     assert "seed (--seed): 0 in the earlier run, 3 now" in err
     assert re.search(r"estimators \(--estimators\): \[.*vqf.*\] in the earlier run, \[.*madgwick.*\] now", err)
-    assert not (out / "results.csv").exists() and len(list((out / store.SHARDS).glob("*.pkl"))) == 2
+    assert not (out / "results.csv").exists() and len(list((out / store.SHARDS).glob(f"*{store.SUFFIX}"))) == 2
 
 
 @pytest.mark.slow
@@ -124,7 +124,7 @@ def test_a_new_run_into_kept_inputs_is_refused_and_force_starts_over(bags, tmp_p
     assert "holds an earlier run's results of 2 input(s)" in err and "--resume" in err and "--force" in err
     assert main(args(bags, out, "-q", "--force", "-e", "vqf")) == 0  # -e given twice: the last one counts
     assert {r["estimator"] for r in json.loads((out / "results.json").read_text())["results"]} == {"vqf"}
-    assert len(list((out / store.SHARDS).glob("*.pkl"))) == 3
+    assert len(list((out / store.SHARDS).glob(f"*{store.SUFFIX}"))) == 3
 
 
 def test_resume_needs_out_and_does_not_combine_with_force(tmp_path, capsys):
