@@ -44,7 +44,7 @@ class _Layout:
         for ax in AXES:
             vals = {s[AXES.index(ax)] for s in sides}
             if ax in cmp.differing or ax in ("estimator", "scenario") or (
-                    ax == "perturbation" and vals != {NONE}) or (ax == "rate" and len(vals) > 1):
+                    ax == "perturbation" and vals != {NONE}) or (ax in ("rate", "sensors") and len(vals) > 1):
                 shown.append(ax)
         self.axes = shown
         self.differing = cmp.differing
@@ -55,12 +55,24 @@ class _Layout:
                                                 else (side_text(a, ax),))]
 
 
-def _how(cmp: Comparison) -> str:
+def _how(cmp: Comparison) -> list[str]:
+    """How the rows were paired, and what makes A's and B's figures differ besides the estimators: the axes they do
+    not share (9D against 6D said in words), the run settings they differ in."""
     sel = [f"{n}: {s.text()}" for n, s in zip("AB", cmp.selections, strict=True) if s.items]
     text = "rows paired by sequence" + (f", {', '.join(cmp.matched)}" if cmp.matched else "")
     if cmp.differing:
         text += f"; A and B differ in {' and '.join(cmp.differing)} (each side's shown)"
-    return text + (f"; selected {'; '.join(sel)}" if sel else "")
+    lines = [text + (f"; selected {'; '.join(sel)}" if sel else "")]
+    if "sensors" in cmp.differing:
+        sa = "/".join(sorted({p.a.sensors for p in cmp.pairs}))
+        sb = "/".join(sorted({p.b.sensors for p in cmp.pairs}))
+        lines.append(f"NOTE: the sensors differ: A's rows are {sa}, B's {sb} (9D: the estimators used the "
+                     "magnetometer): not the same condition (--select sensors=6D on both sides compares like with "
+                     "like)")
+    if cmp.settings_differ:
+        lines.append("NOTE: A and B were run with other settings, which every difference includes: "
+                     + "; ".join(cmp.settings_differ))
+    return lines
 
 
 def format_comparison(cmp: Comparison) -> str:
@@ -76,7 +88,7 @@ def format_comparison(cmp: Comparison) -> str:
             for g in groups]
     out = [f"A = {cmp.a.label}: {cmp.a.path}" + (f"  ({cmp.a.command})" if cmp.a.command else ""),
            f"B = {cmp.b.label}: {cmp.b.path}" + (f"  ({cmp.b.command})" if cmp.b.command else ""),
-           _how(cmp), "",
+           *_how(cmp), "",
            f"{metric_text(cmp.metric)} (°) per sequence, B − A (negative: B is better)",
            *_table(headers, rows, {"n", *headers[len(lay.headers) + 1:]}), "", "per sequence"]
     seq_rows = [[*lay.cells(side_of(p.a), side_of(p.b)), p.sequence, f"{p.va:.2f}", f"{p.vb:.2f}",
