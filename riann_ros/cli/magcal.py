@@ -189,8 +189,9 @@ def _write(args: argparse.Namespace, rf: RecordingFit) -> None:
             staged.append((path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}"), path))
             try:
                 plot(rf, staged[-1][0], f"{args.bag.name}: ")
-            except Exception as exc:
-                raise _Failed(f"cannot draw {path}: {_why(exc)}; nothing written") from None
+            except Exception as exc:  # a full disk, a folder made read-only meanwhile, or matplotlib itself
+                verb = "write" if isinstance(exc, OSError) else "draw"
+                raise _Failed(f"cannot {verb} {path}: {_why(exc)}; nothing written") from None
         if args.out is not None:
             staged.insert(0, (args.out.with_name(f".{args.out.name}.{os.getpid()}.tmp"), args.out))
             try:
