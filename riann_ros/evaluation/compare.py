@@ -11,7 +11,7 @@ have rows of the same sensors); an axis whose values A and B do not share at all
 ``madgwick(beta=0.1)`` in B; a clean run and a perturbed one; a 9D run and a 6D one) is not matched, each side's
 value is shown and the text says so. Run settings that change every score (seed, initial rest, ``--score-from``,
 ``--offset-steps``, the scenarios' bias) are compared too: where A's and B's differ, the text says which
-(:func:`setting_differences`). A statistic (``--metric``: ``rmse`` by default, or
+(:func:`riann_ros.evaluation.compare_text.setting_differences`). A statistic (``--metric``: ``rmse`` by default, or
 another of evo ape's mean, median, std, min, max; heading and total errors where scored) is compared as B − A: per
 group n and mean / median / max over the sequences of A, of B and of B − A; per sequence A, B and B − A, and every
 statistic of e_α; rows of one side that found no partner are counted. No estimator runs.
@@ -38,10 +38,8 @@ from riann_ros.evaluation.scoring import ERRORS, STATS, stat_field
 
 AXES = ("estimator", "scenario", "perturbation", "rate", "sensors")  # matched when A and B share a value
 SELECT_FIELDS = ("sequence", "dataset", *AXES)
-#: results.json settings that change every score of a run: said when A's and B's differ
-SCORE_SETTINGS = {"seed": "seed", "rest": "initial rest (--rest)", "score_from_s": "--score-from",
-                  "offset_steps": "--offset-steps", "bias_std_dps": "the scenarios' gyro bias σ (°/s)"}
 PRINT_PAIRS = 40  # the per-sequence statistics are printed for at most this many pairs (all in compare.csv)
+
 
 
 def metrics() -> list[str]:
@@ -156,14 +154,6 @@ def load(path: str | Path) -> Saved:
     return Saved(p, run_label(p), str(settings.get("command", "")), rows, settings)
 
 
-def setting_differences(a: Saved, b: Saved) -> list[str]:
-    """The score-changing settings (:data:`SCORE_SETTINGS`) A and B were run with otherwise, as ``NAME: A …, B …``
-    (a setting an older results.json lacks is not compared)."""
-    return [f"{name}: A {json.dumps(a.settings[k])}, B {json.dumps(b.settings[k])}"
-            for k, name in SCORE_SETTINGS.items()
-            if k in a.settings and k in b.settings and a.settings[k] != b.settings[k]]
-
-
 Side = tuple[str, str, str, str | float, str]  # estimator, scenario, perturbation, rate, sensors of one side's row
 
 
@@ -245,7 +235,6 @@ class Comparison:
     only_b: list[ResultRow] = field(default_factory=list)
     selections: tuple[Selection, Selection] = (Selection(), Selection())
     without_metric: int = 0  # pairs left out: a side without the statistic (an older file, a 6D heading)
-    settings_differ: list[str] = field(default_factory=list)  # setting_differences(a, b)
 
     @property
     def differing(self) -> tuple[str, ...]:
@@ -287,7 +276,7 @@ def compare(a: Saved, b: Saved, sel_a: Selection = Selection(), sel_b: Selection
     """Pair the (selected) rows of ``a`` and ``b`` by sequence and the axes they share; EvalError when no pair."""
     ra, rb = select(a.rows, sel_a, f"A ({a.path})"), select(b.rows, sel_b, f"B ({b.path})")
     matched = _shared_axes(ra, rb)
-    cmp = Comparison(a, b, matched, metric, selections=(sel_a, sel_b), settings_differ=setting_differences(a, b))
+    cmp = Comparison(a, b, matched, metric, selections=(sel_a, sel_b))
 
     def key(r: ResultRow) -> tuple:
         return (r.sequence, *(getattr(r, ax) for ax in matched))
@@ -341,16 +330,16 @@ def _csv_stats(cmp: Comparison) -> list[tuple[str, str]]:
 
 
 def write_csv(path: Path, cmp: Comparison) -> None:
-    """compare.csv: one row per pair. ``sequence, scenario, perturbation, rate, estimator, sensors`` are A's,
+    """compare.csv: one row per pair. ``sequence, scenario, perturbation, rate, estimator`` are A's,
     ``rmse_a_deg, rmse_b_deg, diff_deg`` the e_α RMSEs and B − A, then B's side, the ``--metric`` and its
-    difference, and A's and B's value of every other statistic."""
+    difference, A's and B's ``sensors``, and A's and B's value of every other statistic."""
     extra = _csv_stats(cmp)
     metric = cmp.metric[1] if cmp.metric[0] == "inclination" else f"{cmp.metric[0]}_{cmp.metric[1]}"
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_a_deg", "rmse_b_deg",
-                    "diff_deg", "scenario_b", "perturbation_b", "rate_b", "estimator_b", "sensors_b", "metric",
-                    "metric_diff_deg",
+        w.writerow(["sequence", "scenario", "perturbation", "rate", "estimator", "rmse_a_deg", "rmse_b_deg",
+                    "diff_deg", "scenario_b", "perturbation_b", "rate_b", "estimator_b", "metric", "metric_diff_deg",
+                    "sensors", "sensors_b",
                     *(f"{stem}_{x}_deg" for stem, _ in extra for x in ("a", "b"))])
 
         def num(v: float | None) -> str:
@@ -358,9 +347,9 @@ def write_csv(path: Path, cmp: Comparison) -> None:
 
         for p in ordered_pairs(cmp):
             a, b = p.a, p.b
-            cells = [p.sequence, a.scenario, a.perturbation, a.rate, a.estimator, a.sensors, num(a.rmse_deg),
-                     num(b.rmse_deg), num(b.rmse_deg - a.rmse_deg), b.scenario, b.perturbation, b.rate, b.estimator,
-                     b.sensors, metric, num(p.diff)]
+            cells = [p.sequence, a.scenario, a.perturbation, a.rate, a.estimator, num(a.rmse_deg), num(b.rmse_deg),
+                     num(b.rmse_deg - a.rmse_deg), b.scenario, b.perturbation, b.rate, b.estimator, metric,
+                     num(p.diff), a.sensors, b.sensors]
             for _, m in extra:
                 err, st = m.split(":")
                 cells += [num(a.score.stat(err, st)), num(b.score.stat(err, st))]

@@ -3,6 +3,7 @@ per sequence, every statistic per sequence, and the rows without a partner (ROS-
 
 from __future__ import annotations
 
+import json
 import math
 import shlex
 
@@ -10,6 +11,7 @@ from riann_ros.evaluation.compare import (
     AXES,
     PRINT_PAIRS,
     Comparison,
+    Saved,
     Side,
     metric_text,
     ordered_pairs,
@@ -22,6 +24,18 @@ from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, ResultRow
 from riann_ros.evaluation.scoring import STATS
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_comparison
+
+#: results.json settings that change every score of a run: said when A's and B's differ
+SCORE_SETTINGS = {"seed": "seed", "rest": "initial rest (--rest)", "score_from_s": "--score-from",
+                  "offset_steps": "--offset-steps", "bias_std_dps": "the scenarios' gyro bias σ (°/s)"}
+
+
+def setting_differences(a: Saved, b: Saved) -> list[str]:
+    """The score-changing settings (:data:`SCORE_SETTINGS`) A and B were run with otherwise, as ``NAME: A …, B …``
+    (a setting an older results.json lacks is not compared)."""
+    return [f"{name}: A {json.dumps(a.settings[k])}, B {json.dumps(b.settings[k])}"
+            for k, name in SCORE_SETTINGS.items()
+            if k in a.settings and k in b.settings and a.settings[k] != b.settings[k]]
 
 
 def _table(headers: list[str], rows: list[list[str]], numeric: set[str]) -> list[str]:
@@ -69,9 +83,10 @@ def _how(cmp: Comparison) -> list[str]:
         lines.append(f"NOTE: the sensors differ: A's rows are {sa}, B's {sb} (9D: the estimators used the "
                      "magnetometer): not the same condition (--select sensors=6D on both sides compares like with "
                      "like)")
-    if cmp.settings_differ:
+    differ = setting_differences(cmp.a, cmp.b)
+    if differ:
         lines.append("NOTE: A and B were run with other settings, which every difference includes: "
-                     + "; ".join(cmp.settings_differ))
+                     + "; ".join(differ))
     return lines
 
 
