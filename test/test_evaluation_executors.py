@@ -166,7 +166,8 @@ def test_client_killed_mid_run_then_resume_completes_the_same_results(cluster, l
 @pytest.mark.slow
 def test_an_input_the_workers_cannot_see_fails_at_once_naming_the_worker(cluster, tmp_path):
     # the workers were started in another folder: a relative path that this shell sees is not there for them
-    seen = str(ROOT / "bags" / "synthetic_rotation_100hz.mcap")
+    # (the other input another bag: this shell sees one file at both paths, and gives a file once)
+    seen = str(ROOT / "bags" / "synthetic_translation_200hz.mcap")
     r = evaluate(["bags/synthetic_rotation_100hz.mcap", seen, "-e", "madgwick", "-s", "as-recorded", "-q",
                   "--scheduler", cluster.address], timeout=300)
     assert r.returncode == 1, r.stdout + r.stderr
