@@ -147,7 +147,7 @@ def many(n: int, work: Path) -> list[dict]:
     tiny = bagio.write_recording(corpus / "tiny.mcap", generate(rate=100, duration=10, seed=1, start_s=1.0))
     names = [f"r{k:05d}.mcap" for k in range(n)]
     for name in names:
-        (corpus / name).symlink_to(tiny)
+        (corpus / name).hardlink_to(tiny)  # files of their own paths (links to one file are one input)
     (corpus / "list.txt").write_text("\n".join(names) + "\n")
     print(f"\n{n} inputs (links to one 10 s, 100 Hz bag), -e madgwick -s as-recorded --offset-steps 0, --out\n")
     print("| mode | wall s | ms per input | client peak RSS MB | shards KB per input | results.json KB per input | "
@@ -159,7 +159,7 @@ def many(n: int, work: Path) -> list[dict]:
         wall, before, after, cpu = timed([sys.executable, "-c", CLIENT, str(peak), "--inputs-from",
                                           str(corpus / "list.txt"), "-e", "madgwick", "-s", "as-recorded",
                                           "--offset-steps", "0", "-q", *extra, "--out", str(out)])
-        shards = sum(p.stat().st_size for p in (out / "shards").glob("*.pkl"))
+        shards = sum(p.stat().st_size for p in (out / "shards").glob("*.npz"))
         print(f"| {mode} | {wall:.1f} | {1000 * wall / n:.0f} | {int(peak.read_text()) / 1024:.0f} | "
               f"{shards / n / 1024:.1f} | {(out / 'results.json').stat().st_size / n / 1024:.1f} | "
               f"{before:.1f} / {after:.1f} |")

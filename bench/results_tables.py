@@ -27,6 +27,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from evo_example import TABLES as EVO_TABLES  # the evo example of docs/evaluation.md (bench/evo_example.py)
+
 from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -599,6 +601,7 @@ def cluster_fleet() -> str:
 
 
 TABLES: dict[str, Callable[[], str]] = {
+    **EVO_TABLES,
     "readme-broad": readme_table,
     "readme-demo-real": demo_real,
     "readme-demo-synthetic": demo_synthetic,

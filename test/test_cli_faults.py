@@ -86,7 +86,7 @@ def test_evaluator_interrupted_half_way_writes_no_result_files_and_resume_comple
     for f in RESULT_FILES:
         assert not (out / f).exists(), f"{f} left after an interrupted run"
     assert "interrupted" in text and "--resume" in text, text
-    kept = len(list((out / "shards").glob("*.pkl")))  # the inputs finished before Ctrl-C
+    kept = len(list((out / "shards").glob("*.npz")))  # the inputs finished before Ctrl-C
     assert kept >= 1
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert again.returncode == 2 and "--resume" in again.stderr  # the same command would mix or lose that run

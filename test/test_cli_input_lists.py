@@ -71,3 +71,19 @@ def test_the_listed_inputs_follow_the_command_lines_in_order(tmp_path):
                     "synthetic_combined_seed1_200hz"]
     assert Path(json.loads((out / "results.json").read_text())["settings"]["inputs"][2]).name == (
         "synthetic_combined_200hz.mcap")
+
+
+def test_an_input_given_twice_is_kept_once_by_its_resolved_path(tmp_path, monkeypatch):
+    from riann_ros.cli.input_lists import deduplicated
+
+    (tmp_path / "a.mcap").write_text("")
+    (tmp_path / "b.mcap").write_text("")
+    (tmp_path / "link.mcap").symlink_to(tmp_path / "a.mcap")
+    (tmp_path / "hard.mcap").hardlink_to(tmp_path / "b.mcap")
+    monkeypatch.chdir(tmp_path)
+    kept, warnings = deduplicated(["a.mcap", "b.mcap", "./a.mcap", str(tmp_path / "link.mcap"), "a.mcap",
+                                   "hard.mcap"])
+    assert kept == ["a.mcap", "b.mcap", "hard.mcap"]  # a hard link is a file of its own path
+    assert warnings == ["./a.mcap is given more than once (as a.mcap): evaluated once",
+                        f"{tmp_path / 'link.mcap'} is given more than once (as a.mcap): evaluated once",
+                        "a.mcap is given more than once: evaluated once"]

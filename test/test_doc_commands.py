@@ -1,5 +1,5 @@
-"""Every shell command in the code blocks of README.md and docs/*.md runs as pasted from the repository root after the
-README's set-up (`make setup`: the tools in .venv/bin).
+"""Every shell command in the code blocks of README.md, docs/*.md and bags/README.md runs as pasted from the repository
+root after the README's set-up (`make setup`: the tools in .venv/bin).
 
 The commands are taken from the fenced ``bash``/``sh`` blocks and expanded by bash itself (comments, line
 continuations, variables, globs such as ``bags/*.mcap``, braces) in a copy of the repository's layout where every
@@ -25,7 +25,8 @@ layout, every command that is cheap and has its inputs: ``riann-bag-eval`` and `
 synthetic bags, on BROAD single trials, on what earlier commands made, and the nodes' ``--help``. Checked by parsing
 only, with the reason in :func:`run_or_why_not`: ``--live`` (a real-time replay over DDS), ``--tune`` and ``--rates``
 (long), ``--scheduler tcp://…`` (a cluster of your own), the real trial in ``bags/`` and all BROAD trials at once
-(long; make demo runs the former), files named
+(long; make demo runs the former), BROAD files on a machine without them (a clone: bags/README.md says where to get
+BROAD), what rewrites the bundled bags in ``bags/`` (bags/make_bags.sh), files named
 ``my_…``, and what needs running nodes (``riann-topic``, node command lines, ``ros2``).
 """
 
@@ -43,7 +44,7 @@ import yaml
 
 from conftest import ROOT
 
-DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "bags" / "README.md"]
 SHELL_LANGS = {"bash", "sh", "shell"}
 SCRIPTS = dict(re.findall(r'"([\w-]+) = (riann_ros\.[\w.]+):main"', (ROOT / "setup.py").read_text()))
 NODES = {name for name, module in SCRIPTS.items() if module.startswith("riann_ros.nodes.")}
@@ -108,6 +109,11 @@ def _layout(where: Path) -> Path:
     return repo
 
 
+def _folder(doc: str) -> str:
+    """A scratch folder's name for a page (README.md and bags/README.md apart)."""
+    return doc.removesuffix(".md").replace("/", "_")
+
+
 def commands(tmp: Path) -> list[Command]:
     """Every command of every page, in page order, as bash expands it from the repository root."""
     out = []
@@ -115,7 +121,7 @@ def commands(tmp: Path) -> list[Command]:
         blocks = shell_blocks(doc)
         if not blocks:
             continue
-        where = tmp / doc.stem
+        where = tmp / _folder(str(doc.relative_to(ROOT)))
         repo = _layout(where)
         shims = repo / ".venv" / "bin"
         shims.mkdir(parents=True)
@@ -285,7 +291,7 @@ def checked(tmp: Path, monkeypatch) -> list[tuple[Command, str, list[str], list[
 def test_every_doc_command_is_checked(tmp_path, monkeypatch):
     rows = checked(tmp_path, monkeypatch)
     docs = {c.doc for c, *_ in rows}
-    assert {"README.md", "docs/converter.md", "docs/evaluation.md", "docs/node.md"} <= docs, docs
+    assert {"README.md", "docs/converter.md", "docs/evaluation.md", "docs/node.md", "bags/README.md"} <= docs, docs
     assert len(rows) >= 40, len(rows)
 
 
@@ -305,11 +311,13 @@ def test_bare_names_and_missing_files_are_caught(tmp_path, monkeypatch):
 # -- run for real ----------------------------------------------------------------------------------------------
 
 
-def run_or_why_not(cmd: Command, how: str, reads: list[str], ran: set[str], made: set[str], from_broad: set[str]
-                   ) -> str | None:
+def run_or_why_not(cmd: Command, how: str, reads: list[str], ran: set[str], made: set[str], from_broad: set[str],
+                   writes: tuple[str, ...] = ()) -> str | None:
     """None: run it; else why it is checked by parsing only. ``ran``/``made``: what earlier commands of the page
-    wrote when run / at all; ``from_broad``: what they made from BROAD trials."""
+    wrote when run / at all; ``from_broad``: what they made from BROAD trials; ``writes``: what it writes."""
     tool = Path(cmd.argv[0]).name
+    if any(w.startswith("bags/") for w in writes):
+        return "rewrites a bundled bag in bags/ (bags/make_bags.sh)"
     if how == "node help":
         return None
     if how.startswith("workspace"):
@@ -348,7 +356,7 @@ def test_cheap_doc_commands_run(tmp_path, monkeypatch):
     summary = []
     for cmd, how, reads, writes in rows:
         why = run_or_why_not(cmd, how, reads, ran.setdefault(cmd.doc, set()), made.setdefault(cmd.doc, set()),
-                             from_broad.setdefault(cmd.doc, set()))
+                             from_broad.setdefault(cmd.doc, set()), tuple(writes))
         made[cmd.doc].update(writes)
         if any(r.startswith(BROAD) or r == REAL_TRIAL for r in reads):
             from_broad[cmd.doc].update(writes)
@@ -356,7 +364,7 @@ def test_cheap_doc_commands_run(tmp_path, monkeypatch):
         if why is not None:
             continue
         if cmd.doc not in pages:
-            pages[cmd.doc] = _layout(tmp_path / "run" / Path(cmd.doc).stem)
+            pages[cmd.doc] = _layout(tmp_path / "run" / _folder(cmd.doc))
             (pages[cmd.doc] / ".venv").symlink_to(ROOT / ".venv")
         env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}
         r = subprocess.run(cmd.argv, cwd=pages[cmd.doc], env=env, capture_output=True, text=True, timeout=900)

@@ -198,3 +198,33 @@ def test_compare_an_old_results_json_with_a_new_one_holding_an_input_without_ref
 # -- plots: every perturbation condition, fixed colours ---------------------------------------------------
 
 
+
+
+def test_9d_rows_never_pair_with_6d_rows_and_other_settings_are_named():
+    from pathlib import Path
+
+    from riann_ros.evaluation.compare import Saved, compare
+    from riann_ros.evaluation.compare_text import format_comparison
+    from riann_ros.evaluation.results import ResultRow
+    from riann_ros.evaluation.scoring import Score
+
+    def row(seq: str, sensors: str, rmse: float) -> ResultRow:
+        return ResultRow(sequence=seq, dataset="d", source="s", scenario="as-recorded", rate="native", rate_hz=100.0,
+                         resampled=False, estimator="mahony", estimator_name="mahony", mode="offline",
+                         score=Score(n_samples=10, n_scored=10, n_unestimated=0, rmse_deg=rmse, max_err_deg=2 * rmse),
+                         sensors=sensors)
+
+    # A: a robust run, 9D where the trial has a magnetometer; B: the demo, 6D everywhere, another seed
+    a = Saved(Path("robust_out/results.json"), "robust_out", "", [row("trial21", "9D", 23.04), row("syn", "6D", 1.0)],
+              {"seed": 0, "score_from_s": 0.0})
+    b = Saved(Path("demo_out/results.json"), "demo_out", "", [row("trial21", "6D", 34.37), row("syn", "6D", 1.2)],
+              {"seed": 3, "score_from_s": 0.0})
+    cmp = compare(a, b)
+    assert [(p.sequence, p.a.sensors, p.b.sensors) for p in cmp.pairs] == [("syn", "6D", "6D")]
+    assert [r.sequence for r in cmp.only_a] == ["trial21"] and [r.sequence for r in cmp.only_b] == ["trial21"]
+    text = format_comparison(cmp)
+    assert "NOTE: A and B were run with other settings, which every difference includes: seed: A 0, B 3" in text
+    only_9d = compare(Saved(a.path, a.label, "", a.rows[:1], a.settings), Saved(b.path, b.label, "", b.rows[:1],
+                                                                                 b.settings))
+    assert only_9d.differing == ("sensors",)
+    assert "NOTE: the sensors differ: A's rows are 9D, B's 6D" in format_comparison(only_9d)

@@ -146,7 +146,7 @@ def test_client_killed_mid_run_then_resume_completes_the_same_results(cluster, l
     p = subprocess.Popen([str(executable("riann-bag-eval")), *args], stdout=subprocess.DEVNULL,
                          stderr=subprocess.DEVNULL, start_new_session=True, env=os.environ.copy())
     try:
-        wait_for(lambda: p.poll() is not None or any((out / "shards").glob("*.pkl")), 300, "the first input kept",
+        wait_for(lambda: p.poll() is not None or any((out / "shards").glob("*.npz")), 300, "the first input kept",
                  period=0.05)
         assert p.poll() is None, "the run finished before it could be killed"
         os.killpg(p.pid, signal.SIGKILL)  # no clean-up of any kind
@@ -155,7 +155,7 @@ def test_client_killed_mid_run_then_resume_completes_the_same_results(cluster, l
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
             p.wait()
-    kept = len(list((out / "shards").glob("*.pkl")))
+    kept = len(list((out / "shards").glob("*.npz")))
     assert 1 <= kept < len(long_bags) and not (out / "results.csv").exists()
     r = evaluate([*(a for a in args if a != "-q"), "--resume"])  # the note on what is resumed
     assert r.returncode == 0, r.stderr
@@ -166,7 +166,8 @@ def test_client_killed_mid_run_then_resume_completes_the_same_results(cluster, l
 @pytest.mark.slow
 def test_an_input_the_workers_cannot_see_fails_at_once_naming_the_worker(cluster, tmp_path):
     # the workers were started in another folder: a relative path that this shell sees is not there for them
-    seen = str(ROOT / "bags" / "synthetic_rotation_100hz.mcap")
+    # (the other input another bag: this shell sees one file at both paths, and gives a file once)
+    seen = str(ROOT / "bags" / "synthetic_translation_200hz.mcap")
     r = evaluate(["bags/synthetic_rotation_100hz.mcap", seen, "-e", "madgwick", "-s", "as-recorded", "-q",
                   "--scheduler", cluster.address], timeout=300)
     assert r.returncode == 1, r.stdout + r.stderr

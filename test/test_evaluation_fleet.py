@@ -36,7 +36,7 @@ def test_listed_inputs_on_a_cluster_with_bounded_client_memory_and_progress(tmp_
     corpus.mkdir()
     names = [f"robot{k % 7}_{k:04d}.mcap" for k in range(n_inputs)]
     for name in names:
-        (corpus / name).symlink_to(tiny)
+        (corpus / name).hardlink_to(tiny)  # files of their own paths (links to one file are one input)
     listing = corpus / "fleet.txt"
     listing.write_text("# the fleet's recordings, one a line\n\n" + "\n".join(names) + "\n")
     out, peak, err = tmp_path / "out", tmp_path / "peak_kb", tmp_path / "stderr.txt"
@@ -54,5 +54,5 @@ def test_listed_inputs_on_a_cluster_with_bounded_client_memory_and_progress(tmp_
     assert "Dask cluster local: 2 worker(s)" in text
     with open(out / "results.csv") as f:
         assert sum(1 for _ in csv.DictReader(f)) == n_inputs
-    assert len(list((out / store.SHARDS).glob("*.pkl"))) == n_inputs
+    assert len(list((out / store.SHARDS).glob(f"*{store.SUFFIX}"))) == n_inputs
     assert f"{n_inputs} of {n_inputs} input(s) evaluated" in r.stdout

@@ -68,3 +68,22 @@ def test_prepare_out_api(tmp_path):
         outdir.prepare_out(tmp_path, replace=False)
     assert outdir.prepare_out(tmp_path, replace=True) == [tmp_path / "results.csv"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.csv"]
+
+
+def test_an_output_folder_is_checked_for_kind_and_write_permission(tmp_path):
+    from helpers_fs import read_only
+
+    outdir.check_folder(tmp_path / "new" / "deeper", "--out")  # made later, under a writable folder
+    assert not (tmp_path / "new").exists() and list(tmp_path.iterdir()) == []  # the try left nothing
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match=r"^--out .*file: exists and is not a folder$"):
+        outdir.check_folder(tmp_path / "file", "--out")
+    with pytest.raises(ValueError, match=r"file is not a folder$"):
+        outdir.check_folder(tmp_path / "file" / "below", "--out")
+    with pytest.raises(ValueError, match=r"is a folder, not a file$"):
+        outdir.check_file(tmp_path, "--out")
+    with read_only(tmp_path / "locked") as locked:
+        with pytest.raises(ValueError, match=rf"^--plots {locked}/x: cannot write into {locked}: "):
+            outdir.check_folder(locked / "x", "--plots")
+        with pytest.raises(ValueError, match=rf"^--out {locked}/cal.yaml: cannot write into {locked}: "):
+            outdir.check_file(locked / "cal.yaml", "--out")

@@ -6,6 +6,7 @@ there whole or not at all."""
 from __future__ import annotations
 
 import json
+import os
 import re
 from pathlib import Path
 
@@ -79,7 +80,7 @@ def _stopped_run(bags: list[str], out: Path, lose: list[int]) -> None:
 
 @pytest.mark.slow
 def test_every_finished_input_is_kept_at_once(bags, uninterrupted):
-    shards = sorted(p.name for p in (uninterrupted / store.SHARDS).glob("*.pkl"))
+    shards = sorted(p.name for p in (uninterrupted / store.SHARDS).glob(f"*{store.SUFFIX}"))
     assert shards == sorted(name for _, name in store.shard_keys(bags))
     assert json.loads((uninterrupted / store.SHARDS / store.MANIFEST).read_text())["format"] == store.FORMAT
 
@@ -111,7 +112,7 @@ def test_resume_with_other_settings_is_refused_naming_what_differs(bags, uninter
     assert "cannot resume" in err
     assert "seed (--seed): 0 in the earlier run, 3 now" in err
     assert re.search(r"estimators \(--estimators\): \[.*vqf.*\] in the earlier run, \[.*madgwick.*\] now", err)
-    assert not (out / "results.csv").exists() and len(list((out / store.SHARDS).glob("*.pkl"))) == 2
+    assert not (out / "results.csv").exists() and len(list((out / store.SHARDS).glob(f"*{store.SUFFIX}"))) == 2
 
 
 @pytest.mark.slow
@@ -124,7 +125,7 @@ def test_a_new_run_into_kept_inputs_is_refused_and_force_starts_over(bags, tmp_p
     assert "holds an earlier run's results of 2 input(s)" in err and "--resume" in err and "--force" in err
     assert main(args(bags, out, "-q", "--force", "-e", "vqf")) == 0  # -e given twice: the last one counts
     assert {r["estimator"] for r in json.loads((out / "results.json").read_text())["results"]} == {"vqf"}
-    assert len(list((out / store.SHARDS).glob("*.pkl"))) == 3
+    assert len(list((out / store.SHARDS).glob(f"*{store.SUFFIX}"))) == 3
 
 
 def test_resume_needs_out_and_does_not_combine_with_force(tmp_path, capsys):
@@ -191,3 +192,121 @@ def test_only_the_plotted_series_are_kept_whatever_the_order_inputs_finish(tmp_p
     for i in (2, 0):
         every.add(i, SequenceResult(source=sources[i], series=dict(series)))
     assert [r is not None and r.series is not None for r in every.results] == [True, False, True]
+
+
+# ---- the shards are data, read back with validation ----------------------------------------------------------------
+def _same(a, b, where="result") -> None:
+    """``a`` and ``b`` hold the same values (dataclasses by field, arrays by value and dtype, NaN equal to NaN)."""
+    import dataclasses
+
+    import numpy as np
+
+    if dataclasses.is_dataclass(a):
+        assert type(a) is type(b), where
+        for f in dataclasses.fields(a):
+            _same(getattr(a, f.name), getattr(b, f.name), f"{where}.{f.name}")
+    elif isinstance(a, np.ndarray):
+        assert isinstance(b, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape, where
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind in "fc"), where
+    elif isinstance(a, dict):
+        assert isinstance(b, dict) and list(a) == list(b), where
+        for k in a:
+            _same(a[k], b[k], f"{where}[{k!r}]")
+    elif isinstance(a, list | tuple):
+        assert type(a) is type(b) and len(a) == len(b), where
+        for k, (x, y) in enumerate(zip(a, b, strict=True)):
+            _same(x, y, f"{where}[{k}]")
+    elif isinstance(a, float) and a != a:
+        assert b != b, where
+    else:
+        assert a == b and type(a) is type(b), (where, a, b)
+
+
+@pytest.fixture(scope="module")
+def rich_results(bags, tmp_path_factory) -> list[SequenceResult]:
+    """Results with everything a shard holds: plot series, kept estimates, two conditions, σ histograms; and a
+    reference-free input (agreement, attitude series, health)."""
+    from riann_ros.datasets.synthetic import generate
+    from riann_ros.evaluation.perturb import parse_condition
+    from riann_ros.evaluation.run import evaluate_source
+
+    rec = generate(rate=100, duration=20, seed=5, start_s=1.0)
+    rec.quat_ref = None
+    free = bagio.write_recording(tmp_path_factory.mktemp("free") / "free.mcap", rec)
+    s = EvalSettings(parse_estimators("madgwick,vqf"), scenarios=["as-recorded", "realistic"], series_for="*",
+                     keep_estimates=True, conditions=[parse_condition("none"), parse_condition("bias:3,3,0")])
+    out = [evaluate_source(src, s) for src in (bags[0], str(free))]
+    assert not any(r.error for r in out) and out[0].series and out[0].estimates and out[1].agreement
+    return out
+
+
+def test_a_shard_gives_back_every_value_of_the_result(rich_results, tmp_path):
+    shards = store.ShardStore(tmp_path, store.fingerprint(EvalSettings([])), store.NEW,
+                              [r.source for r in rich_results])
+    for i, res in enumerate(rich_results):
+        shards.write(i, res)
+    back = shards.load()
+    for i, res in enumerate(rich_results):
+        _same(res, back[i])
+    assert not list(tmp_path.rglob("*.pkl"))
+
+
+@pytest.mark.parametrize("change, why", [
+    (lambda doc: doc["value"]["f"].update(name=3), "SequenceResult.name is not a str"),
+    (lambda doc: doc["value"].update({"$dc": "Popen"}), "unknown record 'Popen'"),
+    (lambda doc: doc["value"]["f"].update(shell="rm -rf /"), "no field 'shell'"),
+    (lambda doc: doc["value"]["f"]["rows"][0]["f"]["score"]["f"].update(n_scored=1.5), "Score.n_scored"),
+    (lambda doc: doc["value"]["f"].update(series={"$arr": "a999"}), "no array 'a999'"),
+])
+def test_a_shard_that_breaks_the_record_types_is_refused_naming_why(rich_results, tmp_path, change, why):
+    from riann_ros.evaluation import shard_codec
+
+    data = shard_codec.encode({"format": store.FORMAT}, rich_results[0])
+    import io
+
+    import numpy as np
+
+    arrays = dict(np.load(io.BytesIO(data)))
+    doc = json.loads(arrays["doc"].tobytes())
+    change(doc)
+    arrays["doc"] = np.frombuffer(json.dumps(doc).encode(), dtype=np.uint8)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    with pytest.raises(shard_codec.ShardError, match=re.escape(why)):
+        shard_codec.decode(buf.getvalue(), "crafted.npz")
+
+
+def test_a_shard_holds_only_the_evaluators_records():
+    from riann_ros.evaluation import shard_codec
+
+    with pytest.raises(TypeError, match="cannot hold"):
+        shard_codec.encode({}, SequenceResult(source="a", health={"x": object()}))
+
+
+def test_the_tuning_is_kept_as_data(tmp_path):
+    from riann_ros.evaluation.specs import EstimatorSpec
+
+    shards = store.ShardStore(tmp_path, store.fingerprint(EvalSettings([])), store.NEW, ["a"])
+    tuned = [({"estimator": "mahony", "best": {"label": "mahony(kp=1)", "mean": 1.5, "params": {"kp": 1.0}}},
+              EstimatorSpec.of("mahony", {"kp": 1.0}, "mahony(kp=1) tuned"))]
+    shards.save_tuning(tuned)
+    assert shards.tuning() == tuned
+    (tmp_path / store.SHARDS / store.TUNING).write_bytes(b"\x80\x04garbage")
+    assert shards.tuning() is None  # not readable as a tuning: tuned again
+
+
+def test_an_input_changed_since_its_shard_is_named_and_not_loaded(bags, tmp_path):
+    import shutil
+
+    path = tmp_path / "robot.mcap"
+    shutil.copy(bags[0], path)
+    shards = store.ShardStore(tmp_path / "o", store.fingerprint(EvalSettings([])), store.NEW, [str(path)])
+    shards.write(0, SequenceResult(source=str(path), name="robot"))
+    assert store.stale(tmp_path / "o", [str(path)]) == [] and 0 in shards.load()
+    shutil.copy(bags[1], path)
+    ((src, why),) = store.stale(tmp_path / "o", [str(path)])
+    assert src == str(path) and "other content" in why
+    assert shards.load() == {} and "other content" in shards.changed[0]
+    os.utime(path, ns=(0, 0))  # the same bytes, touched: modified since
+    assert "modified since" in store.changed(store.identity(bags[1]), store.identity(path))
+    assert store.changed(store.identity(path), store.identity(path)) == ""

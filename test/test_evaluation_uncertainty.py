@@ -126,3 +126,18 @@ def test_error_vs_sigma_plot_from_the_histograms_of_the_rows(tmp_path):
     paths = plot_error_vs_sigma([back], tmp_path)
     assert {p.name for p in paths} == {"error_vs_sigma.png", "error_vs_sigma.svg"}
     assert plot_error_vs_sigma([], tmp_path) == []
+
+
+def test_the_field_used_split_and_the_note_share_one_threshold():
+    """A classical filter reports the field's 2.5° combined with a converging calibration's share: up to
+    FIELD_USED_SD_DEG that is "field used", and report.md's note names the same figure."""
+    from riann_ros.evaluation.uncertainty import FIELD_USED_SD_DEG, UncertaintySums
+    from riann_ros.evaluation.uncertainty_report import NOTE
+
+    sd = np.radians([2.5, 4.0, FIELD_USED_SD_DEG, FIELD_USED_SD_DEG + 0.5, 20.0, 180.0])
+    sig = np.column_stack([np.full(6, np.radians(2.0)), sd])
+    u = UncertaintySums()
+    u.add(np.full(6, np.radians(0.5)), np.radians(np.full(6, 1.0)), sig)
+    r = u.result()
+    assert (r["n_yaw_mag"], r["n_yaw_held"]) == (3, 2)  # 2.5°, 4° and the threshold itself; 180°: not counted
+    assert f"a heading σ of at most {FIELD_USED_SD_DEG:g}°" in NOTE and FIELD_USED_SD_DEG == 5.0

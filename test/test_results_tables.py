@@ -4,6 +4,7 @@ is what bench/results_tables.py writes from the committed docs/results/*.json.""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -56,3 +57,27 @@ def test_trim_keeps_only_the_table_fields(tmp_path: Path, monkeypatch: pytest.Mo
 def test_no_absolute_paths_in_the_committed_results():
     for f in sorted((ROOT / "docs" / "results").glob("*.json")):
         assert '"/' not in f.read_text() and " /" not in f.read_text(), f.name
+
+
+def test_the_evo_example_check_catches_a_changed_figure_not_the_wall_time():
+    import evo_example
+
+    committed = json.loads(evo_example.RESULT.read_text())
+    assert evo_example.differences(committed, committed) == []
+    timed = json.loads(json.dumps(committed))
+    timed["outputs"][0] = re.sub(r"evaluated in [\d.]+ s", "evaluated in 99.9 s", timed["outputs"][0])
+    assert evo_example.differences(committed, timed) == []
+    moved = json.loads(json.dumps(committed))
+    moved["outputs"][1] = moved["outputs"][1].replace("rmse\t", "rmse\t9", 1)
+    moved["rows"]["eval21/riann"]["total_rmse_deg"] += 0.01
+    before, after = (r["rows"]["eval21/riann"]["total_rmse_deg"] for r in (committed, moved))
+    assert evo_example.differences(committed, moved) == [
+        f"the output of {evo_example.COMMANDS[1]}", f"eval21/riann total_rmse_deg: {before} committed, {after} now"]
+
+
+@pytest.mark.slow
+def test_the_evo_example_commands_give_the_committed_figures():
+    """docs/evaluation.md's evo blocks are written from docs/results/evo.json; its commands, run now, give it."""
+    import evo_example
+
+    assert evo_example.main(["--check"]) == 0

@@ -58,11 +58,11 @@ def _plan_jobs(parser: argparse.ArgumentParser, args: argparse.Namespace) -> lis
 
 
 def _summary(label: str, target: Path, rec: Recording, t0: float) -> str:
+    """The line of a converted input: samples, rate, and the samples with a reference and scored ("no reference"
+    when none has one: nothing is scored)."""
     n_ref = 0 if rec.quat_ref is None else int((~(rec.quat_ref != rec.quat_ref).any(axis=1)).sum())
-    return (
-        f"{label} → {target}: {len(rec)} samples at {rec.rate_hz:.6g} Hz, {n_ref} reference, "
-        f"{int(rec.score_mask.sum())} scored ({time.perf_counter() - t0:.1f} s)"
-    )
+    ref = f"{n_ref} reference, {int(rec.score_mask.sum())} scored" if n_ref else "no reference"
+    return f"{label} → {target}: {len(rec)} samples at {rec.rate_hz:.6g} Hz, {ref} ({time.perf_counter() - t0:.1f} s)"
 
 
 def _convert_one(args: argparse.Namespace, job: cv.Job, target: Path, settings: cv.ConvertSettings) -> int:

@@ -25,13 +25,12 @@ import sys
 import time
 
 from riann_ros import evaluation as ev
-from riann_ros.cli import eval_executor, eval_inputs, input_lists
+from riann_ros.cli import eval_executor, eval_inputs, eval_outputs, input_lists
 from riann_ros.cli.evaluate_parser import DEFAULT_ESTIMATORS, SETTING_OPTIONS, build_parser
 from riann_ros.cli.pipe import quiet_when_reader_leaves
 from riann_ros.cli.progress import Progress
-from riann_ros.evaluation import free_report, outdir, perturb, report, seq_tables, session, store
-from riann_ros.evaluation.estimate_bags import write_estimate_bags
-from riann_ros.evaluation.estimate_files import parse_formats, write_estimate_files
+from riann_ros.evaluation import coverage, free_report, outdir, perturb, report, seq_tables, session, store
+from riann_ros.evaluation.estimate_files import parse_formats
 from riann_ros.evaluation.fleet import Scale
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_table
 
@@ -55,8 +54,9 @@ def _err(msg: str) -> None:
     print(f"riann-bag-eval: {msg}", file=sys.stderr)
 
 
-def _settings(args: argparse.Namespace) -> ev.EvalSettings:
-    """The evaluation settings of the command line (ValueError / ImportError on bad usage)."""
+def _settings(args: argparse.Namespace, warnings: list[str] | None = None) -> ev.EvalSettings:
+    """The evaluation settings of the command line (ValueError / ImportError on bad usage); ``warnings``: found in the
+    inputs already (inputs given twice), the first of its input warnings."""
     parse_formats(args.write_format)
     if args.tune_scenario not in ev.SCENARIOS:
         raise ValueError(f"unknown --tune-scenario {args.tune_scenario!r}; known: {', '.join(ev.SCENARIOS)}")
@@ -68,7 +68,7 @@ def _settings(args: argparse.Namespace) -> ev.EvalSettings:
     have = ev.available_estimators()
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
     only_recorded = spec_text.strip().lower() == "none"
-    input_warnings: list[str] = []
+    input_warnings = list(warnings or [])
     topics = eval_inputs.topics(args, input_warnings)
     if only_recorded and not (topics.estimates or topics.files):
         raise ValueError("--estimators none needs at least one --estimate-topic or --estimate-file")
@@ -98,9 +98,8 @@ def _check_resume(args: argparse.Namespace) -> None:
     """--resume with the options it goes with (ValueError otherwise)."""
     if args.resume and not args.out:
         raise ValueError("--resume continues the run kept in an --out folder: give --out")
-    if args.resume and (args.force or args.write_estimates):
-        raise ValueError("--resume does not combine with --force (which starts over) or --write-estimates (the "
-                         "estimates of the inputs finished earlier are not kept)")
+    if args.resume and args.force:
+        raise ValueError("--resume does not combine with --force (which starts over)")
 
 
 def _plotted(args: argparse.Namespace) -> tuple[str, ...] | None:
@@ -136,22 +135,6 @@ def _hooks(args: argparse.Namespace, n_sources: int) -> session.Hooks:
                          note=note)
 
 
-def _write_estimates(results: list[ev.SequenceResult], args: argparse.Namespace) -> list[str]:
-    """--write-estimates: the bag copies and trajectory files written (stdout is for tables: stderr), and the
-    problems."""
-    out_dir, force = args.write_estimates, args.force
-    done = write_estimate_bags(results, out_dir, force)
-    for dst, topics in done.written:
-        print(f"wrote {dst} ({', '.join(topics)})", file=sys.stderr)
-    for src in done.not_bags:
-        print(f"{src}: a dataset file, no bag copy (its estimates are in the trajectory files)", file=sys.stderr)
-    files = write_estimate_files(results, out_dir, parse_formats(args.write_format), force)
-    if files.written:
-        names = [p.name for p in files.written]
-        print(f"wrote {len(names)} trajectory file(s) in {out_dir}: {', '.join(names)}", file=sys.stderr)
-    return done.problems + files.problems
-
-
 def _print_free(rep: report.Report) -> None:
     """The inputs without a reference: which they are, the estimators' agreement, their bias, the stream's health."""
     which = free_report.which_is_which(rep.results)
@@ -167,6 +150,8 @@ def _print_free(rep: report.Report) -> None:
 def _print_summary(rep: report.Report, live: bool) -> None:
     if rep.summary or all(r.has_reference for r in rep.results):
         print(report.format_table(rep.summary))
+        for line in coverage.recorded_lines(rep.rows):
+            print(line)
     _print_free(rep)
     nine = seq_tables.format_heading_table(rep.rows)
     if nine:
@@ -213,13 +198,17 @@ def _mode(args: argparse.Namespace) -> str:
 
 def _check_out(args: argparse.Namespace, run: session.EvalRun | None = None) -> None:
     """Refuse (ValueError, exit status 2) an --out folder holding an earlier run's results, or another run's kept
-    inputs (``run``: this run, whose settings a resumed run must share), before any work."""
+    inputs (``run``: this run, whose settings a resumed run must share), and outputs that cannot be written
+    (:func:`riann_ros.cli.eval_outputs.check`), before any work."""
     old = outdir.previous_results(args.out) if args.out and not (args.force or args.resume) else []
     if old:
         raise ValueError(str(outdir.OutputExists(args.out, old)))
-    if args.out and run is not None:
+    if run is None:
+        return
+    if args.out:
         store.check(args.out, store.fingerprint(run.settings, run.tune, run.tune_scenario), _mode(args),
                     SETTING_OPTIONS)
+    eval_outputs.check(args, list(run.sources), run.settings)
 
 
 def _print_messages(rep: report.Report) -> None:
@@ -231,20 +220,10 @@ def _print_messages(rep: report.Report) -> None:
     for res in rep.results:
         for w in res.warnings if not res.error else []:
             _err(f"warning: {w}")
+    for w in coverage.warnings(rep.rows):
+        _err(f"warning: {w}")
     for f in rep.failures:
         _err(f"FAILED {f['error']}")
-
-
-def _write_out(args: argparse.Namespace, rep: report.Report) -> bool:
-    """The result files in --out; False when they could not be written."""
-    try:
-        figures = report.write_results(args.out, rep, plots=not args.no_plots, replace=args.force or args.resume)
-    except outdir.OutputExists as exc:  # written meanwhile by someone else
-        _err(str(exc))
-        return False
-    print(f"wrote {args.out}/results.csv, results.json, report.md"
-          + (f" and {len(figures)} plot files" if figures else ""))
-    return True
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -286,6 +265,9 @@ def _evaluate(args: argparse.Namespace, run: session.EvalRun) -> report.Report |
             return session.evaluate(run, runner, _hooks(args, len(run.sources)), started)
     except ev.EvalError as exc:
         _err(str(exc))
+    except OSError as exc:  # the shards of --out no longer writable, say
+        kept = f"; the inputs finished so far are kept in {args.out / store.SHARDS}" if args.out else ""
+        _err(f"the run stopped: {exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "") + kept)
     except KeyboardInterrupt:
         if args.out and (args.out / store.SHARDS).is_dir():
             _err(f"the inputs finished so far are kept in {args.out / store.SHARDS}: add --resume to continue")
@@ -302,34 +284,41 @@ def _main(argv: list[str] | None) -> int:
             parser.error("--compare A B takes no inputs: it compares two saved runs")
         return _compare(args)
     try:
-        args.inputs = inputs = [*map(str, args.inputs), *input_lists.inputs_from(args.inputs_from)]
+        given = [*map(str, args.inputs), *input_lists.inputs_from(args.inputs_from)]
     except ValueError as exc:
         _err(str(exc))
         return 2
+    inputs, twice = input_lists.deduplicated(given)
+    args.inputs = inputs
     if not inputs:
         parser.error("no input given (bags or BROAD files, --inputs-from FILE; or --compare A B)")
     if args.select or args.select_a or args.select_b or args.metric != "rmse":
         parser.error("--select, --select-a, --select-b and --metric belong to --compare A B")
     try:
         scale = Scale(eval_executor.executor_setting(args), args.out, _mode(args))
-        run = session.EvalRun(tuple(inputs), _settings(args), tuple(args.tune), args.tune_scenario,
+        run = session.EvalRun(tuple(inputs), _settings(args, twice), tuple(args.tune), args.tune_scenario,
                               "riann-bag-eval " + shlex.join(argv_list), scale)
         _check_out(args, run)
     except (ValueError, ImportError) as exc:
         _err(str(exc))
         return 2
+    if args.resume:
+        for src, why in store.stale(args.out, inputs):
+            _err(f"warning: {src} changed since the earlier run in {args.out} ({why}): evaluated again")
     rep = _evaluate(args, run)
-    if rep is None:
-        return 1
-    results = rep.results
+    return 1 if rep is None else _finish(args, rep)
+
+
+def _finish(args: argparse.Namespace, rep: report.Report) -> int:
+    """The messages and tables, then every output written from what finished (one failing does not stop the
+    others); exit status 1 when an input or an output failed."""
     _print_messages(rep)
     _print_summary(rep, args.live)
-    problems = _write_estimates(results, args) if args.write_estimates else []
+    written = eval_outputs.write_out(args, rep) if args.out else True
+    problems = eval_outputs.write_estimate_outputs(rep.results, args) if args.write_estimates else []
     for p in problems:
         _err(p)
-    if args.out and not _write_out(args, rep):
-        return 1
-    return 1 if rep.failures or problems else 0
+    return 1 if rep.failures or problems or not written else 0
 
 
 if __name__ == "__main__":

@@ -83,7 +83,8 @@ def _scaling(p: argparse.ArgumentParser) -> None:
                    help="more inputs, read from FILE: one path or glob (*, ?, [...], ** for any depth) per line, in "
                    "that order (a glob's matches sorted); blank lines and lines starting with # are skipped; a "
                    "relative path is relative to FILE's folder ('-': standard input, relative to the current folder). "
-                   "A glob that matches nothing is an error. Repeatable; the BAG arguments come first")
+                   "A glob that matches nothing is an error. Repeatable; the BAG arguments come first. A file given "
+                   "more than once (by its resolved path: a link is its target) is evaluated once, with a warning")
     s.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="evaluate on a Dask cluster instead of --jobs: tcp://HOST:8786 (a scheduler started with "
                    "'dask scheduler', workers with 'dask worker tcp://HOST:8786'; every worker must see the inputs at "
@@ -91,8 +92,9 @@ def _scaling(p: argparse.ArgumentParser) -> None:
                    "'riann_ros[cluster]'")
     s.add_argument("--resume", action="store_true",
                    help="continue the run in --out (each finished input is kept in OUT/shards as it completes): "
-                   "evaluate only the inputs it has not finished, or that failed, then write the result files; "
-                   "refused, naming them, when settings differ from that run's")
+                   "evaluate only the inputs it has not finished, or that failed, or that changed since (another size, "
+                   "modification time or content: said on stderr), then write the result files; refused, naming "
+                   "them, when settings differ from that run's")
 
 
 def _what_runs(p: argparse.ArgumentParser) -> None:
@@ -128,7 +130,8 @@ def _recorded_estimates(p: argparse.ArgumentParser) -> None:
                    "file's stem or starts it followed by a character other than a letter or digit (run1.mcap: "
                    "run1.tum, run1_vins.tum; not run10.tum), the longest such stem; a single file with a single "
                    "input belongs to it whatever its name. Inputs without a file and files without an input are "
-                   "warned about. Repeatable")
+                   "warned about. An estimate covering less than 90 %% of an input's scored span is scored over what "
+                   "it covers but not ranked (left out of the summary, with a warning). Repeatable")
     b.add_argument("--estimate-cols", default=None, metavar="TIME,QW,QX,QY,QZ",
                    help="the --estimate-file columns, for a CSV in another layout")
     b.add_argument("--estimate-time-unit", default=None, choices=("s", "ms", "us", "ns"),
@@ -178,7 +181,8 @@ def _results(p: argparse.ArgumentParser) -> None:
     """What is scored and written: the output folder, heading, magnetometer, time offsets, plots, tuning."""
     p.add_argument("--out", "-o", type=Path, default=None,
                    help="write results.csv, results.json, report.md and plots (PNG+SVG) here (a folder already holding "
-                   "results needs --force)")
+                   "results needs --force; it must be a folder, or not exist, and be writable: checked before any "
+                   "work)")
     p.add_argument("--heading", action="store_true",
                    help="also score heading and total error of 6D runs (unaligned, as evo_ape without alignment: they "
                    "include the start heading) and the heading drift (heading_drift_*: the heading error after "
@@ -207,7 +211,9 @@ def _results(p: argparse.ArgumentParser) -> None:
                    "geometry_msgs/QuaternionStamped topics /eval/<scenario>/<estimator> (first scenario), and per "
                    "input and estimator a trajectory file <sequence>.<scenario>.<label>.tum (TUM: t x y z qx qy qz "
                    "qw, position 0 0 0; evo_ape / evo_traj read it), plus <sequence>.<scenario>.reference.tum with "
-                   "the reference at the scored samples where the input has one")
+                   "the reference at the scored samples where the input has one. A file that exists (without --force) "
+                   "is refused before any work; after the run all files are written or, on a clash, none. Combines "
+                   "with --resume")
     p.add_argument("--write-format", default="tum", metavar="tum|csv|tum,csv",
                    help="the trajectory files of --write-estimates: tum (default), csv (a header time[s],qw,qx,qy,qz: "
                    "what --estimate-file reads) or both")

@@ -40,3 +40,18 @@ def inputs_from(names: list[str]) -> list[str]:
                 raise ValueError(f"--inputs-from {name}, line {n}: {line!r} matches no file")
             out += found
     return out
+
+
+def deduplicated(inputs: list[str]) -> tuple[list[str], list[str]]:
+    """The inputs with each file once, by its resolved path (a link, ``./a.mcap`` and ``a.mcap`` are one file), in
+    the order they first come; and a warning per input left out, naming the one kept."""
+    kept: dict[Path, str] = {}
+    warnings = []
+    for i in inputs:
+        key = Path(i).resolve()
+        if key in kept:
+            same = "" if kept[key] == i else f" (as {kept[key]})"
+            warnings.append(f"{i} is given more than once{same}: evaluated once")
+        else:
+            kept[key] = i
+    return list(kept.values()), warnings

@@ -8,16 +8,21 @@ The command line (options, exit status) is :mod:`riann_ros.cli.magcal_parser`. T
 ``riann-bag-eval`` reads it (:func:`riann_ros.evaluation.sources.read_whole`: the magnetometer paired with the IMU
 samples the nodes' way); the fit and its checks are :func:`riann_ros.magcal.bag_fit.calibrate_recording`, the file
 :func:`riann_ros.magcal.store.save_calibration` (atomic; an existing calibration file is replaced only with
-``--force``, any other file never), the figures :mod:`riann_ros.magcal.plots`. Nothing is written when the input
-cannot be read or gives nothing to calibrate from, or when validation by physics (:mod:`riann_ros.magcal.validate`)
-refuses the ``--prior`` (its file, or its calibrated field on this recording) or the result (exit status 1, one line
-naming the file and the reason). Reference: docs/magnetometer.md.
+``--force``, any other file never), the figures :mod:`riann_ros.magcal.plots`. The outputs are checked before any
+work (what is there, write permission: exit status 2). Nothing is written when the input cannot be read, gives
+nothing to calibrate from, the fit fails, validation by physics (:mod:`riann_ros.magcal.validate`) refuses the
+``--prior`` (its file, or its calibrated field on this recording) or the result, or an output cannot be written (exit
+status 1, one line naming the input or the target, never a temporary file): the figures are drawn into temporary
+files beside their targets, then the calibration file is written, then the figures take their names. Reference:
+docs/magnetometer.md.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -33,7 +38,14 @@ from riann_ros.cli.magcal_parser import (
     build_parser,
 )
 from riann_ros.magcal.bag_fit import NoMagnetometer, NotCalibratable, RecordingFit
-from riann_ros.magcal.records import CALIBRATED, MAX_DELAY_S, UT, MagCalPrior
+from riann_ros.magcal.records import (
+    CALIBRATED,
+    HARD_IRON_PRIOR_SD_T,
+    MAX_DELAY_S,
+    SOFT_IRON_PRIOR_SD,
+    UT,
+    MagCalPrior,
+)
 
 
 def _err(text: str) -> None:
@@ -50,7 +62,9 @@ def _figures(args: argparse.Namespace) -> list[Path]:
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-    """Refuse (ValueError, exit status 2) outputs that exist, before any work."""
+    """Refuse (ValueError, exit status 2) outputs that exist or cannot be written, and a bad --mag-delay, before any
+    work."""
+    from riann_ros.evaluation.outdir import check_file, check_folder
     from riann_ros.magcal.store import CalibrationFileError, is_calibration_file
 
     _delay(args)
@@ -60,11 +74,15 @@ def _check_outputs(args: argparse.Namespace) -> None:
                                                       "file; not replaced (not even with --force)")))
         if not args.force:
             raise ValueError(f"{args.out}: exists; --force replaces it")
-    if args.plots is not None and args.plots.exists() and not args.plots.is_dir():
-        raise ValueError(f"--plots {args.plots}: exists and is not a folder")
-    old = [f for f in _figures(args) if f.exists()]
-    if old and not args.force:
-        raise ValueError(f"{old[0]}: exists; --force replaces it (or --no-plots)")
+    if args.out is not None:
+        check_file(args.out, "--out")
+    if args.plots is not None and not args.no_plots:
+        check_folder(args.plots, "--plots")
+    for f in _figures(args):
+        if f.is_dir():
+            raise ValueError(f"{f}: is a folder, not a figure; not replaced")
+        if f.exists() and not args.force:
+            raise ValueError(f"{f}: exists; --force replaces it (or --no-plots)")
 
 
 def _delay(args: argparse.Namespace) -> float | None:
@@ -80,10 +98,30 @@ def _delay(args: argparse.Namespace) -> float | None:
     return d
 
 
-def _prior(args: argparse.Namespace) -> MagCalPrior | None:
-    from riann_ros.magcal.store import load_calibration
+#: a saved calibration whose σ is wider than this many times the unknown prior's (hard iron 50 µT, soft iron 0.1 per
+#: entry) is refused as --prior: it says less than no prior, and numbers that wide break the fit's linear algebra
+PRIOR_WIDER = 10.0
 
-    return None if args.prior is None else MagCalPrior.from_calibration(load_calibration(args.prior))
+
+def _prior(args: argparse.Namespace) -> MagCalPrior | None:
+    """The --prior file as the fit's prior (CalibrationFileError naming the file: unreadable, not a calibration, or
+    too wide to start from)."""
+    from riann_ros.magcal.store import CalibrationFileError, load_calibration
+
+    if args.prior is None:
+        return None
+    prior = MagCalPrior.from_calibration(load_calibration(args.prior))
+    if prior.covariance is not None:
+        sd = np.sqrt(np.clip(np.diag(np.asarray(prior.covariance).reshape(12, 12)), 0.0, None))
+        limit = PRIOR_WIDER * np.array([SOFT_IRON_PRIOR_SD] * 9 + [HARD_IRON_PRIOR_SD_T] * 3)
+        k = int(np.argmax(sd / limit))
+        if not sd[k] <= limit[k]:
+            what, unit, scale = ("soft iron", "", 1.0) if k < 9 else ("hard iron", " µT", UT)
+            raise CalibrationFileError(
+                f"{args.prior}: its covariance is too wide to start from (a {what} σ of {sd[k] / scale:.3g}{unit}, "
+                f"more than {PRIOR_WIDER:g} times the unknown prior's {limit[k] / PRIOR_WIDER / scale:g}{unit}); "
+                "leave out --prior to start from the unknown prior")
+    return prior
 
 
 class Refused(ValueError):
@@ -139,13 +177,18 @@ def format_fit(rf: RecordingFit) -> str:
     return "\n".join(lines)
 
 
-def _run(args: argparse.Namespace) -> int:
+class _Failed(Exception):
+    """The run cannot go on (message: what, naming the input or the target; nothing written)."""
+
+
+def _fit(args: argparse.Namespace) -> RecordingFit:
+    """Read the bag, check the ``--prior`` on its readings and fit it (_Failed for anything that stops it, nothing
+    written)."""
     from riann_ros.estimators.motion import gyro_motion
     from riann_ros.evaluation import BagTopics, EvalError
     from riann_ros.evaluation.sources import read_whole
-    from riann_ros.magcal import plots
     from riann_ros.magcal.bag_fit import calibrate_recording
-    from riann_ros.magcal.store import CalibrationFileError, save_calibration
+    from riann_ros.magcal.store import CalibrationFileError
 
     topics = BagTopics(**{k: "/" + v.strip().lstrip("/") for k, v in (("imu", args.imu_topic),
                                                                        ("mag", args.mag_topic)) if v})
@@ -153,35 +196,85 @@ def _run(args: argparse.Namespace) -> int:
         prior = _prior(args)
         rec = read_whole(args.bag, topics)
         _check_prior(args, prior, rec.mag)
-        rf = calibrate_recording(rec, gyro_motion, prior, args.soft_iron_model, _delay(args))
+        with np.errstate(all="ignore"):
+            return calibrate_recording(rec, gyro_motion, prior, args.soft_iron_model, _delay(args))
     except CalibrationFileError as exc:
-        _err(f"--prior {exc}; nothing written")
-        return EXIT_FAILED
+        raise _Failed(f"--prior {exc}; nothing written") from None
     except (EvalError, Refused) as exc:
-        _err(str(exc))
-        return EXIT_FAILED
+        raise _Failed(str(exc)) from None
     except NotCalibratable as exc:
         hint = "; another topic: --mag-topic" if isinstance(exc, NoMagnetometer) else ""
-        _err(f"{args.bag}: {exc}{hint}; nothing written")
-        return EXIT_FAILED
-    print(format_fit(rf))
+        raise _Failed(f"{args.bag}: {exc}{hint}; nothing written") from None
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        raise _Failed(f"{args.bag}: the fit failed ({type(exc).__name__}: {exc}); nothing written") from None
+
+
+def _write(args: argparse.Namespace, rf: RecordingFit) -> None:
+    """The figures and the calibration file, each into a temporary file beside its target first, then all renamed to
+    their targets; _Failed naming the target when any cannot be written, and then nothing is."""
+    from riann_ros.magcal import plots
+    from riann_ros.magcal.store import CalibrationFileError, save_calibration
+
+    figures = _figures(args)
+    made = _make_folders([*([args.out.parent] if args.out is not None else []), *(f.parent for f in figures[:1])])
+    staged: list[tuple[Path, Path]] = []
     try:
+        for path, plot in zip(figures, (plots.plot_sphere, plots.plot_heading)[:len(figures)], strict=True):
+            staged.append((path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}"), path))
+            try:
+                plot(rf, staged[-1][0], f"{args.bag.name}: ")
+            except Exception as exc:  # a full disk, a folder made read-only meanwhile, or matplotlib itself
+                verb = "write" if isinstance(exc, OSError) else "draw"
+                raise _Failed(f"cannot {verb} {path}: {_why(exc)}; nothing written") from None
+        if args.out is not None:
+            staged.insert(0, (args.out.with_name(f".{args.out.name}.{os.getpid()}.tmp"), args.out))
+            try:
+                save_calibration(staged[0][0], rf.fit.calibration)
+            except (CalibrationFileError, OSError) as exc:
+                raise _Failed(f"cannot write {args.out}: {_why(exc)}; nothing written") from None
+        for tmp, path in staged:  # renames: the last step, all within their folders
+            os.replace(tmp, path)
+    except BaseException:
+        for tmp, _ in staged:
+            tmp.unlink(missing_ok=True)
+        for folder in reversed(made):
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+
+
+def _why(exc: BaseException) -> str:
+    """An error's reason without the temporary file an OSError names."""
+    return exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc) or type(exc).__name__
+
+
+def _make_folders(folders: list[Path]) -> list[Path]:
+    """Make the folders that do not exist (parents first); the ones made, to remove again if nothing is written."""
+    made: list[Path] = []
+    for folder in folders:
+        missing = [p for p in (folder, *folder.parents) if not p.exists()]
+        for p in reversed(missing):
+            try:
+                p.mkdir()
+            except OSError as exc:
+                raise _Failed(f"cannot make the folder {p}: {_why(exc)}; nothing written") from None
+            made.append(p)
+    return made
+
+
+def _run(args: argparse.Namespace) -> int:
+    try:
+        rf = _fit(args)
+        print(format_fit(rf))
         _check_result(args, rf)
-    except Refused as exc:
+        _write(args, rf)
+    except (_Failed, Refused) as exc:
         _err(str(exc))
         return EXIT_FAILED
     if args.out is not None:
-        try:
-            save_calibration(args.out, rf.fit.calibration)
-        except (CalibrationFileError, OSError) as exc:
-            _err(f"{exc}; nothing written")
-            return EXIT_FAILED
         print(f"wrote {args.out} (load it with the node parameter mag_calibration_file)")
-    figures = _figures(args)
-    if figures:
-        figures[0].parent.mkdir(parents=True, exist_ok=True)
-        for path, plot in zip(figures, (plots.plot_sphere, plots.plot_heading), strict=True):
-            print(f"wrote {plot(rf, path, f'{args.bag.name}: ')}")
+    for path in _figures(args):
+        print(f"wrote {path}")
     if rf.fit.calibration.state != CALIBRATED:
         _err(f"warning: the calibration is {rf.fit.calibration.state}, not calibrated: too little rotation to bound "
              "the heading error it adds to the field's own 2.5° (turn the sensor through more headings, and tilt "

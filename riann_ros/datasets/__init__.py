@@ -22,7 +22,9 @@ def detect_format(path: str | os.PathLike[str]) -> str:
 
     p = Path(path)
     if not p.exists():
-        raise FileNotFoundError(f"{p}: no such file or directory")
+        from riann_ros.datasets.broad import missing
+
+        raise FileNotFoundError(missing(p))
     if p.is_dir():
         if is_euroc(p):
             return "euroc"

@@ -90,6 +90,19 @@ def read_broad(path: str | os.PathLike[str]) -> Recording:
     )
 
 
+#: where to get BROAD, for a BROAD path that is not there (a clone of the repository holds only trial 21, as a bag)
+GET_BROAD = ("BROAD is not part of the repository: download it from https://doi.org/10.3390/data6070072 (the "
+             "article's data, CC BY 4.0) into ../shared/datasets/broad, as bags/README.md says")
+
+
+def missing(path: str | os.PathLike[str]) -> str:
+    """The message for an input that does not exist; for what looks like a BROAD trial (a path through
+    ``datasets/broad``, an ``.hdf5`` or ``.mat`` file) with where to get BROAD."""
+    p = Path(path)
+    broad = "datasets/broad" in p.as_posix() or p.suffix.lower() in (".hdf5", ".mat")
+    return f"{p}: no such file or directory" + (f" ({GET_BROAD})" if broad else "")
+
+
 def find_broad_dir() -> Path | None:
     """The BROAD folder from ``$RIANN_BROAD_DIR`` or ``../shared/datasets/broad``; None when absent."""
     env = os.environ.get("RIANN_BROAD_DIR")

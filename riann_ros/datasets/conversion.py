@@ -114,7 +114,7 @@ def plan(inputs: Sequence[Path], fmt: str) -> list[Job]:
     """The jobs of ``inputs`` read as ``fmt`` (``auto``: detected per input); none for synthetic, which takes no
     input: one job. A folder that is not an EuRoC folder expands to its BROAD (or, failing those, CSV) files.
     FileNotFoundError / ValueError for inputs that cannot be planned."""
-    from riann_ros.datasets.broad import broad_files
+    from riann_ros.datasets.broad import broad_files, missing
     from riann_ros.datasets.euroc import is_euroc
 
     if fmt == "synthetic":
@@ -122,7 +122,7 @@ def plan(inputs: Sequence[Path], fmt: str) -> list[Job]:
     jobs = []
     for inp in inputs:
         if not inp.exists():
-            raise FileNotFoundError(f"{inp}: no such file or directory")
+            raise FileNotFoundError(missing(inp))
         if inp.is_dir() and fmt in ("auto", "broad", "csv") and not is_euroc(inp):
             files = broad_files(inp) if fmt in ("auto", "broad") else sorted(inp.glob("*.csv"))
             if not files and fmt == "auto":

@@ -220,15 +220,19 @@ def float_columns(
     return out
 
 
-def normalise_quats(q: np.ndarray, path: Path, lines: Sequence[int]) -> np.ndarray:
-    """Normalise finite rows (NaN where any component is missing); reject non-unit quaternions."""
+def normalise_quats(q: np.ndarray, path: Path, lines: Sequence[int], what: str = "reference quaternion") -> np.ndarray:
+    """Normalise finite rows (NaN where any component is missing); reject non-unit quaternions (``what``: the
+    quaternions' name in the message). A norm too large for a float is ``inf`` in the message, without a numpy
+    warning."""
     ok = np.isfinite(q).all(axis=1)
     q = np.where(ok[:, None], q, np.nan)
-    norm = np.linalg.norm(q, axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        big = np.max(np.abs(q), axis=1)  # the norm of the row scaled to 1 at most, scaled back: no overflow
+        norm = big * np.linalg.norm(q / np.where(big > 0.0, big, 1.0)[:, None], axis=1)
     bad = ok & (np.abs(norm - 1.0) > 0.1)
     if bad.any():
         r = int(np.flatnonzero(bad)[0])
-        raise InputError(f"{path}:{lines[r]}: reference quaternion norm {norm[r]:.3g} is not ≈ 1")
+        raise InputError(f"{path}:{lines[r]}: {what} norm {norm[r]:.3g} is not ≈ 1")
     return q / norm[:, None]
 
 

@@ -102,18 +102,21 @@ def _find_named(header: list[str], names: Sequence[str]) -> list[int | None]:
 GT_OPTIONS = ("--gt-cols", "--gt-time-unit")  # the converter's options naming the columns and the time unit
 
 
-def _named_layout(path: Path, header: list[str], cols: Sequence[str], cols_option: str = GT_OPTIONS[0]) -> list[int]:
-    """Indices of the --gt-cols columns TIME, QW, QX, QY, QZ, else InputError with a hint."""
+def _named_layout(path: Path, header: list[str], cols: Sequence[str], cols_option: str = GT_OPTIONS[0],
+                  kind: str = "ground-truth") -> list[int]:
+    """Indices of the --gt-cols columns TIME, QW, QX, QY, QZ, else InputError with a hint (``kind``: what the file
+    holds, for the message)."""
     found = _find_named(header, cols)
     missing = [c for c, i in zip(cols, found, strict=True) if i is None]
     if missing:
         raise InputError(
-            missing_columns_message(path, missing, header, "ground-truth", cols_option, cols[0] in missing, cols)
+            missing_columns_message(path, missing, header, kind, cols_option, cols[0] in missing, cols)
         )
     return [i for i in found if i is not None]
 
 
-def _auto_layout(path: Path, header: list[str], cols_option: str = GT_OPTIONS[0]) -> list[int] | None:
+def _auto_layout(path: Path, header: list[str], cols_option: str = GT_OPTIONS[0],
+                 kind: str = "ground-truth") -> list[int] | None:
     """Indices of time, qw, qx, qy, qz in an ASL or open_vins-style header; None for a TUM file (no header).
 
     ASL: ``#timestamp, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z``. open_vins / vicon2gt:
@@ -131,7 +134,7 @@ def _auto_layout(path: Path, header: list[str], cols_option: str = GT_OPTIONS[0]
         return None
     missing = ([] if t is not None else ["time"]) + [q for q in OV_QUAT_COLS if q not in low]
     raise InputError(
-        missing_columns_message(path, missing, header, "ground-truth", cols_option, t is None, OV_QUAT_COLS)
+        missing_columns_message(path, missing, header, kind, cols_option, t is None, OV_QUAT_COLS)
         + "; known layouts: ASL (#timestamp, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z), open_vins "
         "(#time(ns), ..., qw, qx, qy, qz) and TUM (t tx ty tz qx qy qz qw, no header); "
         f"{cols_option} TIME,QW,QX,QY,QZ names other columns"
@@ -144,7 +147,7 @@ def _read_tum(path: Path, header: list[str], rows: list[list[str]], lines: list[
     lines = [lines[0] - 1, *lines]
     if any(len(r) != 8 for r in rows):
         raise InputError(
-            f"{path}: neither an ASL ground-truth CSV (#timestamp, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z), an "
+            f"{path}: neither an ASL CSV (#timestamp, ..., q_RS_w, q_RS_x, q_RS_y, q_RS_z), an "
             "open_vins one (#time(ns),px,py,pz,qw,qx,qy,qz) nor a TUM file (t tx ty tz qx qy qz qw)"
         )
     stamps = parse_time_ns([r[0] for r in rows], time_unit, str(path), lines)
@@ -155,6 +158,7 @@ def _read_tum(path: Path, header: list[str], rows: list[list[str]], lines: list[
 def read_ground_truth(
     path: str | os.PathLike[str], cols: Sequence[str] | None = None, time_unit: str | None = None,
     options: tuple[str, str] = GT_OPTIONS,
+    kind: str = "ground-truth",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stamps (ns) and quaternions (w, x, y, z) from a ground-truth file.
 
@@ -163,12 +167,13 @@ def read_ground_truth(
     columns found by name) or a TUM file (``t tx ty tz qx qy qz qw``, no header). ``time_unit``: the unit
     of the time column; default: the unit in its name (``time(ns)``, ``timestamp [s]``), else ns for CSVs
     with a header and s for TUM files. ``options``: the command-line options that name the columns and the time
-    unit, for the messages (the converter's ``--gt-cols``, ``--gt-time-unit``).
+    unit, for the messages (the converter's ``--gt-cols``, ``--gt-time-unit``); ``kind``: what the file holds, for
+    the messages (``ground-truth``, or ``estimate`` for riann-bag-eval's ``--estimate-file``).
     """
     path = Path(path)
     header, rows, lines = read_table(path)
-    idx = _named_layout(path, header, cols, options[0]) if cols is not None else _auto_layout(path, header,
-                                                                                              options[0])
+    idx = _named_layout(path, header, cols, options[0], kind) if cols is not None else _auto_layout(
+        path, header, options[0], kind)
     if idx is None:
         unit = time_unit or "s"
         stamps, q, lines = _read_tum(path, header, rows, lines, unit)
@@ -180,7 +185,8 @@ def read_ground_truth(
         check_stamps(stamps, str(path), lines)
     except InputError as e:  # e.g. seconds read as ns: 5 ms steps round to the same ns
         raise InputError(f"{e} (time read in {unit}; if that is wrong, use {options[1]})") from None
-    return stamps, normalise_quats(q, path, lines)
+    return stamps, normalise_quats(q, path, lines, "estimate quaternion" if kind == "estimate" else
+                                   "reference quaternion")
 
 
 def _is_number_row(cells: list[str]) -> bool:

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from riann_ros.evaluation.coverage import ranked
 from riann_ros.evaluation.errors import EvalError
 from riann_ros.evaluation.executors import Executor
 from riann_ros.evaluation.perturb import NONE
@@ -57,8 +58,9 @@ def scenario_order(scenarios: Iterable[str]) -> list[str]:
 def aggregate(rows: Iterable[ResultRow], metric: str = "rmse_deg") -> list[Group]:
     """Per estimator × scenario × perturbation × dataset × rate: n, mean, median, max, min of the per-sequence
     ``metric`` (BROAD's group averaging: RMSE per trial, then the plain mean). With several datasets an ``all``
-    group over every sequence is added. Rows of inputs without a reference (no scores) are left out."""
-    rows = [r for r in rows if r.has_reference and getattr(r.score, metric) is not None]
+    group over every sequence is added. Rows of inputs without a reference (no scores) are left out, and recorded
+    estimates that cover too little of the scored span to be ranked (:func:`~riann_ros.evaluation.coverage.ranked`)."""
+    rows = [r for r in rows if r.has_reference and ranked(r) and getattr(r.score, metric) is not None]
     groups: dict[tuple[str, str, str, str, str | float], list[float]] = {}
     datasets = sorted({r.dataset for r in rows})
     for r in rows:

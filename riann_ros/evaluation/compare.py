@@ -4,10 +4,14 @@ A and B are results.json files of riann-bag-eval (or their ``--out`` folders; th
 one run), each narrowed by selections (``--select-a estimator=madgwick``, ``--select-b perturbation=jitter:10ms``,
 ``--select scenario=as-recorded`` for both; :func:`parse_selection`).
 
-Matching: rows always pair by sequence. Of the other axes — scenario, perturbation, rate, estimator — those on
-which A and B share a value also have to agree (so two runs of the same settings pair row by row);
-an axis whose values A and B do not share at all (``madgwick`` in A, ``madgwick(beta=0.1)`` in B; a clean run and a
-perturbed one) is not matched, and each side's value is shown. A statistic (``--metric``: ``rmse`` by default, or
+Matching: rows always pair by sequence. Of the other axes — estimator (its label holds its parameters), scenario,
+perturbation, rate, sensors (6D, or 9D: the magnetometer used) — those on which A and B share a value also have to
+agree (so two runs of the same settings pair row by row, and a 9D row never pairs with a 6D one while both sides
+have rows of the same sensors); an axis whose values A and B do not share at all (``madgwick`` in A,
+``madgwick(beta=0.1)`` in B; a clean run and a perturbed one; a 9D run and a 6D one) is not matched, each side's
+value is shown and the text says so. Run settings that change every score (seed, initial rest, ``--score-from``,
+``--offset-steps``, the scenarios' bias) are compared too: where A's and B's differ, the text says which
+(:func:`riann_ros.evaluation.compare_text.setting_differences`). A statistic (``--metric``: ``rmse`` by default, or
 another of evo ape's mean, median, std, min, max; heading and total errors where scored) is compared as B − A: per
 group n and mean / median / max over the sequences of A, of B and of B − A; per sequence A, B and B − A, and every
 statistic of e_α; rows of one side that found no partner are counted. No estimator runs.
@@ -32,9 +36,10 @@ from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, ResultRow
 from riann_ros.evaluation.scoring import ERRORS, STATS, stat_field
 
-AXES = ("estimator", "scenario", "perturbation", "rate")  # matched when A and B share a value
-SELECT_FIELDS = ("sequence", "dataset", "sensors", *AXES)
+AXES = ("estimator", "scenario", "perturbation", "rate", "sensors")  # matched when A and B share a value
+SELECT_FIELDS = ("sequence", "dataset", *AXES)
 PRINT_PAIRS = 40  # the per-sequence statistics are printed for at most this many pairs (all in compare.csv)
+
 
 
 def metrics() -> list[str]:
@@ -118,6 +123,7 @@ class Saved:
     label: str
     command: str
     rows: list[ResultRow]
+    settings: dict = field(default_factory=dict)  # results.json's settings
 
 
 def run_label(path: Path) -> str:
@@ -143,14 +149,16 @@ def load(path: str | Path) -> Saved:
         rows = [row for row in (ResultRow.from_dict(d) for d in data["results"]) if row.has_reference]
     except (KeyError, TypeError, ValueError) as exc:
         raise EvalError(f"{p}: a result row lacks or garbles {exc}") from exc
-    return Saved(p, run_label(p), str((data.get("settings") or {}).get("command", "")), rows)
+    settings = data.get("settings")
+    settings = settings if isinstance(settings, dict) else {}
+    return Saved(p, run_label(p), str(settings.get("command", "")), rows, settings)
 
 
-Side = tuple[str, str, str, str | float]  # estimator, scenario, perturbation, rate of one side's row
+Side = tuple[str, str, str, str | float, str]  # estimator, scenario, perturbation, rate, sensors of one side's row
 
 
 def side_of(r: ResultRow) -> Side:
-    return (r.estimator, r.scenario, r.perturbation, r.rate)
+    return (r.estimator, r.scenario, r.perturbation, r.rate, r.sensors)
 
 
 @dataclass
@@ -211,6 +219,10 @@ class GroupDiff:
     def rate(self) -> str | float:
         return self.a_side[3]
 
+    @property
+    def sensors(self) -> str:
+        return self.a_side[4]
+
 
 @dataclass
 class Comparison:
@@ -238,9 +250,9 @@ class Comparison:
         prts = list(dict.fromkeys(k[i][2] for k in by for i in (0, 1)))
 
         def order(k: tuple[Side, Side]) -> tuple:
-            (ea, sa, pa, ra), (eb, sb, pb, rb) = k
+            (ea, sa, pa, ra, na), (eb, sb, pb, rb, nb) = k
             return (scns.index(sa), scns.index(sb), prts.index(pa), prts.index(pb), rate_order(ra), rate_order(rb),
-                    ests.index(ea), ests.index(eb))
+                    na, nb, ests.index(ea), ests.index(eb))
 
         out = []
         for k in sorted(by, key=order):
@@ -320,13 +332,14 @@ def _csv_stats(cmp: Comparison) -> list[tuple[str, str]]:
 def write_csv(path: Path, cmp: Comparison) -> None:
     """compare.csv: one row per pair. ``sequence, scenario, perturbation, rate, estimator`` are A's,
     ``rmse_a_deg, rmse_b_deg, diff_deg`` the e_α RMSEs and B − A, then B's side, the ``--metric`` and its
-    difference, and A's and B's value of every other statistic."""
+    difference, A's and B's ``sensors``, and A's and B's value of every other statistic."""
     extra = _csv_stats(cmp)
     metric = cmp.metric[1] if cmp.metric[0] == "inclination" else f"{cmp.metric[0]}_{cmp.metric[1]}"
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["sequence", "scenario", "perturbation", "rate", "estimator", "rmse_a_deg", "rmse_b_deg",
                     "diff_deg", "scenario_b", "perturbation_b", "rate_b", "estimator_b", "metric", "metric_diff_deg",
+                    "sensors", "sensors_b",
                     *(f"{stem}_{x}_deg" for stem, _ in extra for x in ("a", "b"))])
 
         def num(v: float | None) -> str:
@@ -336,7 +349,7 @@ def write_csv(path: Path, cmp: Comparison) -> None:
             a, b = p.a, p.b
             cells = [p.sequence, a.scenario, a.perturbation, a.rate, a.estimator, num(a.rmse_deg), num(b.rmse_deg),
                      num(b.rmse_deg - a.rmse_deg), b.scenario, b.perturbation, b.rate, b.estimator, metric,
-                     num(p.diff)]
+                     num(p.diff), a.sensors, b.sensors]
             for _, m in extra:
                 err, st = m.split(":")
                 cells += [num(a.score.stat(err, st)), num(b.score.stat(err, st))]
@@ -349,11 +362,12 @@ def differences(cmp: Comparison) -> dict[tuple[str, str], list[float]]:
     out: dict[tuple[str, str], list[float]] = {}
     for g in cmp.groups():
         parts = []
-        for ax in ("scenario", "perturbation", "rate"):
+        for ax in ("scenario", "perturbation", "rate", "sensors"):
             a, b = side_text(g.a_side, ax), side_text(g.b_side, ax)
             if ax in cmp.differing:
                 parts.append(f"{a} → {b}")
-            elif not ((ax == "perturbation" and a == NONE) or (ax == "rate" and a == NATIVE)):
+            elif not ((ax == "perturbation" and a == NONE) or (ax == "rate" and a == NATIVE)
+                      or (ax == "sensors" and a == "6D")):
                 parts.append(a)
         tick = g.a_side[0] if g.a_side[0] == g.b_side[0] else f"{g.a_side[0]} → {g.b_side[0]}"
         out[(", ".join(parts), tick)] = [p.diff for p in cmp.pairs if (side_of(p.a), side_of(p.b)) == (g.a_side,

@@ -3,6 +3,7 @@ per sequence, every statistic per sequence, and the rows without a partner (ROS-
 
 from __future__ import annotations
 
+import json
 import math
 import shlex
 
@@ -10,6 +11,7 @@ from riann_ros.evaluation.compare import (
     AXES,
     PRINT_PAIRS,
     Comparison,
+    Saved,
     Side,
     metric_text,
     ordered_pairs,
@@ -22,6 +24,18 @@ from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, ResultRow
 from riann_ros.evaluation.scoring import STATS
 from riann_ros.evaluation.uncertainty_report import format_uncertainty_comparison
+
+#: results.json settings that change every score of a run: said when A's and B's differ
+SCORE_SETTINGS = {"seed": "seed", "rest": "initial rest (--rest)", "score_from_s": "--score-from",
+                  "offset_steps": "--offset-steps", "bias_std_dps": "the scenarios' gyro bias σ (°/s)"}
+
+
+def setting_differences(a: Saved, b: Saved) -> list[str]:
+    """The score-changing settings (:data:`SCORE_SETTINGS`) A and B were run with otherwise, as ``NAME: A …, B …``
+    (a setting an older results.json lacks is not compared)."""
+    return [f"{name}: A {json.dumps(a.settings[k])}, B {json.dumps(b.settings[k])}"
+            for k, name in SCORE_SETTINGS.items()
+            if k in a.settings and k in b.settings and a.settings[k] != b.settings[k]]
 
 
 def _table(headers: list[str], rows: list[list[str]], numeric: set[str]) -> list[str]:
@@ -44,7 +58,7 @@ class _Layout:
         for ax in AXES:
             vals = {s[AXES.index(ax)] for s in sides}
             if ax in cmp.differing or ax in ("estimator", "scenario") or (
-                    ax == "perturbation" and vals != {NONE}) or (ax == "rate" and len(vals) > 1):
+                    ax == "perturbation" and vals != {NONE}) or (ax in ("rate", "sensors") and len(vals) > 1):
                 shown.append(ax)
         self.axes = shown
         self.differing = cmp.differing
@@ -55,12 +69,25 @@ class _Layout:
                                                 else (side_text(a, ax),))]
 
 
-def _how(cmp: Comparison) -> str:
+def _how(cmp: Comparison) -> list[str]:
+    """How the rows were paired, and what makes A's and B's figures differ besides the estimators: the axes they do
+    not share (9D against 6D said in words), the run settings they differ in."""
     sel = [f"{n}: {s.text()}" for n, s in zip("AB", cmp.selections, strict=True) if s.items]
     text = "rows paired by sequence" + (f", {', '.join(cmp.matched)}" if cmp.matched else "")
     if cmp.differing:
         text += f"; A and B differ in {' and '.join(cmp.differing)} (each side's shown)"
-    return text + (f"; selected {'; '.join(sel)}" if sel else "")
+    lines = [text + (f"; selected {'; '.join(sel)}" if sel else "")]
+    if "sensors" in cmp.differing:
+        sa = "/".join(sorted({p.a.sensors for p in cmp.pairs}))
+        sb = "/".join(sorted({p.b.sensors for p in cmp.pairs}))
+        lines.append(f"NOTE: the sensors differ: A's rows are {sa}, B's {sb} (9D: the estimators used the "
+                     "magnetometer): not the same condition (--select sensors=6D on both sides compares like with "
+                     "like)")
+    differ = setting_differences(cmp.a, cmp.b)
+    if differ:
+        lines.append("NOTE: A and B were run with other settings, which every difference includes: "
+                     + "; ".join(differ))
+    return lines
 
 
 def format_comparison(cmp: Comparison) -> str:
@@ -76,7 +103,7 @@ def format_comparison(cmp: Comparison) -> str:
             for g in groups]
     out = [f"A = {cmp.a.label}: {cmp.a.path}" + (f"  ({cmp.a.command})" if cmp.a.command else ""),
            f"B = {cmp.b.label}: {cmp.b.path}" + (f"  ({cmp.b.command})" if cmp.b.command else ""),
-           _how(cmp), "",
+           *_how(cmp), "",
            f"{metric_text(cmp.metric)} (°) per sequence, B − A (negative: B is better)",
            *_table(headers, rows, {"n", *headers[len(lay.headers) + 1:]}), "", "per sequence"]
     seq_rows = [[*lay.cells(side_of(p.a), side_of(p.b)), p.sequence, f"{p.va:.2f}", f"{p.vb:.2f}",

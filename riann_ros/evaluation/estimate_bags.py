@@ -1,13 +1,13 @@
-"""The estimates of a run written into copies of its input bags (``--write-estimates``, ROS-free): each
-estimator's output of the first scenario as a ``geometry_msgs/QuaternionStamped`` topic
-``/eval/<scenario>/<estimator>`` beside the input's own topics. Dataset files (BROAD) get no bag copy; their
-estimates are in the trajectory files (:mod:`~riann_ros.evaluation.estimate_files`)."""
+"""The estimates of a run in copies of its input bags (``--write-estimates``, ROS-free): each estimator's output of the
+first scenario as a ``geometry_msgs/QuaternionStamped`` topic ``/eval/<scenario>/<estimator>`` beside the input's own
+topics. Dataset files (BROAD) get no bag copy; their estimates are in the trajectory files. What is written, and
+when: :func:`riann_ros.evaluation.estimate_files.write_estimates`."""
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from riann_ros.evaluation.input_hints import BROAD_SUFFIXES
 from riann_ros.evaluation.results import SequenceResult
@@ -19,37 +19,22 @@ def topic_for(scenario: str, label: str) -> str:
     return f"/eval/{scenario.replace('-', '_')}/{clean}"
 
 
-@dataclass
-class EstimateBags:
-    """What :func:`write_estimate_bags` did: the bags written with their topics, why others were not, and the
-    inputs that are no bags (no copy: not a problem)."""
-
-    written: list[tuple[Path, list[str]]] = field(default_factory=list)
-    problems: list[str] = field(default_factory=list)
-    not_bags: list[Path] = field(default_factory=list)
+BagCopy = tuple[Path, Path, dict[str, tuple[Any, Any]]]  # input bag, its copy in the folder, topic → estimates
 
 
-def write_estimate_bags(results: list[SequenceResult], out_dir: Path, force: bool) -> EstimateBags:
-    """A copy of every evaluated input bag in ``out_dir`` with its estimates (``SequenceResult.estimates``, kept with
-    ``EvalSettings.keep_estimates``); ``force`` replaces existing copies. Unwritable copies are problems, not
-    errors: the other inputs are still written; dataset files are skipped (``not_bags``)."""
-    from riann_ros import bagio
-
-    done = EstimateBags()
-    out_dir.mkdir(parents=True, exist_ok=True)
+def bag_copies(results: list[SequenceResult], out_dir: Path) -> tuple[list[BagCopy], list[Path]]:
+    """The bag copy of every evaluated input bag with estimates (``SequenceResult.estimates``, kept with
+    ``EvalSettings.keep_estimates``): (input, copy, topics); and the dataset files, which get none."""
+    copies: list[BagCopy] = []
+    not_bags: list[Path] = []
     for res in results:
         if res.error or not res.estimates:
             continue
         src = Path(res.source)
         if src.suffix.lower() in BROAD_SUFFIXES:
-            done.not_bags.append(src)
+            not_bags.append(src)
             continue
         est = res.estimates
         topics = {topic_for(est["scenario"], lbl): (est["stamps"], q) for lbl, q in est["quats"].items()}
-        dst = out_dir / src.name
-        try:
-            bagio.write_estimates(src, dst, topics, force=force)
-            done.written.append((dst, list(topics)))
-        except Exception as exc:
-            done.problems.append(f"{src}: cannot write estimates to {dst}: {exc}")
-    return done
+        copies.append((src, out_dir / src.name, topics))
+    return copies, not_bags

@@ -71,14 +71,6 @@ def write_trajectory(path: Path, stamps_ns: NDArray[np.int64], quats: NDArray[np
     return int(ok.sum())
 
 
-@dataclass
-class EstimateFiles:
-    """What :func:`write_estimate_files` did: the files written, and why others were not."""
-
-    written: list[Path] = field(default_factory=list)
-    problems: list[str] = field(default_factory=list)
-
-
 def _trajectories(res: SequenceResult) -> dict[str, tuple[NDArray[np.int64], NDArray[np.float64]]]:
     """Label → (stamps, quaternions) of an input's kept estimates, the reference (scored samples only) last."""
     est = res.estimates or {}
@@ -91,12 +83,23 @@ def _trajectories(res: SequenceResult) -> dict[str, tuple[NDArray[np.int64], NDA
     return out
 
 
-def write_estimate_files(results: Sequence[SequenceResult], out_dir: Path, formats: Sequence[str] = ("tum",),
-                         force: bool = False) -> EstimateFiles:
-    """The trajectory files of every evaluated input in ``out_dir`` (``force``: replace existing ones). A file that
-    exists (without ``force``) or cannot be written is a problem; the others are still written."""
-    done = EstimateFiles()
-    out_dir.mkdir(parents=True, exist_ok=True)
+@dataclass(frozen=True)
+class Trajectory:
+    """One trajectory file to write: where, what, in which format, and the input it comes from."""
+
+    path: Path
+    stamps: NDArray[np.int64]
+    quats: NDArray[np.float64]
+    fmt: str
+    source: str
+
+
+def trajectories(results: Sequence[SequenceResult], out_dir: Path,
+                 formats: Sequence[str] = ("tum",)) -> tuple[list[Trajectory], list[str]]:
+    """The trajectory files of every evaluated input, and the labels whose file names clash (two labels that give
+    one file name: neither can be written under it)."""
+    out: list[Trajectory] = []
+    problems: list[str] = []
     for res in results:
         if res.error or not res.estimates:
             continue
@@ -105,19 +108,83 @@ def write_estimate_files(results: Sequence[SequenceResult], out_dir: Path, forma
         for label, (stamps, quats) in _trajectories(res).items():
             stem = file_stem(res.name, scenario, label)
             if stem in stems:
-                done.problems.append(f"{res.source}: the labels {stems[stem]!r} and {label!r} give the same file name "
-                                     f"{stem}: {label!r} not written")
+                problems.append(f"{res.source}: the labels {stems[stem]!r} and {label!r} give the same file name "
+                                f"{stem}")
                 continue
             stems[stem] = label
-            for fmt in formats:
-                path = out_dir / f"{stem}.{fmt}"
-                if path.exists() and not force:
-                    done.problems.append(f"{path} exists: not overwriting it (--force replaces it)")
-                    continue
-                try:
-                    write_trajectory(path, stamps, quats, fmt)
-                except OSError as exc:
-                    done.problems.append(f"{res.source}: cannot write {path}: {exc}")
-                    continue
-                done.written.append(path)
+            out += [Trajectory(out_dir / f"{stem}.{fmt}", stamps, quats, fmt, res.source) for fmt in formats]
+    return out, problems
+
+
+@dataclass
+class Written:
+    """What :func:`write_estimates` did: the bag copies (with their topics) and trajectory files written, the
+    dataset inputs that get no bag copy, and the problems (each naming its file)."""
+
+    bags: list[tuple[Path, list[str]]] = field(default_factory=list)
+    files: list[Path] = field(default_factory=list)
+    not_bags: list[Path] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+
+def clashes(targets: Sequence[Path], inputs: Sequence[str], force: bool) -> list[str]:
+    """Why files cannot be written at ``targets``: one that exists (unless ``force``), two that are one file, one that
+    is an input (never replaced, whatever ``force``)."""
+    out = []
+    own = {Path(i).resolve() for i in inputs}
+    seen: set[Path] = set()
+    for t in targets:
+        r = t.resolve()
+        if r in own:
+            out.append(f"{t} is an input: it would be replaced by its own copy (choose another folder)")
+        elif r in seen:
+            out.append(f"{t}: two inputs of the same file name would be written there")
+        elif (t.exists() or t.is_symlink()) and not force:
+            out.append(f"{t} exists: not overwriting it (--force replaces it)")
+        seen.add(r)
+    return out
+
+
+def write_estimates(results: Sequence[SequenceResult], out_dir: Path, formats: Sequence[str] = ("tum",),
+                    force: bool = False) -> Written:
+    """``--write-estimates`` into ``out_dir``: every bag copy (:func:`~riann_ros.evaluation.estimate_bags.bag_copies`)
+    and trajectory file (:func:`trajectories`) is planned first; any clash (:func:`clashes`, two labels of one file
+    name) and nothing is written. Otherwise all are written; one that fails is a problem naming it, the others are
+    still written."""
+    from riann_ros.evaluation.estimate_bags import bag_copies
+
+    copies, not_bags = bag_copies(list(results), out_dir)
+    files, problems = trajectories(results, out_dir, formats)
+    done = Written(not_bags=not_bags)
+    problems += clashes([dst for _, dst, _ in copies] + [t.path for t in files], [r.source for r in results], force)
+    if problems:
+        done.problems = [*problems, f"nothing written in {out_dir}"]
+        return done
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        done.problems = [f"cannot create {out_dir}: {exc.strerror or exc}; nothing written there"]
+        return done
+    done.bags, bag_problems = _write_bags(copies, force)
+    done.problems += bag_problems
+    for t in files:
+        try:
+            write_trajectory(t.path, t.stamps, t.quats, t.fmt)
+            done.files.append(t.path)
+        except OSError as exc:
+            done.problems.append(f"{t.source}: cannot write {t.path}: {exc.strerror or exc}")
     return done
+
+
+def _write_bags(copies: Sequence[tuple[Path, Path, dict]], force: bool) -> tuple[list[tuple[Path, list[str]]],
+                                                                                 list[str]]:
+    from riann_ros import bagio
+
+    written, problems = [], []
+    for src, dst, topics in copies:
+        try:
+            bagio.write_estimates(src, dst, topics, force=force)
+            written.append((dst, list(topics)))
+        except Exception as exc:  # a bag that cannot be copied must not stop the others
+            problems.append(f"{src}: cannot write estimates to {dst}: {exc}")
+    return written, problems

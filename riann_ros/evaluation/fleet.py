@@ -74,9 +74,8 @@ class _Kept:
 
     def _put(self, i: int, res: SequenceResult) -> None:
         self.results[i] = res
-        if self.store is not None:
-            # the estimates of --write-estimates stay in memory only (that option does not combine with --resume)
-            self.store.write(i, replace(res, estimates=None) if res.estimates is not None else res)
+        if self.store is not None:  # with the estimates of --write-estimates, so that a resumed run writes them
+            self.store.write(i, res)
 
 
 class Fleet(AbstractContextManager["Fleet"]):

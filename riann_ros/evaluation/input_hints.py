@@ -58,7 +58,9 @@ def input_hint(path: str | os.PathLike[str]) -> str | None:
 def check_input(p: Path) -> None:
     """EvalError for a missing input, or one to convert first (:func:`input_hint`)."""
     if not p.exists():
-        raise EvalError(f"{p}: no such file or directory")
+        from riann_ros.datasets.broad import missing
+
+        raise EvalError(missing(p))
     hint = input_hint(p)
     if hint:
         raise EvalError(hint)

@@ -4,6 +4,8 @@ two runs in one folder. Used by the run's files (:mod:`~riann_ros.evaluation.rep
 
 from __future__ import annotations
 
+import os
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -44,3 +46,40 @@ def prepare_out(out: Path, replace: bool) -> list[Path]:
         p.unlink(missing_ok=True)
     out.mkdir(parents=True, exist_ok=True)
     return old
+
+
+def _unwritable(folder: Path) -> str:
+    """Why nothing can be made in ``folder`` or, where it does not exist yet, in the nearest existing folder above it
+    (tried: a file made there and removed again); "" when it can."""
+    where = folder
+    while not where.exists() and not where.is_symlink() and where != where.parent:
+        where = where.parent
+    if not where.is_dir():
+        return f"{where} is not a folder"
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".riann_write_check.", dir=where)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        return f"cannot write into {where}: {exc.strerror or exc}"
+    return ""
+
+
+def check_folder(path: Path, option: str) -> None:
+    """ValueError naming ``option`` and ``path`` when an output folder cannot be there: something other than a folder
+    is at ``path`` (or above it), or it cannot be written into (or made)."""
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{option} {path}: exists and is not a folder")
+    why = _unwritable(path)
+    if why:
+        raise ValueError(f"{option} {path}: {why}")
+
+
+def check_file(path: Path, option: str) -> None:
+    """ValueError naming ``option`` and ``path`` when an output file cannot be written at ``path``: a folder is there,
+    or its folder cannot be written into (or made)."""
+    if path.is_dir():
+        raise ValueError(f"{option} {path}: is a folder, not a file")
+    why = _unwritable(path.parent)
+    if why:
+        raise ValueError(f"{option} {path}: {why}")

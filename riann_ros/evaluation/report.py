@@ -1,42 +1,24 @@
-"""What ``riann-bag-eval`` shows and writes: tables, results.csv / results.json / report.md (ROS-free).
+"""What ``riann-bag-eval`` shows and writes: the summary table and one run's content (ROS-free).
 
-:class:`Report` holds one run (settings, per-input results, tuning); :func:`write_results` writes its files
-into an output folder, removing what it wrote if interrupted, so a folder never holds half a run.
+:class:`Report` holds one run (settings, per-input results, tuning) and what results.json holds of it; the files
+(results.csv, results.json, report.md, figures) are :mod:`~riann_ros.evaluation.report_files`.
 """
 
 from __future__ import annotations
 
-import csv
-import json
-import math
 import platform
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from riann_ros.evaluation import free_report as fr
-from riann_ros.evaluation import plots as pl
 from riann_ros.evaluation.aggregate import Group, aggregate, rate_label
 from riann_ros.evaluation.offsets import timing_notes
-from riann_ros.evaluation.outdir import prepare_out, previous_results
 from riann_ros.evaluation.perturb import DEFINITIONS as PERTURB_DEFINITIONS
-from riann_ros.evaluation.plots_free import plot_attitude_overlay
 from riann_ros.evaluation.rest import DEFINITION as REST_DEFINITION
 from riann_ros.evaluation.results import BIAS_KEYS, EvalSettings, ResultRow, SequenceResult
 from riann_ros.evaluation.scenarios import BIAS_STD_DPS, DEFINITIONS
-from riann_ros.evaluation.scoring import ERRORS, STATS, stat_field
-from riann_ros.evaluation.seq_tables import (
-    ERROR_TITLES,
-    format_heading_table,
-    format_stats_table,
-    per_sequence_markdown,
-)
+from riann_ros.evaluation.scoring import STATS, stat_field
 from riann_ros.evaluation.uncertainty import KEYS as UNCERTAINTY_KEYS
-from riann_ros.evaluation.uncertainty_report import NOTE as UNCERTAINTY_NOTE
-from riann_ros.evaluation.uncertainty_report import format_uncertainty_table, plot_error_vs_sigma
 
 CSV_FIELDS = (
     "sequence",
@@ -70,6 +52,7 @@ CSV_FIELDS = (
     "n_samples",
     "n_scored",
     "n_unestimated",
+    "coverage",
     "seconds",
     "cpu_seconds",
     "mode",
@@ -226,17 +209,6 @@ class Report:
         }
 
 
-# ---------------------------------------------------------------------------------------------------
-# files
-# ---------------------------------------------------------------------------------------------------
-def write_csv(path: Path, rows: Sequence[ResultRow]) -> None:
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(CSV_FIELDS), extrasaction="ignore")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6f}" if isinstance(v, float) else v) for k, v in r.to_dict().items()})
-
-
 def versions() -> dict[str, Any]:
     """Package, model and runtime versions for results.json."""
     out: dict[str, Any] = {"python": platform.python_version(), "platform": platform.platform()}
@@ -261,131 +233,3 @@ def versions() -> dict[str, Any]:
     except Exception as exc:
         out["riann_model"] = {"error": str(exc)}
     return out
-
-
-def _clean(obj: Any) -> Any:
-    """JSON-safe: NaN/inf → None, numpy scalars → Python."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
-def write_json(path: Path, payload: dict[str, Any]) -> None:
-    with open(path, "w") as f:
-        json.dump(_clean(payload), f, indent=1)
-        f.write("\n")
-
-
-def _timing_and_statistics(report: Report) -> list[str]:
-    """report.md's timing notes, per-sequence RMSE tables and per-sequence error statistics."""
-    notes = report.timing_notes
-    lines = ["## Timing", ""] + [f"- {n}" for n in notes] + [""] if notes else []
-    lines += ["## Per sequence", "", *per_sequence_markdown(report.rows)]
-    for err in ERRORS:
-        table = format_stats_table(report.rows, err, markdown_table=True)
-        if table:
-            lines += [f"### Error statistics: {ERROR_TITLES[err]}", "", table, ""]
-    return lines
-
-
-def _free_sections(report: Report) -> list[str]:
-    """report.md's sections on the inputs without a reference (agreement, bias) and every input's stream health."""
-    lines = []
-    agreement = fr.format_agreement(report.results, markdown_table=True)
-    if agreement:
-        bias = fr.format_bias(report.results, report.rows, markdown_table=True)
-        lines += ["## Without a reference", "", fr.NOTE, "", agreement, "", *([bias, ""] if bias else [])]
-    health = fr.format_health(report.results, markdown_table=True, every=True)
-    return lines + (["## Stream health", "", health, ""] if health else [])
-
-
-def markdown(report: Report, plots: Sequence[Path]) -> str:
-    """The content of report.md."""
-    s = report.settings
-    rates = ", ".join("native" if r is None else f"{r:g} Hz" for r in s.rates)
-    lines = ["# riann-bag-eval report", "", f"Command: `{report.command}`", "",
-             f"Scenarios: {', '.join(s.scenarios)}; seed {s.seed}; rates: {rates}; perturbations: "
-             f"{', '.join(c.label for c in s.conditions)}.",
-             "Metric: RMSE of the inclination error e_α (heading ignored, paper eq. 3) over the scored samples "
-             "with a reference; table values summarise the per-sequence RMSEs."]
-    citations = sorted({r.citation for r in report.results if r.citation and not r.error})
-    if citations:
-        lines += ["", "Data: " + "; ".join(citations)]
-    which = fr.which_is_which(report.results)
-    lines += ["", *([f"Inputs {which}.", ""] if which else []), "## Summary", "", format_markdown_table(report.summary),
-              ""]
-    lines += _free_sections(report)
-    nine = format_heading_table(report.rows, markdown_table=True)
-    if nine:
-        lines += ["## Heading (9D runs: estimators that used the magnetometer)", "",
-                  "Heading and total error as BROAD defines them (error quaternion in the earth frame); the heading "
-                  "of a 9D estimate is absolute (magnetic north), so it is scored as it is.", "", nine, ""]
-    unc = format_uncertainty_table(report.rows, markdown_table=True)
-    if unc:
-        lines += ["## Uncertainty (the σ each estimator reports)", "", UNCERTAINTY_NOTE, "", unc, ""]
-    if report.tuning:
-        lines += ["## Tuning (grid search on these sequences)", ""]
-        for t in report.tuning:
-            b = t["best"]
-            lines.append(
-                f"- {t['estimator']} ({t['scenario']}): best {b['label']} — mean {b['mean']:.2f}°, max {b['max']:.2f}°"
-            )
-        lines.append("")
-    warnings = [*report.settings.input_warnings, *(w for r in report.results if not r.error for w in r.warnings)]
-    if warnings:
-        lines += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
-    lines += _timing_and_statistics(report)
-    if report.failures:
-        lines += ["## Failed inputs", ""] + [f"- {f['error']}" for f in report.failures] + [""]
-    if plots:
-        lines += ["## Plots", ""] + [f"![{p.stem}]({p.name})" for p in plots if p.suffix == ".png"] + [""]
-    return "\n".join(lines)
-
-
-def _plots(report: Report, rows: list[ResultRow], out: Path) -> list[Path]:
-    """The figures: boxplots, error over time (the first sequence with series), roll/pitch per sequence (that one,
-    or every sequence with ``--plot-sequence all``) and perturbation condition, the overlay of every input without a
-    reference, RMSE vs rate; every condition, or those of ``--plot-perturb``."""
-    chosen = report.settings.series_conditions
-    free = [r.attitude_series for r in report.results if r.attitude_series and not r.error]
-    rows = [r for r in rows if r.has_reference]
-    figures = pl.plot_boxes(rows, out, conditions=chosen)
-    with_series = [r.series for r in report.results if r.series and not r.error]
-    if with_series:
-        figures += pl.plot_error_over_time(with_series[0], out, conditions=chosen)
-    for series in with_series if report.settings.series_for == "all" else with_series[:1]:
-        for cond in pl.series_conditions(series, chosen):
-            figures += pl.plot_attitude(series, out, condition=cond)
-    for series in free:
-        for cond in pl.series_conditions(series, chosen):
-            figures += plot_attitude_overlay(series, out, condition=cond)
-    return figures + pl.plot_rmse_vs_rate(rows, out, conditions=chosen) + plot_error_vs_sigma(rows, out)
-
-
-def write_results(out: Path, report: Report, plots: bool = True, replace: bool = False) -> list[Path]:
-    """results.csv, results.json, report.md and (``plots``) the figures in ``out``; returns the plot files.
-
-    An earlier run's result files in ``out`` are removed first with ``replace``, else
-    :class:`~riann_ros.evaluation.outdir.OutputExists`
-    (:func:`prepare_out`): a folder never mixes two runs. If anything stops it half-way (Ctrl-C included), the
-    files of this call are removed again."""
-    prepare_out(out, replace)
-    try:
-        rows = report.rows
-        write_csv(out / "results.csv", rows)
-        write_json(out / "results.json", report.payload())
-        figures: list[Path] = []
-        if plots and rows:
-            figures += _plots(report, rows, out)
-        (out / "report.md").write_text(markdown(report, figures))
-        return figures
-    except BaseException:
-        for f in previous_results(out):  # all of this call's: the earlier run's are gone
-            f.unlink(missing_ok=True)
-        raise

@@ -101,6 +101,13 @@ class ResultRow:
         """The inclination RMSE (the metric everything ranks by)."""
         return self.score.rmse_deg
 
+    @property
+    def coverage(self) -> float | None:
+        """The share of the scored span (score mask, reference present) the estimate covers; None without a
+        reference (:mod:`~riann_ros.evaluation.coverage`)."""
+        span = self.score.n_scored + self.score.n_unestimated
+        return self.score.n_scored / span if self.has_reference and span > 0 else None
+
     def to_dict(self) -> dict[str, Any]:
         """The flat row of results.csv / results.json."""
         d: dict[str, Any] = {
@@ -118,6 +125,7 @@ class ResultRow:
         if self.sensors == "9D":
             d["mag_converged_after_s"] = self.stats.mag_converged_after_s
         d["has_reference"] = self.has_reference
+        d["coverage"] = self.coverage
         if self.stats.gyro_bias_dps is not None:
             d.update(zip(BIAS_KEYS, self.stats.gyro_bias_dps, strict=True))
         return d

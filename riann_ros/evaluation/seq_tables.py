@@ -10,6 +10,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from riann_ros.evaluation.aggregate import rate_label, rate_order, scenario_order
+from riann_ros.evaluation.coverage import ranked
 from riann_ros.evaluation.perturb import NONE
 from riann_ros.evaluation.results import NATIVE, ResultRow
 from riann_ros.evaluation.scoring import STATS
@@ -123,7 +124,7 @@ def per_sequence_markdown(rows: Sequence[ResultRow]) -> list[str]:
     lines: list[str] = []
     rows = [r for r in rows if r.has_reference]
     ests = list(dict.fromkeys(r.estimator for r in rows))
-    rmse = {(r.sequence, r.scenario, r.perturbation, r.estimator, r.rate): r.rmse_deg for r in rows}
+    rmse = {(r.sequence, r.scenario, r.perturbation, r.estimator, r.rate): _cell(r) for r in rows}
     tables = dict.fromkeys((r.scenario, r.perturbation, r.rate) for r in rows)
     order = scenario_order(r.scenario for r in rows)
     for scn, prt, rate in sorted(tables, key=lambda k: (order.index(k[0]), rate_order(k[2]))):
@@ -132,6 +133,12 @@ def per_sequence_markdown(rows: Sequence[ResultRow]) -> list[str]:
         lines += [title, "", "| sequence | " + " | ".join(ests) + " |", "|---|" + "---:|" * len(ests)]
         for seq in dict.fromkeys(r.sequence for r in rows if (r.scenario, r.perturbation, r.rate) == (scn, prt, rate)):
             cells = [rmse.get((seq, scn, prt, e, rate)) for e in ests]
-            lines.append(f"| {seq} | " + " | ".join("–" if v is None else f"{v:.2f}" for v in cells) + " |")
+            lines.append(f"| {seq} | " + " | ".join("–" if v is None else v for v in cells) + " |")
         lines.append("")
     return lines
+
+
+def _cell(r: ResultRow) -> str:
+    """A row's RMSE in the per-sequence tables; a recorded estimate that is not ranked says what it covers."""
+    c = r.coverage
+    return f"{r.rmse_deg:.2f}" + ("" if ranked(r) or c is None else f" (covers {100 * c:.0f} %: not ranked)")

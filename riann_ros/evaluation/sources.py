@@ -51,7 +51,8 @@ class EstimateFile:
         from riann_ros.datasets.euroc import read_ground_truth
 
         try:
-            return read_ground_truth(self.path, self.cols, self.time_unit, options=ESTIMATE_FILE_OPTIONS)
+            return read_ground_truth(self.path, self.cols, self.time_unit, options=ESTIMATE_FILE_OPTIONS,
+                                     kind="estimate")
         except (OSError, ValueError) as exc:
             raise EvalError(f"estimate file {exc}" if str(exc).startswith(self.path) else
                             f"estimate file {self.path}: {exc}") from exc

@@ -3,15 +3,18 @@ any point keeps every input it finished, and ``--resume`` evaluates only the oth
 
 - ``OUT/shards/run.json``: what the run was asked (the settings, the tuning specs; :func:`fingerprint`) and the
   format. A resumed run must ask the same: :func:`check` names every setting that differs.
-- ``OUT/shards/<key>.pkl``: one input's :class:`~riann_ros.evaluation.results.SequenceResult`, pickled whole (an
-  opaque record: whatever it holds comes back), with the input's path and occurrence. The key is a hash of the path
-  as given and of how many times it came earlier in the input list. A file is written under a temporary name,
-  flushed to disk and then renamed, so it is there whole or not at all; a shard is replaced only by a newer result of
-  the same input (a retried failure; the plot series moving to an earlier input).
-- ``OUT/shards/tuning.pkl``: the tuning's results (``--tune``), so a resumed run does not tune again.
+- ``OUT/shards/<key>.npz``: one input's :class:`~riann_ros.evaluation.results.SequenceResult` as data (JSON and
+  NumPy arrays, :mod:`~riann_ros.evaluation.shard_codec`; never a pickle: reading a shard runs no code), with the
+  input's path, occurrence and identity (:func:`identity`: size, modification time and a hash of the first and last
+  64 KiB of each of its files). The key is a hash of the path as given and of how many times it came earlier in the
+  input list. A file is written under a temporary name, flushed to disk and then renamed, so it is there whole or
+  not at all; a shard is replaced only by a newer result of the same input (a retried failure; the plot series
+  moving to an earlier input).
+- ``OUT/shards/tuning.npz``: the tuning's results (``--tune``), so a resumed run does not tune again.
 
-The shards are pickles: read them with the riann_ros that wrote them, and only shards of your own runs (unpickling
-runs code).
+A shard is read back with validation: its format, its input and occurrence, every record's fields and their types;
+one that fails any check, or whose input has changed since (another identity), counts as not finished and that input
+is evaluated again (:func:`stale` names the changed ones).
 """
 
 from __future__ import annotations
@@ -19,19 +22,23 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import pickle
 import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Any
 
+from riann_ros.evaluation import shard_codec
 from riann_ros.evaluation.results import EvalSettings, SequenceResult
+from riann_ros.evaluation.specs import EstimatorSpec
 
 SHARDS = "shards"
 MANIFEST = "run.json"
-TUNING = "tuning.pkl"
-FORMAT = 1
+SUFFIX = ".npz"  # a shard's
+TUNING = "tuning" + SUFFIX
+LEGACY_SUFFIX = ".pkl"  # the shards of format 1 (pickles): counted, never read
+FORMAT = 2
+HEAD_TAIL = 1 << 16  # bytes of each end of an input's files hashed into its identity
 NEW, REPLACE, RESUME = "new", "replace", "resume"  # an --out folder: a new run, --force, --resume
 
 
@@ -84,7 +91,7 @@ def shard_keys(sources: Sequence[str]) -> list[tuple[int, str]]:
     keys = []
     for src in sources:
         k = seen[src] = seen.get(src, -1) + 1
-        keys.append((k, hashlib.sha256(f"{k}\0{src}".encode()).hexdigest()[:32] + ".pkl"))
+        keys.append((k, hashlib.sha256(f"{k}\0{src}".encode()).hexdigest()[:32] + SUFFIX))
     return keys
 
 
@@ -93,7 +100,7 @@ def unfinished(out: Path) -> int:
     d = out / SHARDS
     if not d.is_dir():
         return 0
-    n = sum(1 for _ in d.glob("*.pkl"))
+    n = sum(1 for p in d.iterdir() if p.suffix in (SUFFIX, LEGACY_SUFFIX) and p.stem != "tuning")
     return n if (d / MANIFEST).is_file() else (-1 if n else 0)
 
 
@@ -138,6 +145,62 @@ def _write_atomic(path: Path, data: bytes) -> None:
         raise
 
 
+def identity(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """What tells a changed input from the one a shard was made of: the total size and the latest modification time
+    (ns) of its files (a bag directory: every file in it) and a SHA-256 of each file's name, size and first and last
+    :data:`HEAD_TAIL` bytes; None when it cannot be read from here."""
+    p = Path(path)
+    try:
+        files = sorted(f for f in p.rglob("*") if f.is_file()) if p.is_dir() else [p]
+        h = hashlib.sha256()
+        size = mtime = 0
+        for f in files:
+            st = f.stat()
+            size, mtime = size + st.st_size, max(mtime, st.st_mtime_ns)
+            h.update(f"{f.relative_to(p) if p.is_dir() else f.name}\0{st.st_size}\0".encode())
+            with open(f, "rb") as fh:
+                h.update(fh.read(HEAD_TAIL))
+                if st.st_size > HEAD_TAIL:
+                    fh.seek(max(st.st_size - HEAD_TAIL, HEAD_TAIL))
+                    h.update(fh.read(HEAD_TAIL))
+    except OSError:
+        return None
+    return {"size": size, "mtime_ns": mtime, "head_tail_sha256": h.hexdigest()}
+
+
+def changed(old: Any, new: dict[str, Any] | None) -> str:
+    """How an input's identity ``new`` differs from the shard's ``old`` ("" when it does not)."""
+    if old == new:
+        return ""
+    if not isinstance(old, dict) or new is None:
+        return "it cannot be compared with the earlier run's (unreadable now, or kept without an identity)"
+    what = []
+    if old.get("size") != new["size"]:
+        what.append(f"size {old.get('size')} → {new['size']} bytes")
+    if old.get("mtime_ns") != new["mtime_ns"]:
+        what.append("modified since")
+    if old.get("head_tail_sha256") != new["head_tail_sha256"]:
+        what.append("other content")
+    return ", ".join(what) or "another identity"
+
+
+def stale(out: Path, sources: Sequence[str]) -> list[tuple[str, str]]:
+    """(input, how it changed) of every input whose shard in ``out`` was made of another file than the one at its
+    path now: a resumed run evaluates those again."""
+    d = out / SHARDS
+    found = []
+    for src, (occurrence, name) in zip(sources, shard_keys(sources), strict=True):
+        try:
+            head = shard_codec.read_header(d / name)
+        except (FileNotFoundError, shard_codec.ShardError):
+            continue
+        if (head.get("format"), head.get("source"), head.get("occurrence")) == (FORMAT, src, occurrence):
+            why = changed(head.get("identity"), identity(src))
+            if why:
+                found.append((src, why))
+    return found
+
+
 class ShardStore:
     """``OUT/shards`` of one run over ``sources``: opened ``mode`` :data:`NEW` (refused when it holds an earlier run),
     :data:`REPLACE` (an earlier run's shards removed first) or :data:`RESUME` (refused when the settings differ)."""
@@ -147,6 +210,7 @@ class ShardStore:
         self.dir = out / SHARDS
         self.sources = list(sources)
         self.keys = shard_keys(self.sources)
+        self.changed: dict[int, str] = {}  # by input index: how an input changed since its shard (load)
         if mode == REPLACE and self.dir.is_dir():
             shutil.rmtree(self.dir)
         self.dir.mkdir(parents=True, exist_ok=True)
@@ -157,32 +221,43 @@ class ShardStore:
             _write_atomic(self.dir / MANIFEST, (json.dumps(manifest, indent=1) + "\n").encode())
 
     def load(self) -> dict[int, SequenceResult]:
-        """The results the shards hold (by input index; failures included); a shard that cannot be read is left out
-        (that input is evaluated again)."""
+        """The results the shards hold (by input index; failures included). A shard that cannot be read back as this
+        input's result is left out, and so is one whose input changed since (in :attr:`changed`): that input is
+        evaluated again."""
         found: dict[int, SequenceResult] = {}
         for i, (src, (occurrence, name)) in enumerate(zip(self.sources, self.keys, strict=True)):
             try:
-                with open(self.dir / name, "rb") as f:
-                    fmt, source, occ, res = pickle.load(f)
-            except FileNotFoundError:
+                head, res = shard_codec.read(self.dir / name)
+            except (FileNotFoundError, shard_codec.ShardError):
                 continue
-            except Exception:  # written by another riann_ros, or damaged
+            if (head.get("format"), head.get("kind"), head.get("source"), head.get("occurrence")) != (
+                    FORMAT, "result", src, occurrence) or not isinstance(res, SequenceResult):
                 continue
-            if (fmt, source, occ) == (FORMAT, src, occurrence):
-                found[i] = res
+            why = changed(head.get("identity"), identity(src))
+            if why:
+                self.changed[i] = why
+                continue
+            found[i] = res
         return found
 
     def write(self, i: int, res: SequenceResult) -> None:
-        """Keep input ``i``'s result."""
+        """Keep input ``i``'s result (with the identity of its input now)."""
         occurrence, name = self.keys[i]
-        _write_atomic(self.dir / name, pickle.dumps((FORMAT, self.sources[i], occurrence, res), protocol=5))
+        src = self.sources[i]
+        header = {"format": FORMAT, "kind": "result", "source": src, "occurrence": occurrence,
+                  "identity": identity(src)}
+        _write_atomic(self.dir / name, shard_codec.encode(header, res))
 
     def tuning(self) -> Any:
-        """The tuning an earlier pass of this run saved (None: none saved)."""
+        """The tuning an earlier pass of this run saved (None: none saved, or not readable as one)."""
         try:
-            return pickle.loads((self.dir / TUNING).read_bytes())
-        except FileNotFoundError:
+            head, value = shard_codec.read(self.dir / TUNING)
+        except (FileNotFoundError, shard_codec.ShardError):
             return None
+        ok = (head.get("format"), head.get("kind")) == (FORMAT, "tuning") and isinstance(value, list) and all(
+            isinstance(t, tuple) and len(t) == 2 and isinstance(t[0], dict) and isinstance(t[1], EstimatorSpec)
+            for t in value)
+        return value if ok else None
 
     def save_tuning(self, tuning: Any) -> None:
-        _write_atomic(self.dir / TUNING, pickle.dumps(tuning, protocol=5))
+        _write_atomic(self.dir / TUNING, shard_codec.encode({"format": FORMAT, "kind": "tuning"}, tuning))

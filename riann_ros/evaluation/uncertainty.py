@@ -13,10 +13,10 @@ freedom:
 The heading the same way with one degree of freedom (``χ²₁(0.95) = 3.841``), on samples whose ``σ_ψ`` is below the
 unobservable 180°, split into those corrected by a field and those held by the gyro after one (the field rejected or
 absent): by the state the estimator reports with its σ
-(:meth:`~riann_ros.estimators.base.AttitudeEstimator.heading_state`, run in process), else by the σ (at most the
-field's, :data:`~riann_ros.defaults.MAG_HEADING_SD_DEG`: corrected; larger: held), as for a covariance read from a
-bag. Samples without a σ (NaN) are not
-counted. The tables, ``--compare`` lines and the plot: :mod:`riann_ros.evaluation.uncertainty_report`.
+(:meth:`~riann_ros.estimators.base.AttitudeEstimator.heading_state`, run in process), else by the σ (at most
+:data:`FIELD_USED_SD_DEG`: corrected; larger: held), as for the classical filters and a covariance read from a bag.
+Samples without a σ (NaN) are not counted. The tables, ``--compare`` lines and the plot:
+:mod:`riann_ros.evaluation.uncertainty_report`.
 """
 
 from __future__ import annotations
@@ -33,7 +33,12 @@ from riann_ros.estimators.base import HEADING_CORRECTED, HEADING_HELD
 CHI2_2_95 = 5.991  # χ²₂(0.95)
 CHI2_1_95 = 3.841  # χ²₁(0.95)
 BINS = np.radians(np.logspace(-3, math.log10(180.0), 161))  # σ_i bin edges (rad), 0.001° … 180°
-MAG_SD = math.radians(MAG_HEADING_SD_DEG) * (1.0 + 1e-9)
+#: deg; where the estimator does not say its heading state, a heading σ at most this counts as "field used" (the
+#: field corrects the heading), a larger one below 180° as "held": twice the field heading's own σ
+#: (:data:`~riann_ros.defaults.MAG_HEADING_SD_DEG`), which the classical filters report with a field, plus room for
+#: the share of a magnetometer calibration that is still converging (they report the two combined)
+FIELD_USED_SD_DEG = 2.0 * MAG_HEADING_SD_DEG
+MAG_SD = math.radians(FIELD_USED_SD_DEG) * (1.0 + 1e-9)
 FREE_SD = math.radians(YAW_FREE_SD_DEG) * (1.0 - 1e-9)
 KEYS = ("nees", "cover95_pct", "err_bottom_decile_deg", "err_top_decile_deg", "yaw_nees", "yaw_cover95_mag_pct",
         "yaw_cover95_held_pct", "n_yaw_mag", "n_yaw_held")

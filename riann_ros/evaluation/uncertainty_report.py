@@ -8,17 +8,21 @@ from pathlib import Path
 
 import numpy as np
 
+from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.evaluation import plots as pl
 from riann_ros.evaluation.aggregate import rate_label
 from riann_ros.evaluation.results import ResultRow
 from riann_ros.evaluation.seq_tables import aligned
-from riann_ros.evaluation.uncertainty import BINS, decile_errors
+from riann_ros.evaluation.uncertainty import BINS, FIELD_USED_SD_DEG, decile_errors
 
 NOTE = ("Roll and pitch errors as a 2-D Gaussian with the reported σ per axis: the share of scored samples inside the "
         "95 % region (e²/σ² ≤ 5.991; pooled, and the range over the sequences), the mean NEES per degree of freedom "
         "(1 when calibrated), and the mean error in the top decile of σ over the bottom decile's (all samples). The "
-        "heading (1 DOF, 3.841) on samples whose σ is below 180°: while a field corrects it, and while it is held by "
-        "the gyro after one. Madgwick, Mahony and VQF report constants (2°; heading 180°, 5° with a field).")
+        "heading (1 DOF, 3.841) on samples whose σ is below 180°: while a field corrects it (\"field used\": the "
+        f"state the estimator reports, else a heading σ of at most {FIELD_USED_SD_DEG:g}°), and while it is held by "
+        f"the gyro after one. Madgwick, Mahony and VQF report constants ({INCLINATION_SD_DEG:g}°; heading "
+        f"{YAW_FREE_SD_DEG:g}°, {MAG_HEADING_SD_DEG:g}° with a field, combined with a converging magnetometer "
+        "calibration's share).")
 TABLE_HEADERS = ["scenario", "perturbation", "rate", "estimator", "n", "cover95 %", "cover95 min–max %", "NEES/DOF",
                  "err top/bottom σ decile", "yaw cover95 % field used", "yaw cover95 % held", "yaw NEES"]
 
