@@ -16,7 +16,7 @@ from riann_ros import bagio
 from riann_ros.cli import magcal
 from riann_ros.datasets.synthetic import generate
 from riann_ros.magcal.records import IDENTITY_9, MagCalibration
-from riann_ros.magcal.store import save_calibration
+from riann_ros.magcal.store import save_calibration, to_yaml
 from riann_ros.magcal.synthetic import distort
 
 UT = 1e-6
@@ -70,13 +70,18 @@ def test_a_folder_in_the_place_of_an_output_is_refused(bag, tmp_path, where):
     one_line(r, 2, str(out) if where == "out" else str(tmp_path / "my_mag_sphere.png"))
 
 
-def test_a_prior_with_a_huge_covariance_is_one_line_and_nothing_written(bag, tmp_path):
-    prior = save_calibration(tmp_path / "huge.yaml", MagCalibration(
-        hard_iron_t=(0.0, 0.0, 0.0), soft_iron=IDENTITY_9, covariance=tuple(np.diag([1e300] * 12).ravel()),
-        state="converging", windows=3, converged_after_s=None, soft_iron_model="full"))
+@pytest.mark.parametrize("hard_sd_t", [1e150, 7e-4])
+def test_a_prior_with_a_huge_covariance_is_one_line_and_nothing_written(bag, tmp_path, hard_sd_t):
+    """A σ of 1e150 (no number a calibration can mean: refused by the validation every calibration file gets) and a
+    hard-iron σ of 700 µT (a calibration, but too wide to start a fit from): one line each, nothing written."""
+    prior = tmp_path / "huge.yaml"  # (written as text: the package never saves a calibration it would refuse)
+    prior.write_text(to_yaml(MagCalibration(
+        hard_iron_t=(0.0, 0.0, 0.0), soft_iron=IDENTITY_9,
+        covariance=tuple(np.diag([1e-6] * 9 + [hard_sd_t ** 2] * 3).ravel()),
+        state="converging", windows=3, converged_after_s=None, soft_iron_model="full")))
     out = tmp_path / "out" / "my_mag.yaml"
     r = run(bag, "--prior", prior, "--out", out)
-    one_line(r, 1, str(prior), "too wide to start from", "--prior")
+    one_line(r, 1, str(prior), "over its bound" if hard_sd_t > 1.0 else "too wide to start from", "--prior")
     assert "Warning" not in r.stderr and not (tmp_path / "out").exists()
 
 
