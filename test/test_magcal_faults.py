@@ -16,7 +16,7 @@ from riann_ros import bagio
 from riann_ros.cli import magcal
 from riann_ros.datasets.synthetic import generate
 from riann_ros.magcal.records import IDENTITY_9, MagCalibration
-from riann_ros.magcal.store import save_calibration, to_yaml
+from riann_ros.magcal.store import to_yaml
 from riann_ros.magcal.synthetic import distort
 
 UT = 1e-6
