@@ -79,8 +79,10 @@ class EstimatorStream:
             self.front.set_prior(new)
 
     def mag_calibration(self) -> MagCalibration | None:
-        """The online calibration in use (what ``~/save_mag_calibration`` writes); None when it is off."""
-        return self.front.calibration() if self.front is not None else None
+        """The online calibration in use (what ``~/save_mag_calibration`` writes); None when it is off (its test then
+        runs as a monitor only: nothing of it is the robot's calibration)."""
+        front = self.front
+        return front.calibration() if front is not None and not front.monitoring else None
 
     def mag_cal_status(self) -> MagCalStatus | None:
         """The online calibration's state for ``/diagnostics``; None when it is off."""

@@ -10,7 +10,7 @@ from test_evaluation import synthetic
 
 from riann_ros.estimators import create
 from riann_ros.gate import GateConfig
-from riann_ros.mag import MagConfig
+from riann_ros.magcal.input import MagConfig
 from riann_ros.replay import NodeSpec
 from riann_ros.ros.dds_replay import DdsReplay
 from riann_ros.stream import EstimatorStream

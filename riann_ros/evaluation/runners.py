@@ -68,7 +68,7 @@ class _OfflineRun:
             stats.rejected = {k: int(v) for k, v in stream.gate.rejected.items()}
             stats.resets = {k: int(v) for k, v in stream.gate.resets.items()}
             stats.mag_samples = stream.mag.samples_with_field
-            cal = stream.mag_cal_status()
+            cal = stream.mag_calibration()  # (None with the calibration off: its test is a monitor only)
             stats.mag_converged_after_s = None if cal is None else cal.converged_after_s
             stats.gyro_bias_dps = reported_bias(stream.estimator)
             stats.monitor_trips = {k: int(v) for k, v in stream.monitors.trips.items() if v}
