@@ -1,0 +1,212 @@
+"""The consensus of RIANN and VQF: one inclination from both, weighed by their uncertainties (ROS-free).
+
+RIANN's network and VQF's accelerometer low-pass err in partly independent ways (on BROAD their inclination errors
+correlate by +0.10, ``bench/consensus_study.py``), so a weighted mean of the two beats either where both work. The
+estimator runs RIANN (:class:`~.riann.estimator.RiannEstimator`, all its stages and parameters) and VQF on the rows
+RIANN's stages 1–3 made (:class:`~.consensus_rows.VqfRows`: de-jittered, on a constant step, the gyro bias removed,
+holes bridged), and per sample combines their gravity directions:
+
+* **Errors.** Per horizontal axis RIANN's σ is stage 8's ``σ_R``, VQF's ``σ_V`` its state's
+  (:mod:`.vqf_sigma`). Their covariance ``c`` is what the two share: the floor ``σ₀²`` (the same accelerometer),
+  the two lags of the one bias estimate both use (``k_b σ_b · τ_acc σ_b``, the same sign), and
+  :data:`RHO_OWN` of the rest (fitted on synthetic sensors, ``bench/fit_consensus.py``).
+* **Combination.** The error of ``g = w·g_R + (1 − w)·g_V`` has the variance ``w²σ_R² + (1 − w)²σ_V² + 2w(1 − w)c``,
+  least at ``w = (σ_V² − c) / (σ_R² + σ_V² − 2c)`` (with ``c = ρσ_Rσ_V``: ``(σ_V² − ρσ_Rσ_V) / (σ_R² + σ_V² −
+  2ρσ_Rσ_V)``), where it is ``σ² = (σ_R²σ_V² − c²) / (σ_R² + σ_V² − 2c)``; ``w`` is kept in [0, 1] (beyond, the
+  combination would extrapolate on a correlation it only estimates) and ``σ`` is then the chosen one's.
+* **Disagreement.** The angle ``d`` between the two gravity directions is a 2-D Gaussian of per-axis variance
+  ``σ_d² = σ_R² + σ_V² − 2c`` while both σ hold. Where ``d² > χ²₂(0.99)·σ_d²`` they part by more than their σ
+  explain: the unexplained variance ``d²/χ²₂(0.99) − σ_d²`` goes to the one whose own state is unhealthy (RIANN in a
+  hole's hand-over or with an unsettled bias; VQF after a hole or a restart, with an unsettled bias or under
+  linear acceleration: its transient terms outweigh its steady ones), so the output follows the healthy one; where
+  neither or both are, to both in proportion, which keeps the weight and widens σ.
+* **Heading.** RIANN's output heading (the gyro's, and in 9D the calibrated field's: RIANN's stage 7 drives the
+  magnetometer's front end, once per sample), turned by the smallest horizontal rotation onto the combined
+  gravity direction (:func:`~riann_ros.rotations.tilt_to`); the heading's σ and state are RIANN's.
+
+Per sample in plain floats (the node's call is one sample), so a batch gives the numbers of per-sample calls.
+docs/consensus.md has the derivation and the figures.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from riann_ros.constants import DEG
+from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
+from riann_ros.estimators.consensus_rows import DEFAULT_TAU_ACC, VqfRows
+from riann_ros.estimators.riann.estimator import RiannEstimator
+from riann_ros.estimators.riann.s8_uncertainty import K_BIAS
+from riann_ros.estimators.riann.stage import Cause, UncertaintyIn
+from riann_ros.estimators.vqf_sigma import VqfSigma, VqfTerms
+from riann_ros.magcal.frontend import LatencySettings, MagFrontEnd
+from riann_ros.rotations import Quat, Vec, gravity, tilt_to
+
+RHO_OWN = 0.0  # correlation of the two estimators' own errors (fitted on synthetic sensors, bench/fit_consensus.py)
+CHI2_2_99 = 9.210  # χ²₂(0.99): the disagreement test
+TAU_ACC = ParamSpec("tau_acc", DEFAULT_TAU_ACC, "s; time constant of VQF's accelerometer low-pass (VQF tauAcc) in the "
+                    "consensus's second opinion. Default 3.0 = the vqf package default.", min=0.01, max=1000.0,
+                    runtime=True)
+_RIANN = {p.name for p in RiannEstimator.PARAMS}
+
+
+class Opinions(NamedTuple):
+    """The two opinions of the samples of the last call: RIANN's output attitudes (n, 4), VQF's (n, 4, its heading
+    its own) and VQF's σ terms (n, 5: :class:`~.vqf_sigma.VqfTerms`, rad²); what ``bench/fit_consensus.py`` fits."""
+
+    riann: Array
+    vqf: Array
+    vqf_terms: Array
+
+
+class ConsensusEstimator(AttitudeEstimator):
+    """RIANN and VQF in consensus (module docstring)."""
+
+    name = "consensus"
+    PARAMS = (*RiannEstimator.PARAMS, TAU_ACC)
+    USES_MAG = True
+
+    def __init__(self, **params: Any) -> None:
+        self.riann = RiannEstimator(**{k: v for k, v in params.items() if k in _RIANN})
+        tau = float(params.get("tau_acc", DEFAULT_TAU_ACC))
+        self.vqf = VqfRows(tau)
+        self.vqf_sigma = VqfSigma(tau)
+        super().__init__(**params)
+
+    # -- the two estimators' life cycle ---------------------------------------------------------------------------
+    def reset(self) -> None:
+        self.riann.reset()
+        self.vqf.restart(Cause.RESET)
+        self.vqf_sigma.reset()
+        self._after_gap = False
+        self._sigma = np.zeros((0, 2))
+        self.last = Opinions(np.zeros((0, 4)), np.zeros((0, 4)), np.zeros((0, 5)))
+        self.weight = self.disagreement = math.nan  # of the newest sample: RIANN's weight, the angle (rad)
+
+    def on_gap(self) -> None:
+        self.riann.on_gap()
+        self.vqf.restart(Cause.GAP)
+        self._after_gap = True
+
+    def take_front_end(self, front: MagFrontEnd) -> None:
+        super().take_front_end(front)
+        self.riann.take_front_end(front)
+
+    def front_end_latency(self) -> LatencySettings:
+        return self.riann.front_end_latency()
+
+    def _on_params_changed(self) -> None:
+        self.riann.set_params(**{p.name: self.params[p.name] for p in RiannEstimator.PARAMS if p.runtime})
+        tau = float(self.params["tau_acc"])
+        self.vqf.set_tau_acc(tau)
+        self.vqf_sigma.tau_acc = tau
+
+    # -- what the node reports ------------------------------------------------------------------------------------
+    def heading_observed(self) -> bool:
+        return self.riann.heading_observed()
+
+    def heading_state(self) -> Array:
+        return self.riann.heading_state()
+
+    def diagnostics(self) -> dict[str, str]:
+        out = self.riann.diagnostics()
+        if math.isfinite(self.weight):
+            out["consensus weight on RIANN"] = f"{self.weight:.2f}"
+            out["RIANN-VQF disagreement (deg)"] = f"{self.disagreement / DEG:.2f}"
+        return out
+
+    def sigma(self, fields: np.ndarray) -> Array:
+        """The combination's inclination σ and RIANN's heading σ of the samples of the last call."""
+        if len(self._sigma) != len(fields):
+            raise ValueError(f"sigma for {len(fields)} samples asked, the last call had {len(self._sigma)}")
+        return self._sigma.copy()
+
+    # -- estimation -------------------------------------------------------------------------------------------------
+    def update(self, acc: ArrayLike, gyr: ArrayLike, dt: float, mag: ArrayLike | None = None) -> Array:
+        return self._combine(self.riann.update(acc, gyr, dt, mag)[None, :])[0]
+
+    def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
+        return self._combine(self.riann.update_batch(acc, gyr, dt, mag))
+
+    def _combine(self, q_r: Array) -> Array:
+        """RIANN's outputs of its last call with their inclination replaced by the consensus's (module docstring)."""
+        u = self.riann.records
+        n = len(q_r)
+        if u is None or n == 0:
+            self._sigma = np.zeros((0, 2))
+            return q_r
+        q_v = self.vqf.run(u)
+        s_r = self.riann.last.sigma_rad
+        feats = self.riann.last.features.tolist()
+        out = np.empty((n, 4))
+        sig = s_r.copy()
+        terms = []
+        for i, (qr, fi) in enumerate(zip(q_r.tolist(), feats, strict=True)):
+            t = self._vqf_terms(u, i, fi[3])
+            terms.append(t)
+            out[i], sig[i, 0] = self._one(qr, q_v[i], float(s_r[i, 0]), fi, t)
+        self._sigma = sig
+        self.last = Opinions(q_r, np.asarray(q_v, dtype=float).reshape(n, 4), np.array(terms).reshape(n, 5))
+        return out
+
+    def _vqf_terms(self, u: UncertaintyIn, i: int, bias_sd: float) -> VqfTerms:
+        """VQF's σ terms at sample ``i`` of RIANN's last call (``bias_sd``: the bias estimate's σ, rad/s)."""
+        s, g, h = u.samples, u.grid, u.handover
+        x = s.x[i]
+        b = u.bias.bias_rad_s[g.r0[i]]
+        rate = math.sqrt((x[3] - b[0]) ** 2 + (x[4] - b[1]) ** 2 + (x[5] - b[2]) ** 2)
+        bridge = h.bridge_sd_deg.get(i)
+        if bridge is not None:
+            self.vqf_sigma.kick(bridge * DEG)
+        if self._after_gap:
+            self.vqf_sigma.kick(h.fresh_sd_deg[i] * DEG)
+            self._after_gap = False
+        return self.vqf_sigma.step(s.step_s[i], rate, math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]), bias_sd)
+
+    def _one(self, qr: list[float], qv: Quat, s_r: float, f: list[float], v: VqfTerms) -> tuple[Quat, float]:
+        """One sample: RIANN's output ``qr`` and σ ``s_r``, stage 8's features ``f``, VQF's attitude ``qv`` and σ
+        terms ``v`` → the output attitude and its inclination σ."""
+        gr, gv = gravity((qr[0], qr[1], qr[2], qr[3])), gravity(qv)
+        lag_r, hand_r = (K_BIAS * f[3]) ** 2, f[2] * f[2]
+        var_r, var_v = s_r * s_r, v.total
+        own_r = max(var_r - v.floor - lag_r, 0.0)
+        cov = v.floor + math.sqrt(lag_r * v.bias) + RHO_OWN * math.sqrt(own_r * v.own)
+        d = _angle(gr, gv)
+        var_d = var_r + var_v - 2.0 * cov
+        if d * d > CHI2_2_99 * var_d:  # they part by more than their σ explain
+            excess = d * d / CHI2_2_99 - var_d
+            sick_r = lag_r + hand_r > var_r - lag_r - hand_r  # RIANN's transients outweigh its steady terms
+            if sick_r != v.unhealthy:
+                var_r, var_v = (var_r + excess, var_v) if sick_r else (var_r, var_v + excess)
+            else:
+                var_r, var_v = var_r + excess * var_r / (var_r + var_v), var_v + excess * var_v / (var_r + var_v)
+            var_d = var_r + var_v - 2.0 * cov
+        w, var = _weigh(var_r, var_v, cov, var_d)
+        self.weight, self.disagreement = w, d
+        g = (w * gr[0] + (1.0 - w) * gv[0], w * gr[1] + (1.0 - w) * gv[1], w * gr[2] + (1.0 - w) * gv[2])
+        q = tilt_to((qr[0], qr[1], qr[2], qr[3]), g)
+        if q[0] < 0.0:
+            q = (-q[0], -q[1], -q[2], -q[3])
+        return q, math.sqrt(var)
+
+
+def _angle(a: Vec, b: Vec) -> float:
+    cx, cy, cz = a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+    return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+
+
+def _weigh(var_r: float, var_v: float, cov: float, var_d: float) -> tuple[float, float]:
+    """The minimum-variance weight on RIANN and the combination's variance (module docstring), ``w`` kept in
+    [0, 1]."""
+    if var_d <= 1e-18:
+        return 0.5, var_r
+    w = (var_v - cov) / var_d
+    if w <= 0.0:
+        return 0.0, var_v
+    if w >= 1.0:
+        return 1.0, var_r
+    return w, max((var_r * var_v - cov * cov) / var_d, 0.0)
