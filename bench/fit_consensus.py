@@ -1,12 +1,13 @@
 """Fit the consensus's constants on synthetic sensors of several grades, and show how its σ holds on each (issue 47).
 
-The consensus (riann_ros/estimators/consensus.py) has two fitted constants in VQF's σ (riann_ros/estimators/
-vqf_sigma.py: ``K_RATE``, ``K_ACC``; its other terms are physics) and one in the combination (``RHO_OWN``, the
-correlation of the two estimators' own errors). They are fitted here on the project's synthetic generator
+The consensus (riann_ros/estimators/consensus.py) has three fitted constants in VQF's σ (riann_ros/estimators/
+vqf_sigma.py: ``K_LAG``, ``K_RATE``, ``K_ACC``; its other terms are physics) and one in the combination
+(``RHO_OWN``, the correlation of the two estimators' own errors, kept ≥ 0: estimators on one input do not err
+against each other). They are fitted here on the project's synthetic generator
 (``riann_ros.datasets.synthetic``: exact reference) over sensor grades that differ in noise density, turn-on bias,
 rate and motion (:data:`GRADES`), never on the BROAD trials:
 
-1. VQF's ``K_RATE`` and ``K_ACC`` by maximum likelihood of its 2-D inclination error (``|e|²/σ_V²`` is χ²₂), each
+1. VQF's ``K_LAG``, ``K_RATE`` and ``K_ACC`` by maximum likelihood of its 2-D inclination error (``|e|²/σ_V²`` is χ²₂), each
    recording weighted equally;
 2. ``RHO_OWN`` by maximum likelihood of the two errors jointly (per axis a 2-D Gaussian of covariance
    ``[[σ_R², c], [c, σ_V²]]``, ``c`` as the consensus models it), RIANN's σ as stage 8 reports it.
@@ -31,7 +32,7 @@ from riann_ros.datasets.synthetic import generate
 from riann_ros.estimators.consensus import RHO_OWN, ConsensusEstimator
 from riann_ros.estimators.consensus_rows import gravity_rows
 from riann_ros.estimators.riann.s8_uncertainty import K_BIAS
-from riann_ros.estimators.vqf_sigma import K_ACC, K_RATE
+from riann_ros.estimators.vqf_sigma import K_ACC, K_LAG, K_RATE
 
 CHI2_2_95 = 5.991
 
@@ -79,14 +80,18 @@ def record(grade: Grade, motion: str, seed: int, duration: float) -> dict[str, n
             "t": op.vqf_terms[m], "f": est.riann.last.features[m]}
 
 
-def vqf_var(t: np.ndarray, k: tuple[float, float]) -> np.ndarray:
-    """σ_V² with the constants ``k`` = (K_RATE, K_ACC) from the terms computed with the source's."""
-    return t[:, 0] + t[:, 1] + t[:, 2] * (k[0] / K_RATE) ** 2 + t[:, 3] * (k[1] / K_ACC) ** 2 + t[:, 4]
+Ks = tuple[float, float, float]
 
 
-def fit_vqf(data: list[dict[str, np.ndarray]]) -> tuple[float, float]:
+def vqf_var(t: np.ndarray, k: Ks) -> np.ndarray:
+    """σ_V² with the constants ``k`` = (K_LAG, K_RATE, K_ACC) from the terms computed with the source's."""
+    return (t[:, 0] + t[:, 1] * (k[0] / K_LAG) ** 2 + t[:, 2] * (k[1] / K_RATE) ** 2 + t[:, 3] * (k[2] / K_ACC) ** 2
+            + t[:, 4])
+
+
+def fit_vqf(data: list[dict[str, np.ndarray]]) -> Ks:
     def nll(logk: np.ndarray) -> float:
-        k = (float(np.exp(logk[0])), float(np.exp(logk[1])))
+        k = (float(np.exp(logk[0])), float(np.exp(logk[1])), float(np.exp(logk[2])))
         tot = 0.0
         for d in data:
             v = vqf_var(d["t"], k)
@@ -94,21 +99,23 @@ def fit_vqf(data: list[dict[str, np.ndarray]]) -> tuple[float, float]:
             tot += float(np.mean(np.log(v) + e2 / (2.0 * v)))
         return tot
 
-    r = minimize(nll, np.log([K_RATE, K_ACC]), method="Nelder-Mead")
-    return float(np.exp(r.x[0])), float(np.exp(r.x[1]))
+    r = minimize(nll, np.log([K_LAG, K_RATE, K_ACC]), method="Nelder-Mead")
+    return float(np.exp(r.x[0])), float(np.exp(r.x[1])), float(np.exp(r.x[2]))
 
 
-def covariance(d: dict[str, np.ndarray], k: tuple[float, float], rho: float) -> tuple[np.ndarray, ...]:
+def covariance(d: dict[str, np.ndarray], k: Ks, rho: float) -> tuple[np.ndarray, ...]:
     """Per sample σ_R², σ_V² and their covariance as the consensus models it."""
     t = d["t"]
     vr, vv = d["s_r"] ** 2, vqf_var(t, k)
     lag_r = (K_BIAS * d["f"][:, 3]) ** 2
     own_r = np.maximum(vr - t[:, 0] - lag_r, 0.0)
-    own_v = np.maximum(vv - t[:, 0] - t[:, 1], 0.0)
-    return vr, vv, t[:, 0] + np.sqrt(lag_r * t[:, 1]) + rho * np.sqrt(own_r * own_v)
+    lag_v = t[:, 1] * (k[0] / K_LAG) ** 2
+    own_v = np.maximum(vv - t[:, 0] - lag_v, 0.0)
+    return vr, vv, t[:, 0] + np.sqrt(lag_r * lag_v) + rho * np.sqrt(own_r * own_v)
 
 
-def fit_rho(data: list[dict[str, np.ndarray]], k: tuple[float, float]) -> float:
+def fit_rho(data: list[dict[str, np.ndarray]], k: Ks) -> float:
+    """The maximum-likelihood ρ of the own errors on a grid from −0.5 (printed as found; the source keeps it ≥ 0)."""
     grid = np.linspace(-0.5, 0.9, 29)
     best, arg = np.inf, 0.0
     for rho in grid:
@@ -147,8 +154,8 @@ def main() -> int:
     data = [d for v in by_grade.values() for d in v]
     k = fit_vqf(data)
     rho = fit_rho(data, k)
-    print(f"fitted on {len(data)} synthetic recordings: K_RATE {k[0]:.5f} s, K_ACC {k[1]:.4f}, RHO_OWN {rho:+.2f} "
-          f"(in the source: {K_RATE}, {K_ACC}, {RHO_OWN:+.2f})")
+    print(f"fitted on {len(data)} synthetic recordings: K_LAG {k[0]:.3f} s, K_RATE {k[1]:.5f} s, K_ACC {k[2]:.4f}, "
+          f"RHO_OWN {rho:+.2f} (in the source: {K_LAG}, {K_RATE}, {K_ACC}, {RHO_OWN:+.2f})")
     print("\n| grade | RMSE RIANN | VQF (rows) | mean | consensus | σ_R cov / NEES | σ_V (fitted) | σ consensus |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for name, ds in by_grade.items():

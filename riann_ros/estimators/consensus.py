@@ -8,7 +8,7 @@ holes bridged), and per sample combines their gravity directions:
 
 * **Errors.** Per horizontal axis RIANN's σ is stage 8's ``σ_R``, VQF's ``σ_V`` its state's
   (:mod:`.vqf_sigma`). Their covariance ``c`` is what the two share: the floor ``σ₀²`` (the same accelerometer),
-  the two lags of the one bias estimate both use (``k_b σ_b · τ_acc σ_b``, the same sign), and
+  the two lags of the one bias estimate both use (``K_BIAS σ_b · K_LAG σ_b``, the same sign), and
   :data:`RHO_OWN` of the rest (fitted on synthetic sensors, ``bench/fit_consensus.py``).
 * **Combination.** The error of ``g = w·g_R + (1 − w)·g_V`` has the variance ``w²σ_R² + (1 − w)²σ_V² + 2w(1 − w)c``,
   least at ``w = (σ_V² − c) / (σ_R² + σ_V² − 2c)`` (with ``c = ρσ_Rσ_V``: ``(σ_V² − ρσ_Rσ_V) / (σ_R² + σ_V² −
@@ -40,13 +40,17 @@ from riann_ros.constants import DEG
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.consensus_rows import DEFAULT_TAU_ACC, VqfRows
 from riann_ros.estimators.riann.estimator import RiannEstimator
+from riann_ros.estimators.riann.s6_handover import FreshNetwork
 from riann_ros.estimators.riann.s8_uncertainty import K_BIAS
 from riann_ros.estimators.riann.stage import Cause, UncertaintyIn
 from riann_ros.estimators.vqf_sigma import VqfSigma, VqfTerms
 from riann_ros.magcal.frontend import LatencySettings, MagFrontEnd
 from riann_ros.rotations import Quat, Vec, gravity, tilt_to
 
-RHO_OWN = 0.0  # correlation of the two estimators' own errors (fitted on synthetic sensors, bench/fit_consensus.py)
+#: correlation of the two estimators' own errors: the maximum-likelihood fit on synthetic sensors is below 0
+#: (bench/fit_consensus.py), which two estimators on one input cannot be, so the bound; on BROAD their errors, floor
+#: included, correlate by +0.10 (bench/consensus_study.py)
+RHO_OWN = 0.0
 CHI2_2_99 = 9.210  # χ²₂(0.99): the disagreement test
 TAU_ACC = ParamSpec("tau_acc", DEFAULT_TAU_ACC, "s; time constant of VQF's accelerometer low-pass (VQF tauAcc) in the "
                     "consensus's second opinion. Default 3.0 = the vqf package default.", min=0.01, max=1000.0,
@@ -83,6 +87,7 @@ class ConsensusEstimator(AttitudeEstimator):
         self.vqf.restart(Cause.RESET)
         self.vqf_sigma.reset()
         self._after_gap = False
+        self._kicks: dict[int, float] = {}  # sample of the last call -> the σ (rad) VQF's attitude starts off by
         self._sigma = np.zeros((0, 2))
         self.last = Opinions(np.zeros((0, 4)), np.zeros((0, 4)), np.zeros((0, 5)))
         self.weight = self.disagreement = math.nan  # of the newest sample: RIANN's weight, the angle (rad)
@@ -139,7 +144,7 @@ class ConsensusEstimator(AttitudeEstimator):
         if u is None or n == 0:
             self._sigma = np.zeros((0, 2))
             return q_r
-        q_v = self.vqf.run(u)
+        q_v = self.vqf.run(u, self._restarts(u))
         s_r = self.riann.last.sigma_rad
         feats = self.riann.last.features.tolist()
         out = np.empty((n, 4))
@@ -153,16 +158,32 @@ class ConsensusEstimator(AttitudeEstimator):
         self.last = Opinions(q_r, np.asarray(q_v, dtype=float).reshape(n, 4), np.array(terms).reshape(n, 5))
         return out
 
+    def _restarts(self, u: UncertaintyIn) -> list[int]:
+        """The rows where VQF starts afresh from the accelerometer instead of bridging a hole: where the bridge's σ
+        exceeds a fresh start's (stage 6's models of both: :func:`~.riann.s6_handover.bridge_sigma` and
+        :class:`~.riann.s6_handover.FreshNetwork`, a filter started from the accelerometer in the motion around the
+        hole); VQF's σ starts from the smaller at the hole."""
+        out = []
+        for h in u.grid.holes:
+            bridge = u.handover.bridge_sd_deg[h.sample]
+            x = u.samples.x[h.sample]
+            w_max = max(math.hypot(*h.w_before_rad_s), math.hypot(*h.w_after_rad_s))
+            fresh = FreshNetwork(w_max, (x[0], x[1], x[2])).sigma()
+            if bridge > fresh:
+                out.append(u.grid.r1[h.sample])
+            self._kicks[h.sample] = min(bridge, fresh) * DEG
+        return out
+
     def _vqf_terms(self, u: UncertaintyIn, i: int, bias_sd: float) -> VqfTerms:
         """VQF's σ terms at sample ``i`` of RIANN's last call (``bias_sd``: the bias estimate's σ, rad/s)."""
         s, g, h = u.samples, u.grid, u.handover
         x = s.x[i]
         b = u.bias.bias_rad_s[g.r0[i]]
         rate = math.sqrt((x[3] - b[0]) ** 2 + (x[4] - b[1]) ** 2 + (x[5] - b[2]) ** 2)
-        bridge = h.bridge_sd_deg.get(i)
-        if bridge is not None:
-            self.vqf_sigma.kick(bridge * DEG)
-        if self._after_gap:
+        kick = self._kicks.pop(i, None)
+        if kick is not None:
+            self.vqf_sigma.kick(kick)
+        if self._after_gap:  # started afresh: stage 6's σ of a fresh start at this sample
             self.vqf_sigma.kick(h.fresh_sd_deg[i] * DEG)
             self._after_gap = False
         return self.vqf_sigma.step(s.step_s[i], rate, math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]), bias_sd)
@@ -176,17 +197,21 @@ class ConsensusEstimator(AttitudeEstimator):
         own_r = max(var_r - v.floor - lag_r, 0.0)
         cov = v.floor + math.sqrt(lag_r * v.bias) + RHO_OWN * math.sqrt(own_r * v.own)
         d = _angle(gr, gv)
+        self.disagreement = d
+        if hand_r > 0.0:  # a hole's hand-over, or a gap's fresh network: RIANN's (module docstring)
+            self.weight = 1.0
+            return (qr[0], qr[1], qr[2], qr[3]), s_r
         var_d = var_r + var_v - 2.0 * cov
         if d * d > CHI2_2_99 * var_d:  # they part by more than their σ explain
             excess = d * d / CHI2_2_99 - var_d
-            sick_r = lag_r + hand_r > var_r - lag_r - hand_r  # RIANN's transients outweigh its steady terms
+            sick_r = lag_r > var_r - lag_r  # RIANN's bias lag outweighs its steady terms
             if sick_r != v.unhealthy:
                 var_r, var_v = (var_r + excess, var_v) if sick_r else (var_r, var_v + excess)
             else:
                 var_r, var_v = var_r + excess * var_r / (var_r + var_v), var_v + excess * var_v / (var_r + var_v)
             var_d = var_r + var_v - 2.0 * cov
         w, var = _weigh(var_r, var_v, cov, var_d)
-        self.weight, self.disagreement = w, d
+        self.weight = w
         g = (w * gr[0] + (1.0 - w) * gv[0], w * gr[1] + (1.0 - w) * gv[1], w * gr[2] + (1.0 - w) * gv[2])
         q = tilt_to((qr[0], qr[1], qr[2], qr[3]), g)
         if q[0] < 0.0:

@@ -22,7 +22,15 @@ from vqf import VQF
 
 from riann_ros.estimators.base import Array
 from riann_ros.estimators.riann.s5_carry import Carry
-from riann_ros.estimators.riann.stage import SMALL_BLOCK, CarryIn, Cause, NetworkBlock, UncertaintyIn, first_step
+from riann_ros.estimators.riann.stage import (
+    SMALL_BLOCK,
+    CarryIn,
+    Cause,
+    NetworkBlock,
+    Row7,
+    UncertaintyIn,
+    first_step,
+)
 
 DEFAULT_TAU_ACC = 3.0  # s; VQF's tauAcc default (vqf 2.1.2)
 
@@ -53,23 +61,33 @@ class VqfRows:
                             magDistRejectionEnabled=False)
         return self._vqf, self._ts
 
-    def run(self, u: UncertaintyIn) -> list[tuple[float, float, float, float]]:
-        """VQF's attitude (sensor → its 6D earth frame) at each sample of RIANN's last call ``u``."""
+    def run(self, u: UncertaintyIn, restarts: list[int]) -> list[tuple[float, float, float, float]]:
+        """VQF's attitude (sensor → its 6D earth frame) at each sample of RIANN's last call ``u``; VQF's attitude
+        starts anew at each row in ``restarts`` (a hole it is not to bridge)."""
         rows = u.bias.rows
         q = np.empty((len(rows), 4))
-        if rows:
-            v, ts = self._filter(rows[0][6])
-            if len(rows) < SMALL_BLOCK:
-                for k, r in enumerate(rows):
-                    s = r[6] / ts
-                    v.update(np.array((r[3] * s, r[4] * s, r[5] * s)), np.array((r[0], r[1], r[2])))
-                    q[k] = v.getQuat6D()
-            else:
-                x = np.asarray(rows, dtype=float)
-                g = np.ascontiguousarray(x[:, 3:6] * (x[:, 6] / ts)[:, None])
-                q = v.updateBatch(g, np.ascontiguousarray(x[:, 0:3]))["quat6D"]
+        cuts = [0, *sorted(r for r in set(restarts) if 0 < r < len(rows)), len(rows)]
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+            if a in restarts:
+                self._vqf = None
+            if b > a:
+                q[a:b] = self._rows(rows[a:b])
         c = self.carry.run(CarryIn(u.grid, u.bias, NetworkBlock(q, np.zeros(len(rows)))))
         return c.q
+
+    def _rows(self, rows: list[Row7]) -> Array:
+        """VQF over rows (acc, gyr less the bias, step): its attitude after each."""
+        v, ts = self._filter(rows[0][6])
+        if len(rows) < SMALL_BLOCK:
+            q = np.empty((len(rows), 4))
+            for k, r in enumerate(rows):
+                s = r[6] / ts
+                v.update(np.array((r[3] * s, r[4] * s, r[5] * s)), np.array((r[0], r[1], r[2])))
+                q[k] = v.getQuat6D()
+            return q
+        x = np.asarray(rows, dtype=float)
+        g = np.ascontiguousarray(x[:, 3:6] * (x[:, 6] / ts)[:, None])
+        return np.asarray(v.updateBatch(g, np.ascontiguousarray(x[:, 0:3]))["quat6D"])
 
 
 def gravity_rows(q: Array) -> Array:

@@ -3,19 +3,21 @@
 VQF (Laidig & Seel 2023) corrects the gyro's inclination toward the accelerometer's through a low-pass of time
 constant ``τ_acc`` (``tau_acc``). What its error is made of follows from that (per horizontal axis)::
 
-    σ_V² = σ₀² + (τ_acc·σ_b)² + (k_ω·ω̄)² + (k_a·ā)² + x²
+    σ_V² = σ₀² + (k_b·σ_b)² + (k_ω·ω̄)² + (k_a·ā)² + x²
 
 * ``σ₀`` — the floor: what every accelerometer-based inclination shares (the accelerometer's own bias and
   misalignment; against a reference also the reference's alignment). RIANN's stage 8 floor
   (:data:`~.riann.s8_uncertainty.SIGMA0`), the same sensor's.
-* ``τ_acc·σ_b`` — a gyro-bias error ``b`` drifts the gyro's inclination at ``b`` and the correction pulls it back
-  with time constant ``τ_acc``: the lag is ``b·τ_acc`` (``σ_b`` the σ of the bias estimate: VQF's own, or the
-  front end's that removed it). No constant is fitted here: this is the filter's own time constant.
+* ``k_b·σ_b`` — a gyro-bias error ``b`` drifts the gyro's inclination at ``b`` and the correction pulls it back
+  with time constant ``τ_acc``: the lag is ``b·τ_acc`` about the bias's horizontal component. ``σ_b`` is the σ of
+  the bias estimate (VQF's own, or the front end's that removed it), VQF's *worst* direction, which in motion is
+  mostly the least observable one: so ``k_b`` is fitted (0.34 s, well below ``τ_acc``).
 * ``k_ω·ω̄`` and ``k_a·ā`` — what the motion does: ``ω̄`` the rotation rate (bias removed) low-passed over
   :data:`TAU_MOTION` (stage 8's), ``ā = √(LP_τacc((|a| − g)²))/g`` the RMS of the specific force's deviation from
   gravity over the filter's window (the linear acceleration the low-pass has to average out, seen through its norm).
-  ``k_ω`` and ``k_a`` are fitted on synthetic sensors of several grades (``bench/fit_consensus.py``), never on the
-  shared BROAD trials.
+
+``k_b``, ``k_ω`` and ``k_a`` are fitted by maximum likelihood on synthetic sensors of five grades and three motions
+(``bench/fit_consensus.py``), never on the shared BROAD trials; on those the σ holds (docs/consensus.md).
 * ``x`` — a transient: after a hole the gyro bridged (its σ from the gyro at the hole's ends, stage 6's bound) or
   after a restart from the accelerometer (a gap), decaying as the correction pulls it in: ``x = x₀·exp(−t/τ_acc)``.
 
@@ -31,8 +33,9 @@ from riann_ros.constants import GRAVITY
 from riann_ros.estimators.riann.s8_uncertainty import SIGMA0, TAU_MOTION
 
 # fitted on synthetic sensors (bench/fit_consensus.py); the other terms are physics (module docstring)
-K_RATE = 0.004  # s: rad of tilt per rad/s of low-passed rotation rate
-K_ACC = 0.3  # rad of tilt per unit of RMS specific-force deviation (in g)
+K_LAG = 0.335  # s: rad of tilt per rad/s of the bias estimate's σ
+K_RATE = 0.0009  # s: rad of tilt per rad/s of low-passed rotation rate
+K_ACC = 0.032  # rad of tilt per unit of RMS specific-force deviation (in g)
 TRANSIENT_END = 1e-4  # rad: a transient below this is over
 
 
@@ -92,6 +95,6 @@ class VqfSigma:
                     self.transient = 0.0
         else:
             self.rate_lp, self.acc_lp, self.started = rate, dev, True
-        lag = self.tau_acc * bias_sd
+        lag = K_LAG * bias_sd
         return VqfTerms(SIGMA0 * SIGMA0, lag * lag, (K_RATE * self.rate_lp) ** 2, K_ACC * K_ACC * self.acc_lp,
                         self.transient**2)
