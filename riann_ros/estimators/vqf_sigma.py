@@ -29,7 +29,11 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from riann_ros.constants import GRAVITY
+import numpy as np
+
+from riann_ros.constants import DEG, GRAVITY
+from riann_ros.estimators.base import Array
+from riann_ros.estimators.riann.s6_handover import FreshNetwork
 from riann_ros.estimators.riann.s8_uncertainty import SIGMA0, TAU_MOTION
 
 # fitted on synthetic sensors (bench/fit_consensus.py); the other terms are physics (module docstring)
@@ -98,3 +102,34 @@ class VqfSigma:
         lag = K_LAG * bias_sd
         return VqfTerms(SIGMA0 * SIGMA0, lag * lag, (K_RATE * self.rate_lp) ** 2, K_ACC * K_ACC * self.acc_lp,
                         self.transient**2)
+
+
+class VqfStateSigma:
+    """The σ model over the samples :class:`~.vqf_estimator.VqfEstimator` ran (its ``sigma_model`` 'state'): VQF's
+    own bias estimate and its σ after each sample, and from its start the σ of a filter started from the
+    accelerometer alone (stage 6's :class:`~.riann.s6_handover.FreshNetwork` at the first sample), decaying with
+    ``tau_acc``."""
+
+    def __init__(self, tau_acc: float) -> None:
+        self.model = VqfSigma(tau_acc)
+        self.sigma: list[float] = []
+
+    def take(self, acc: Array, gyr: Array, dt: Array, bias: Array, bias_sd: Array) -> None:
+        """The samples of one call: ``gyr`` as VQF integrated it, ``bias`` and ``bias_sd`` VQF's after each."""
+        m = self.model
+        a, w, d, s = acc.tolist(), (gyr - bias).tolist(), dt.tolist(), bias_sd.tolist()
+        out = []
+        for k in range(len(a)):
+            ax, ay, az = a[k]
+            if not m.started:
+                m.kick(FreshNetwork(0.0, (ax, ay, az)).sigma() * DEG)
+            t = m.step(d[k], math.sqrt(w[k][0] ** 2 + w[k][1] ** 2 + w[k][2] ** 2),
+                       math.sqrt(ax * ax + ay * ay + az * az), s[k])
+            out.append(math.sqrt(t.total))
+        self.sigma = out
+
+    def last(self, n: int) -> Array:
+        """σ (rad) of the ``n`` samples of the last call."""
+        if len(self.sigma) != n:
+            raise ValueError(f"sigma for {n} samples asked, the last call had {len(self.sigma)}")
+        return np.asarray(self.sigma)
