@@ -20,7 +20,7 @@ setup(
     zip_safe=True,
     maintainer="riann_ros developers",
     maintainer_email="riann-ros@example.org",
-    description="Plug-and-play IMU attitude estimation for ROS 2 (RIANN, Madgwick, Mahony, VQF, the RIANN–VQF consensus)",
+    description="Plug-and-play IMU attitude estimation for ROS 2 (RIANN, Madgwick, Mahony, VQF, RIANN+VQF)",
     license="Apache-2.0",
     python_requires=">=3.11",
     entry_points={

@@ -7,8 +7,8 @@ against each other). They are fitted here on the project's synthetic generator
 (``riann_ros.datasets.synthetic``: exact reference) over sensor grades that differ in noise density, turn-on bias,
 rate and motion (:data:`GRADES`), never on the BROAD trials:
 
-1. VQF's ``K_LAG``, ``K_RATE`` and ``K_ACC`` by maximum likelihood of its 2-D inclination error (``|e|²/σ_V²`` is χ²₂), each
-   recording weighted equally;
+1. VQF's ``K_LAG``, ``K_RATE`` and ``K_ACC`` by maximum likelihood of its 2-D inclination error (``|e|²/σ_V²`` is
+   χ²₂), each recording weighted equally;
 2. ``RHO_OWN`` by maximum likelihood of the two errors jointly (per axis a 2-D Gaussian of covariance
    ``[[σ_R², c], [c, σ_V²]]``, ``c`` as the consensus models it), RIANN's σ as stage 8 reports it.
 

@@ -16,10 +16,15 @@ holes bridged), and per sample combines their gravity directions:
   combination would extrapolate on a correlation it only estimates) and ``σ`` is then the chosen one's.
 * **Disagreement.** The angle ``d`` between the two gravity directions is a 2-D Gaussian of per-axis variance
   ``σ_d² = σ_R² + σ_V² − 2c`` while both σ hold. Where ``d² > χ²₂(0.99)·σ_d²`` they part by more than their σ
-  explain: the unexplained variance ``d²/χ²₂(0.99) − σ_d²`` goes to the one whose own state is unhealthy (RIANN in a
-  hole's hand-over or with an unsettled bias; VQF after a hole or a restart, with an unsettled bias or under
-  linear acceleration: its transient terms outweigh its steady ones), so the output follows the healthy one; where
-  neither or both are, to both in proportion, which keeps the weight and widens σ.
+  explain: the unexplained variance ``d²/χ²₂(0.99) − σ_d²`` goes to the one whose own state is unhealthy (RIANN with
+  an unsettled bias; VQF after a hole or a restart, with an unsettled bias or under linear acceleration: its
+  transient terms outweigh its steady ones), so the output follows the healthy one; where neither or both are, to
+  both in proportion, which keeps the weight. σ then also holds the chance that either is right, as likely as its
+  weight: the spread of that two-point mixture about the combination, ``w(1 − w)·d²`` (``/2`` per axis).
+* **Holes.** While RIANN's stage 6 hands over after a hole (or its fresh network after a gap is young) the output is
+  RIANN's: VQF started at the same instant from the same bridge or from the accelerometer alone (its restart, where
+  stage 6's fresh-start σ is below the bridge's), and corrects more slowly (``τ_acc`` against the network's 0.5 s),
+  so it holds no independent information then; its σ carries the transient on (:mod:`.vqf_sigma`).
 * **Heading.** RIANN's output heading (the gyro's, and in 9D the calibrated field's: RIANN's stage 7 drives the
   magnetometer's front end, once per sample), turned by the smallest horizontal rotation onto the combined
   gravity direction (:func:`~riann_ros.rotations.tilt_to`); the heading's σ and state are RIANN's.
@@ -210,7 +215,10 @@ class ConsensusEstimator(AttitudeEstimator):
             else:
                 var_r, var_v = var_r + excess * var_r / (var_r + var_v), var_v + excess * var_v / (var_r + var_v)
             var_d = var_r + var_v - 2.0 * cov
-        w, var = _weigh(var_r, var_v, cov, var_d)
+            w, var = _weigh(var_r, var_v, cov, var_d)
+            var += w * (1.0 - w) * d * d / 2.0  # one of the two is right, as likely as its weight
+        else:
+            w, var = _weigh(var_r, var_v, cov, var_d)
         self.weight = w
         g = (w * gr[0] + (1.0 - w) * gv[0], w * gr[1] + (1.0 - w) * gv[1], w * gr[2] + (1.0 - w) * gv[2])
         q = tilt_to((qr[0], qr[1], qr[2], qr[3]), g)

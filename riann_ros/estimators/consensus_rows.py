@@ -16,6 +16,7 @@ everything anew.
 
 from __future__ import annotations
 
+import itertools
 
 import numpy as np
 from vqf import VQF
@@ -67,7 +68,7 @@ class VqfRows:
         rows = u.bias.rows
         q = np.empty((len(rows), 4))
         cuts = [0, *sorted(r for r in set(restarts) if 0 < r < len(rows)), len(rows)]
-        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+        for a, b in itertools.pairwise(cuts):
             if a in restarts:
                 self._vqf = None
             if b > a:
