@@ -8,7 +8,9 @@ holes bridged), and per sample combines their gravity directions:
 
 * **Errors.** Per horizontal axis RIANN's σ is stage 8's ``σ_R``, VQF's ``σ_V`` its state's
   (:mod:`.vqf_sigma`). Their covariance ``c`` is what the two share: the floor ``σ₀²`` (the same accelerometer),
-  the two lags of the one bias estimate both use (``K_BIAS σ_b · K_LAG σ_b``, the same sign), and
+  the two lags of the one bias estimate both use (``K_BIAS σ_b · K_LAG σ_b``, the same sign), the timing error of
+  the rows both read (the rotation rate times a quarter of the input step: the sample convention, points or interval
+  means, is not known; :data:`TIMING_SHARE`), and
   :data:`RHO_OWN` of the rest (fitted on synthetic sensors, ``bench/fit_consensus.py``).
 * **Combination.** The error of ``g = w·g_R + (1 − w)·g_V`` has the variance ``w²σ_R² + (1 − w)²σ_V² + 2w(1 − w)c``,
   least at ``w = (σ_V² − c) / (σ_R² + σ_V² − 2c)`` (with ``c = ρσ_Rσ_V``: ``(σ_V² − ρσ_Rσ_V) / (σ_R² + σ_V² −
@@ -25,6 +27,10 @@ holes bridged), and per sample combines their gravity directions:
   RIANN's: VQF started at the same instant from the same bridge or from the accelerometer alone (its restart, where
   stage 6's fresh-start σ is below the bridge's), and corrects more slowly (``τ_acc`` against the network's 0.5 s),
   so it holds no independent information then; its σ carries the transient on (:mod:`.vqf_sigma`).
+* **What the sensor shows.** ``d`` measures exactly the two own errors (the floor and the common lag cancel in it):
+  where both are healthy, ``E[d²] = 2σ_d²``. The ratio of ``d²`` to ``2σ_d²``, each low-passed over
+  :data:`SCALE_TAUS` × ``τ_acc``, scales both own variances where it exceeds 1 (a sensor noisier than the models
+  know): the weight stays, σ widens. Never below 1: a model more cautious than the data stays so.
 * **Heading.** RIANN's output heading (the gyro's, and in 9D the calibrated field's: RIANN's stage 7 drives the
   magnetometer's front end, once per sample), turned by the smallest horizontal rotation onto the combined
   gravity direction (:func:`~riann_ros.rotations.tilt_to`); the heading's σ and state are RIANN's.
@@ -57,6 +63,12 @@ from riann_ros.rotations import Quat, Vec, gravity, tilt_to
 #: included, correlate by +0.10 (bench/consensus_study.py)
 RHO_OWN = 0.0
 CHI2_2_99 = 9.210  # χ²₂(0.99): the disagreement test
+#: the own errors' scale averages the disagreement over this many VQF time constants (errors that correlate over about
+#: one tau_acc: ten of them know the mean square to about a third)
+SCALE_TAUS = 10.0
+#: a sample read a quarter of its step off: the worst timing error either sample convention leaves (points or interval
+#: means; RIANN's sample_delay halves the half step between them, docs/riann.md, stage 1)
+TIMING_SHARE = 0.25
 TAU_ACC = ParamSpec("tau_acc", DEFAULT_TAU_ACC, "s; time constant of VQF's accelerometer low-pass (VQF tauAcc) in the "
                     "consensus's second opinion. Default 3.0 = the vqf package default.", min=0.01, max=1000.0,
                     runtime=True)
@@ -92,6 +104,7 @@ class ConsensusEstimator(AttitudeEstimator):
         self.vqf.restart(Cause.RESET)
         self.vqf_sigma.reset()
         self._after_gap = False
+        self.scale, self._lp_d2, self._lp_model = 1.0, 0.0, 0.0  # the own errors' scale and its low-passes
         self._kicks: dict[int, float] = {}  # sample of the last call -> the σ (rad) VQF's attitude starts off by
         self._sigma = np.zeros((0, 2))
         self.last = Opinions(np.zeros((0, 4)), np.zeros((0, 4)), np.zeros((0, 5)))
@@ -127,6 +140,7 @@ class ConsensusEstimator(AttitudeEstimator):
         if math.isfinite(self.weight):
             out["consensus weight on RIANN"] = f"{self.weight:.2f}"
             out["RIANN-VQF disagreement (deg)"] = f"{self.disagreement / DEG:.2f}"
+            out["consensus sigma scale"] = f"{self.scale:.2f}"
         return out
 
     def sigma(self, fields: np.ndarray) -> Array:
@@ -158,7 +172,7 @@ class ConsensusEstimator(AttitudeEstimator):
         for i, (qr, fi) in enumerate(zip(q_r.tolist(), feats, strict=True)):
             t = self._vqf_terms(u, i, fi[3])
             terms.append(t)
-            out[i], sig[i, 0] = self._one(qr, q_v[i], float(s_r[i, 0]), fi, t)
+            out[i], sig[i, 0] = self._one(qr, q_v[i], float(s_r[i, 0]), fi, t, u.samples.step_s[i])
         self._sigma = sig
         self.last = Opinions(q_r, np.asarray(q_v, dtype=float).reshape(n, 4), np.array(terms).reshape(n, 5))
         return out
@@ -193,23 +207,28 @@ class ConsensusEstimator(AttitudeEstimator):
             self._after_gap = False
         return self.vqf_sigma.step(s.step_s[i], rate, math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]), bias_sd)
 
-    def _one(self, qr: list[float], qv: Quat, s_r: float, f: list[float], v: VqfTerms) -> tuple[Quat, float]:
+    def _one(self, qr: list[float], qv: Quat, s_r: float, f: list[float], v: VqfTerms, dt: float = 0.0
+             ) -> tuple[Quat, float]:
         """One sample: RIANN's output ``qr`` and σ ``s_r``, stage 8's features ``f``, VQF's attitude ``qv`` and σ
-        terms ``v`` → the output attitude and its inclination σ."""
+        terms ``v``, ``dt`` s since the previous sample → the output attitude and its inclination σ."""
         gr, gv = gravity((qr[0], qr[1], qr[2], qr[3])), gravity(qv)
         lag_r, hand_r = (K_BIAS * f[3]) ** 2, f[2] * f[2]
-        var_r, var_v = s_r * s_r, v.total
-        own_r = max(var_r - v.floor - lag_r, 0.0)
-        cov = v.floor + math.sqrt(lag_r * v.bias) + RHO_OWN * math.sqrt(own_r * v.own)
         d = _angle(gr, gv)
         self.disagreement = d
         if hand_r > 0.0:  # a hole's hand-over, or a gap's fresh network: RIANN's (module docstring)
             self.weight = 1.0
             return (qr[0], qr[1], qr[2], qr[3]), s_r
+        own_r = max(s_r * s_r - v.floor - lag_r, 0.0)
+        sick_r = lag_r > s_r * s_r - lag_r  # RIANN's bias lag outweighs its steady terms
+        if not (sick_r or v.unhealthy):
+            self._learn_scale(d, own_r + v.own + (math.sqrt(lag_r) - math.sqrt(v.bias)) ** 2, dt)
+        own_r, own_v = own_r * self.scale, v.own * self.scale
+        timing = (f[1] * dt * TIMING_SHARE) ** 2  # both read the same rows: a common timing error
+        var_r, var_v = max(s_r * s_r, v.floor + lag_r + own_r) + timing, v.floor + v.bias + own_v + timing
+        cov = v.floor + timing + math.sqrt(lag_r * v.bias) + RHO_OWN * math.sqrt(own_r * own_v)
         var_d = var_r + var_v - 2.0 * cov
         if d * d > CHI2_2_99 * var_d:  # they part by more than their σ explain
             excess = d * d / CHI2_2_99 - var_d
-            sick_r = lag_r > var_r - lag_r  # RIANN's bias lag outweighs its steady terms
             if sick_r != v.unhealthy:
                 var_r, var_v = (var_r + excess, var_v) if sick_r else (var_r, var_v + excess)
             else:
@@ -225,6 +244,17 @@ class ConsensusEstimator(AttitudeEstimator):
         if q[0] < 0.0:
             q = (-q[0], -q[1], -q[2], -q[3])
         return q, math.sqrt(var)
+
+
+    def _learn_scale(self, d: float, var_d: float, dt: float) -> None:
+        """The own errors' scale (:attr:`scale`) from the disagreement ``d`` of a sample where both are healthy and
+        the model's per-axis variance of it, ``var_d``, both low-passed over :data:`SCALE_TAUS` × ``tau_acc``."""
+        if self._lp_model <= 0.0:  # the first: the model's own value for both
+            self._lp_d2 = self._lp_model = 2.0 * var_d
+        k = min(dt / (SCALE_TAUS * self.vqf_sigma.tau_acc), 1.0)
+        self._lp_d2 += k * (d * d - self._lp_d2)
+        self._lp_model += k * (2.0 * var_d - self._lp_model)
+        self.scale = max(1.0, self._lp_d2 / self._lp_model) if self._lp_model > 0.0 else 1.0
 
 
 def _angle(a: Vec, b: Vec) -> float:
