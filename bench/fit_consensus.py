@@ -16,7 +16,7 @@ Then per grade: the RMSE of RIANN, of VQF on RIANN's rows, of their plain mean a
 coverage and NEES per degree of freedom of the σ of RIANN, of VQF (fitted) and of the consensus (as it runs with the
 constants in the source: run again after changing them).
 
-    .venv/bin/python bench/fit_consensus.py [--seeds 2] [--duration 60]
+    .venv/bin/python bench/fit_consensus.py [--seeds 1] [--duration 60]
 """
 
 from __future__ import annotations
@@ -142,7 +142,7 @@ def rmse(e: np.ndarray) -> float:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--duration", type=float, default=60.0)
     args = ap.parse_args()
     by_grade: dict[str, list[dict[str, np.ndarray]]] = {}

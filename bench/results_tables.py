@@ -38,7 +38,8 @@ FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors"
 UNCERTAINTY_FIELDS = ("n_scored", "nees", "cover95_pct", "err_bottom_decile_deg", "err_top_decile_deg", "yaw_nees",
                       "yaw_cover95_mag_pct", "yaw_cover95_held_pct", "n_yaw_mag", "n_yaw_held", "sigma_hist")
 ESTIMATORS = ("riann", "vqf", "madgwick", "mahony")
-NAMES = {"riann": "RIANN", "vqf": "VQF", "madgwick": "Madgwick", "mahony": "Mahony"}
+DEMO_ESTIMATORS = ("riann", "consensus", "vqf", "madgwick", "mahony")  # make demo's -e
+NAMES = {"riann": "RIANN", "vqf": "VQF", "madgwick": "Madgwick", "mahony": "Mahony", "consensus": "Consensus"}
 DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")  # the six trials with movement throughout
 #: the trials whose motion leaves a hard iron unobservable or mistaken (BROAD's descriptions): 10 and 15 translate
 #: without rotation (through the lab's field gradients), 27 barely turns (a vibrating phone) for its first 35 s
@@ -448,9 +449,9 @@ def _synthetic(rows: Rows, synthetic: bool) -> Rows:
 
 
 def _demo_table(rows: Rows, first: str, cell: Callable[[Rows, str], str]) -> str:
-    body = [[DEMO_CONDITIONS.get(c, f"`{c}`"), *(cell(rows.where(perturbation=c), e) for e in ESTIMATORS)]
+    body = [[DEMO_CONDITIONS.get(c, f"`{c}`"), *(cell(rows.where(perturbation=c), e) for e in DEMO_ESTIMATORS)]
             for c in rows.ordered("perturbation")]
-    return _table([first, *(NAMES[e] for e in ESTIMATORS)], body)
+    return _table([first, *(NAMES[e] for e in DEMO_ESTIMATORS)], body)
 
 
 def demo_real(rows: Rows | None = None) -> str:
