@@ -207,3 +207,12 @@ def test_consensus_beats_both_on_broad_trials(broad_trial, trial):
         assert ok.all()
         got[name] = rmse(rec, q)
     assert got["consensus"] < min(got["riann"], got["vqf"]), got
+
+
+def test_consensus_yaml_lists_every_estimator_parameter_with_its_default():
+    yaml = pytest.importorskip("yaml")
+    params = yaml.safe_load((ROOT / "config" / "consensus.yaml").read_text())["/**"]["ros__parameters"]
+    expected = {p.name: list(p.default) if isinstance(p.default, tuple) else p.default
+                for p in ConsensusEstimator.PARAMS}
+    assert params == expected
+    assert all(type(params[k]) is type(v) for k, v in expected.items())
