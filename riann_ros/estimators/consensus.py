@@ -51,7 +51,7 @@ from riann_ros.constants import DEG
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
 from riann_ros.estimators.consensus_rows import DEFAULT_TAU_ACC, VqfRows
 from riann_ros.estimators.riann.estimator import RiannEstimator
-from riann_ros.estimators.riann.s6_handover import FreshNetwork
+from riann_ros.estimators.riann.s6_handover import S_FLOOR, FreshNetwork, bridge_sigma
 from riann_ros.estimators.riann.s8_uncertainty import K_BIAS
 from riann_ros.estimators.riann.stage import Cause, UncertaintyIn
 from riann_ros.estimators.vqf_sigma import VqfSigma, VqfTerms
@@ -69,6 +69,10 @@ SCALE_TAUS = 10.0
 #: a sample read a quarter of its step off: the worst timing error either sample convention leaves (points or interval
 #: means; RIANN's sample_delay halves the half step between them, docs/riann.md, stage 1)
 TIMING_SHARE = 0.25
+#: a sample whose rows span more than twice the usual has at least one lost sample before it; the usual span is a
+#: running mean over about this many samples
+SKIP_FACTOR = 2.0
+SPAN_SAMPLES = 20.0
 TAU_ACC = ParamSpec("tau_acc", DEFAULT_TAU_ACC, "s; time constant of VQF's accelerometer low-pass (VQF tauAcc) in the "
                     "consensus's second opinion. Default 3.0 = the vqf package default.", min=0.01, max=1000.0,
                     runtime=True)
@@ -105,6 +109,7 @@ class ConsensusEstimator(AttitudeEstimator):
         self.vqf_sigma.reset()
         self._after_gap = False
         self.scale, self._lp_d2, self._lp_model = 1.0, 0.0, 0.0  # the own errors' scale and its low-passes
+        self._span_lp, self._w_prev = 0.0, (0.0, 0.0, 0.0)  # the usual step of a sample (s), the last gyro
         self._kicks: dict[int, float] = {}  # sample of the last call -> the σ (rad) VQF's attitude starts off by
         self._sigma = np.zeros((0, 2))
         self.last = Opinions(np.zeros((0, 4)), np.zeros((0, 4)), np.zeros((0, 5)))
@@ -200,12 +205,30 @@ class ConsensusEstimator(AttitudeEstimator):
         b = u.bias.bias_rad_s[g.r0[i]]
         rate = math.sqrt((x[3] - b[0]) ** 2 + (x[4] - b[1]) ** 2 + (x[5] - b[2]) ** 2)
         kick = self._kicks.pop(i, None)
-        if kick is not None:
+        if kick is None:
+            kick = self._skipped(g.delta_s[i], (x[3], x[4], x[5]))
+        if kick:
             self.vqf_sigma.kick(kick)
         if self._after_gap:  # started afresh: stage 6's σ of a fresh start at this sample
             self.vqf_sigma.kick(h.fresh_sd_deg[i] * DEG)
             self._after_gap = False
         return self.vqf_sigma.step(s.step_s[i], rate, math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]), bias_sd)
+
+    def _skipped(self, span: float, w: Vec) -> float:
+        """VQF's σ (rad) after a sample whose step on stage 1's timeline (de-jittered), ``span`` s, is more than
+        :data:`SKIP_FACTOR` × the stream's usual: samples were lost, fewer than a hole, and the grid bridged them by
+        interpolation, whose missed rotation VQF integrates (stage 6's bridge σ without its floor, from the gyro
+        ``w`` here and at the previous sample); 0 where none were lost."""
+        w_prev = self._w_prev
+        self._w_prev = w
+        if self._span_lp <= 0.0:
+            self._span_lp = span
+            return 0.0
+        lost = span > SKIP_FACTOR * self._span_lp
+        self._span_lp += (span - self._span_lp) / SPAN_SAMPLES
+        if not lost:
+            return 0.0
+        return math.sqrt(max(bridge_sigma(w_prev, w, span) ** 2 - S_FLOOR**2, 0.0)) * DEG
 
     def _one(self, qr: list[float], qv: Quat, s_r: float, f: list[float], v: VqfTerms, dt: float = 0.0
              ) -> tuple[Quat, float]:
