@@ -27,14 +27,16 @@ $(BIN)/.installed: requirements.txt requirements-dev.txt requirements-cluster.tx
 
 setup: $(BIN)/.installed
 
-# the bags as recorded and under two perturbations a robot meets (stamps of a polled driver, a turn-on gyro bias),
+# every estimator (RIANN, the RIANN–VQF consensus, VQF, Madgwick, Mahony) on the bags as recorded and under two
+# perturbations a robot meets (stamps of a polled driver, a turn-on gyro bias),
 # 6D (the synthetic bags have no magnetometer), roll/pitch plotted for the real trial; DEMO_OUT: another folder
 # (test/test_demo_smoke.py runs the demo into one of its own)
 DEMO_OUT ?= demo_out
 DEMO_TRIAL := 21_undisturbed_fast_combined
 demo: $(BIN)/.installed
 	rm -rf $(DEMO_OUT)
-	$(BIN)/riann-bag-eval bags/*.mcap -s as-recorded -p none -p jitter:10/20/30ms -p bias:3,3,0 --use-mag false \
+	$(BIN)/riann-bag-eval bags/*.mcap -e riann,consensus,vqf,madgwick,mahony -s as-recorded -p none -p jitter:10/20/30ms \
+		-p bias:3,3,0 --use-mag false \
 		--plot-sequence $(DEMO_TRIAL) --jobs 2 --out $(DEMO_OUT)
 
 # ruff (style, imports, complexity ≤ 10) on the whole tree, mypy on the package, vulture (dead code: the package

@@ -20,7 +20,7 @@ setup(
     zip_safe=True,
     maintainer="riann_ros developers",
     maintainer_email="riann-ros@example.org",
-    description="Plug-and-play IMU attitude estimation for ROS 2 (RIANN, Madgwick, Mahony, VQF)",
+    description="Plug-and-play IMU attitude estimation for ROS 2 (RIANN, Madgwick, Mahony, VQF, RIANN+VQF)",
     license="Apache-2.0",
     python_requires=">=3.11",
     entry_points={
@@ -29,6 +29,7 @@ setup(
             "madgwick_node = riann_ros.nodes.madgwick_node:main",
             "mahony_node = riann_ros.nodes.mahony_node:main",
             "vqf_node = riann_ros.nodes.vqf_node:main",
+            "consensus_node = riann_ros.nodes.consensus_node:main",
             "riann-bag-convert = riann_ros.cli.convert:main",
             "riann-bag-eval = riann_ros.cli.evaluate:main",
             "riann-topic = riann_ros.cli.topic:main",

@@ -3,6 +3,7 @@
 Usage::
 
     .venv/bin/python bench/bench_update.py [--ref DIR] [--rounds 3] [--samples 6000] [--ensemble 4,1] [--mag OFFSET]
+        [--estimators riann,consensus]
 
 Streams (a 1 Hz swing, gyro bias 0): 200 Hz and 1 kHz regular, 200 Hz stamped on arrival (0-10 ms delivery
 delays: the clock stage de-jitters), and jittery 5-15 ms steps (the sample-model test runs). Each figure is the
@@ -12,6 +13,8 @@ ratio is measured on the same machine state. ONNX Runtime runs with one thread. 
 magnetometer field (9D: a 50 µT field seen through the swing, plus that hard-iron offset; ``0,0,0``: a calibrated
 sensor), so the online magnetometer calibration runs where the version has one (its default parameters; where the
 calibration is the stream's magnetometer front end, the estimator is given one as the stream gives it).
+``--estimators`` times other estimators that take ``ensemble`` (RIANN's parameters: ``consensus``) beside it, in the
+same session, alternating like the versions.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import json, math, sys, time
 import numpy as np
 from riann_ros.estimators import create
 STREAMS = ("200 Hz", "1 kHz", "200 Hz on arrival", "jittery 5-15 ms")
-n, copies = int(sys.argv[1]), int(sys.argv[2])
+n, copies, name = int(sys.argv[1]), int(sys.argv[2]), sys.argv[4]
 off = None if sys.argv[3] == "-" else np.array([float(v) for v in sys.argv[3].split(",")]) * 1e-6
 rng = np.random.default_rng(0)
 def steps(kind):
@@ -49,7 +52,7 @@ for kind in STREAMS:
     roll = 0.5 * np.sin(2 * math.pi * t)
     acc = np.column_stack([np.zeros(n), 9.81 * np.sin(roll), 9.81 * np.cos(roll)])
     gyr = np.column_stack([np.pi * np.cos(2 * math.pi * t), np.zeros(n), np.zeros(n)])
-    est = create("riann", ensemble=copies)
+    est = create(name, ensemble=copies)
     if off is not None and hasattr(est, "take_front_end"):  # the magnetometer's front end, as the stream gives it
         from riann_ros.magcal.frontend import FrontEndConfig, MagFrontEnd
         est.take_front_end(MagFrontEnd(FrontEndConfig.of(est.params), latency=est.front_end_latency()))
@@ -68,10 +71,10 @@ print(json.dumps(out))
 """
 
 
-def run(tree: Path, n: int, copies: int, mag: str) -> dict[str, float]:
+def run(tree: Path, n: int, copies: int, mag: str, estimator: str) -> dict[str, float]:
     env = dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1")
-    r = subprocess.run([sys.executable, "-c", CHILD, str(n), str(copies), mag], env=env, capture_output=True,
-                       text=True, check=True)
+    r = subprocess.run([sys.executable, "-c", CHILD, str(n), str(copies), mag, estimator], env=env,
+                       capture_output=True, text=True, check=True)
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
@@ -82,13 +85,16 @@ def main() -> int:
     ap.add_argument("--samples", type=int, default=6000)
     ap.add_argument("--ensemble", default="4,1")
     ap.add_argument("--mag", default="-", metavar="X,Y,Z", help="µT; 9D with this hard-iron offset (default: 6D)")
+    ap.add_argument("--estimators", default="riann", help="estimators to time (RIANN's parameters: riann, consensus)")
     args = ap.parse_args()
-    trees = {"this": ROOT} | ({"ref": args.ref.resolve()} if args.ref else {})
+    roots = {"this": ROOT} | ({"ref": args.ref.resolve()} if args.ref else {})
+    names = args.estimators.split(",")
+    trees = {(f"{t} {e}" if len(names) > 1 else t): (tree, e) for t, tree in roots.items() for e in names}
     best: dict[tuple[str, int, str], float] = {}
     for _ in range(args.rounds):
         for copies in (int(c) for c in args.ensemble.split(",")):
-            for name, tree in trees.items():
-                for kind, us in run(tree, args.samples, copies, args.mag).items():
+            for name, (tree, estimator) in trees.items():
+                for kind, us in run(tree, args.samples, copies, args.mag, estimator).items():
                     key = (name, copies, kind)
                     best[key] = min(best.get(key, float("inf")), us)
     print(f"per-sample update(), µs, best of {args.rounds} × {args.samples} calls")

@@ -33,14 +33,16 @@ from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results"
-PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md", "bags/README.md", "docs/evaluation.md")
+PAGES = ("README.md", "docs/results.md", "BENCHMARKS.md", "docs/riann.md", "bags/README.md", "docs/evaluation.md",
+         "docs/consensus.md")
 FIELDS = ("sequence", "scenario", "perturbation", "rate", "estimator", "sensors", "rmse_deg", "heading_rmse_deg",
           "total_rmse_deg", "best_t_offset_s", "mag_converged_after_s")
 #: the uncertainty scores a file keeps when trimmed with ``--uncertainty`` (riann_ros/evaluation/uncertainty.py)
 UNCERTAINTY_FIELDS = ("n_scored", "nees", "cover95_pct", "err_bottom_decile_deg", "err_top_decile_deg", "yaw_nees",
                       "yaw_cover95_mag_pct", "yaw_cover95_held_pct", "n_yaw_mag", "n_yaw_held", "sigma_hist")
 ESTIMATORS = ("riann", "vqf", "madgwick", "mahony")
-NAMES = {"riann": "RIANN", "vqf": "VQF", "madgwick": "Madgwick", "mahony": "Mahony"}
+DEMO_ESTIMATORS = ("riann", "consensus", "vqf", "madgwick", "mahony")  # make demo's -e
+NAMES = {"riann": "RIANN", "vqf": "VQF", "madgwick": "Madgwick", "mahony": "Mahony", "consensus": "Consensus"}
 DROPOUT_TRIALS = ("02", "07", "10", "15", "24", "27")  # the six trials with movement throughout
 #: the trials whose motion leaves a hard iron unobservable or mistaken (BROAD's descriptions): 10 and 15 translate
 #: without rotation (through the lab's field gradients), 27 barely turns (a vibrating phone) for its first 35 s
@@ -327,6 +329,89 @@ def _uncertainty_groups() -> list[tuple[str, str, dict[str, float | None]]]:
     return out
 
 
+# -- the consensus of RIANN and VQF (docs/consensus.md): its rows from docs/results/consensus*.json, RIANN's and VQF's
+# from the runs above (the consensus changes neither) --------------------------------------------------------------
+CONSENSUS = ("riann", "vqf", "consensus")
+
+
+def _with_consensus(base: str, name: str, **match: object) -> Rows:
+    """RIANN's and VQF's rows of ``base`` with the consensus's of ``name``, both cut by ``match``."""
+    return Rows(tuple(r for r in (*load(base).where(**match).rows, *load(name).where(**match).rows)
+                      if r["estimator"] in CONSENSUS))
+
+
+def _met(rows: Rows) -> tuple[str, str]:
+    """The issue's acceptance for one condition: the consensus's mean at most the better of RIANN's and VQF's, its
+    worst at most 1.05 × RIANN's worst (on the rounded figures the tables show)."""
+    m = {e: round(rows.mean(e), 2) for e in CONSENSUS}
+    w = {e: round(max(rows.values(e)), 2) for e in CONSENSUS}
+    return ("yes" if m["consensus"] <= min(m["riann"], m["vqf"]) else "**no**",
+            "yes" if w["consensus"] <= round(1.05 * w["riann"], 2) else "**no**")
+
+
+def _consensus_table(rows: Rows, key: str, label: Callable[[object], str]) -> str:
+    body = [[label(c), *(rows.where(**{key: c}).mean_max(e) for e in CONSENSUS), *_met(rows.where(**{key: c}))]
+            for c in rows.ordered(key)]
+    return _table([key.replace("perturbation", "condition"), "RIANN", "VQF", "consensus", "mean ≤ better",
+                   "worst ≤ 1.05 RIANN"], body)
+
+
+def consensus_conditions(scenario: str) -> Callable[[], str]:
+    return lambda: _consensus_table(_with_consensus("perturbed", "consensus", scenario=scenario), "perturbation", str)
+
+
+def consensus_rates() -> str:
+    rows = _with_consensus("rates", "consensus_rates")
+    return _consensus_table(Rows(tuple(sorted(rows.rows, key=lambda r: r["rate"]))), "rate", lambda f: f"{f:g} Hz")
+
+
+def consensus_streams() -> str:
+    """The 200 Hz streams of the sample-delay section (the slower ones are in the perturbed tables)."""
+    rows = Rows(tuple(r for r in _with_consensus("sample_delay", "consensus_200").rows
+                      if r["perturbation"].startswith("rate:200")))
+    return _consensus_table(rows, "perturbation", str)
+
+
+def consensus_9d() -> str:
+    """9D as recorded: heading and inclination, RIANN, VQF and the consensus."""
+    rows = _with_consensus("mag9d", "consensus_9d", sensors="9D")
+    body = [[NAMES[e], rows.mean_max(e, "heading_rmse_deg"), rows.mean_max(e)] for e in CONSENSUS]
+    return _table(["estimator (9D, as recorded)", "heading mean / worst", "inclination mean / worst"], body)
+
+
+def consensus_uncertainty() -> str:
+    """The consensus's inclination σ per condition (docs/results/consensus.json, 6D: the inclination is the same in
+    9D), pooled over the 12 trials."""
+    from types import SimpleNamespace
+
+    from riann_ros.evaluation.scoring import Score
+    from riann_ros.evaluation.uncertainty_report import group_scores
+
+    body = []
+    for scenario in ("as-recorded", "realistic"):
+        rows = load("consensus").where(scenario=scenario, estimator="consensus")
+        for cond in rows.ordered("perturbation"):
+            grp = [SimpleNamespace(score=Score(n_samples=r["n_scored"], n_scored=r["n_scored"], n_unestimated=0,
+                                               rmse_deg=r["rmse_deg"], max_err_deg=float("nan"),
+                                               **{k: r.get(k) for k in UNCERTAINTY_FIELDS if k != "n_scored"}))
+                   for r in rows.where(perturbation=cond).rows]
+            g = group_scores(grp)
+            body.append([scenario, cond, _pct(g["cover95_pct"]), f"{g['cover95_min']:.1f}–{g['cover95_max']:.1f}",
+                         f"{g['nees']:.2f}"])
+    return _table(["scenario", "condition", "coverage 95 %", "per trial", "NEES/DOF"], body, left=2)
+
+
+def consensus_figures() -> str:
+    """README: as recorded, and how many conditions meet the acceptance."""
+    rows = _with_consensus("perturbed", "consensus", scenario="as-recorded", perturbation="none")
+    met = [_met(_with_consensus("perturbed", "consensus", scenario=s, perturbation=c))
+           for s in ("as-recorded", "realistic")
+           for c in _with_consensus("perturbed", "consensus", scenario=s).ordered("perturbation")]
+    return (f"as recorded {rows.mean_max('consensus')}° (RIANN {rows.mean_max('riann')}°, VQF "
+            f"{rows.mean_max('vqf')}°); the mean at most the better of the two in {sum(m[0] == 'yes' for m in met)} "
+            f"of {len(met)} conditions, the worst trial within 1.05× RIANN's in {sum(m[1] == 'yes' for m in met)}")
+
+
 def _pct(v: float | None) -> str:
     return "–" if v is None else f"{v:.1f}"
 
@@ -450,9 +535,9 @@ def _synthetic(rows: Rows, synthetic: bool) -> Rows:
 
 
 def _demo_table(rows: Rows, first: str, cell: Callable[[Rows, str], str]) -> str:
-    body = [[DEMO_CONDITIONS.get(c, f"`{c}`"), *(cell(rows.where(perturbation=c), e) for e in ESTIMATORS)]
+    body = [[DEMO_CONDITIONS.get(c, f"`{c}`"), *(cell(rows.where(perturbation=c), e) for e in DEMO_ESTIMATORS)]
             for c in rows.ordered("perturbation")]
-    return _table([first, *(NAMES[e] for e in ESTIMATORS)], body)
+    return _table([first, *(NAMES[e] for e in DEMO_ESTIMATORS)], body)
 
 
 def demo_real(rows: Rows | None = None) -> str:
@@ -629,6 +714,13 @@ TABLES: dict[str, Callable[[], str]] = {
     "mag-summary": mag_summary,
     "mag-trials": mag_trials,
     "uncertainty-inclination": uncertainty_inclination,
+    "consensus-as-recorded": consensus_conditions("as-recorded"),
+    "consensus-realistic": consensus_conditions("realistic"),
+    "consensus-rates": consensus_rates,
+    "consensus-streams": consensus_streams,
+    "consensus-9d": consensus_9d,
+    "consensus-uncertainty": consensus_uncertainty,
+    "readme-consensus": consensus_figures,
     "uncertainty-heading": uncertainty_heading,
     "magcal": magcal_table,
     "magcal-uncertainty": magcal_uncertainty,

@@ -1,4 +1,4 @@
-"""RIANN, Madgwick, Mahony and VQF side by side on one IMU input.
+"""RIANN, Madgwick, Mahony, VQF and the RIANN–VQF consensus side by side on one IMU input.
 
     ros2 launch riann_ros side_by_side.launch.py
     ros2 launch riann_ros side_by_side.launch.py input_topic:=/my_imu/data_raw nominal_rate:=200.0
@@ -7,9 +7,9 @@
 
 Each node loads its parameter file from the package share (``config/<name>.yaml``) and publishes on
 its own default topics (``imu/attitude`` + ``imu/data`` (+ ``imu/rpy``) for RIANN, ``imu/<name>/attitude`` +
-``imu/<name>/data`` (+ ``imu/<name>/rpy``) for the others), so nothing collides; all four subscribe the
+``imu/<name>/data`` (+ ``imu/<name>/rpy``) for the others), so nothing collides; all five subscribe the
 same input (``input_topic``) and magnetometer (``mag_topic``), under ``namespace``. ``nominal_rate``,
-``world_frame``, ``fixed_frame`` and ``publish_rpy`` go to all four, ``publish_tf`` to riann_node only (four
+``world_frame``, ``fixed_frame`` and ``publish_rpy`` go to all five, ``publish_tf`` to riann_node only (five
 nodes broadcasting the same fixed_frame -> sensor frame transform would fight over it). These five default
 to empty, which means "the value in the parameter files": a launch default never replaces a value you set
 there. See docs/node.md.
@@ -26,7 +26,7 @@ from launch import LaunchDescription
 from riann_ros.params import launch_overrides
 
 PACKAGE = "riann_ros"
-NODES = ("riann", "madgwick", "mahony", "vqf")  # executable <name>_node, parameters config/<name>.yaml
+NODES = ("riann", "madgwick", "mahony", "vqf", "consensus")  # executable <name>_node, parameters config/<name>.yaml
 INPUT_TOPIC = "imu/data_raw"  # the topic every node subscribes (riann_ros.nodes.node_base.INPUT_TOPIC)
 MAG_TOPIC = "imu/mag"  # riann_ros.nodes.node_base.MAG_TOPIC
 TF_NODE = "riann"  # the one node that broadcasts TF when publish_tf:=true
@@ -65,11 +65,11 @@ def _nodes(context):
 def generate_launch_description() -> LaunchDescription:
     actions = [
         DeclareLaunchArgument("input_topic", default_value=INPUT_TOPIC,
-                              description="IMU topic (sensor_msgs/Imu) all four nodes subscribe"),
+                              description="IMU topic (sensor_msgs/Imu) all five nodes subscribe"),
         DeclareLaunchArgument("mag_topic", default_value=MAG_TOPIC,
-                              description="magnetometer topic (sensor_msgs/MagneticField) all four nodes subscribe"),
+                              description="magnetometer topic (sensor_msgs/MagneticField) all five nodes subscribe"),
         DeclareLaunchArgument("namespace", default_value="",
-                              description="namespace of the four nodes and their relative topics (empty: none)"),
+                              description="namespace of the five nodes and their relative topics (empty: none)"),
     ]
     for name, (kind, text) in PARAMETER_ARGUMENTS.items():
         actions.append(DeclareLaunchArgument(name, default_value="",

@@ -41,8 +41,8 @@ def workspace(tmp_path_factory):
 
 def test_colcon_build_installs_the_executables(workspace):
     lib = workspace / "install" / "riann_ros" / "lib" / "riann_ros"
-    for exe in ("riann_node", "madgwick_node", "mahony_node", "vqf_node", "riann-bag-convert", "riann-bag-eval",
-                "riann-topic"):
+    for exe in ("riann_node", "madgwick_node", "mahony_node", "vqf_node", "consensus_node", "riann-bag-convert",
+                "riann-bag-eval", "riann-topic"):
         assert (lib / exe).is_file() and os.access(lib / exe, os.X_OK), exe
     share = workspace / "install" / "riann_ros" / "share" / "riann_ros"
     assert (share / "package.xml").is_file() and (share / "config" / "riann.yaml").is_file()

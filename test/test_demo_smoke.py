@@ -175,7 +175,7 @@ def test_make_demo_scores_the_real_trial_and_the_readme_shows_what_it_writes(tmp
     rows = rt.run_rows(out / "results.json")
     real = rows.where(sequence=TRIAL)
     assert {(r["perturbation"], r["estimator"]) for r in real.rows} == {
-        (c, e) for c in rt.DEMO_CONDITIONS for e in rt.ESTIMATORS}
+        (c, e) for c in rt.DEMO_CONDITIONS for e in rt.DEMO_ESTIMATORS}
     assert {r["sensors"] for r in rows.rows} == {"6D"}
     assert all(np.isfinite(r["rmse_deg"]) and r["n_scored"] > 0 for r in real.rows)
     plots = sorted(p.name for p in out.glob(f"roll_pitch_{TRIAL}*.png"))

@@ -18,7 +18,7 @@ from riann_ros.nodes.parameters import NODE_PARAMS
 from riann_ros.nodes.riann_node import RiannNode
 
 LAUNCH_FILE = ROOT / "launch" / "side_by_side.launch.py"
-NODES = ("riann", "madgwick", "mahony", "vqf")  # the four node executables, <name>_node
+NODES = ("riann", "madgwick", "mahony", "vqf", "consensus")  # the five node executables, <name>_node
 
 
 @pytest.fixture
@@ -95,7 +95,7 @@ def test_side_by_side_launch_overrides_only_what_is_given(load_launch):
         assert node.kwargs["parameters"] == [str(share / "config" / exe.replace("_node", ".yaml"))]
         assert dict(node.kwargs["remappings"]) == {"imu/data_raw": "imu/data_raw", "imu/mag": "imu/mag"}
         assert node.kwargs["namespace"] is None
-    # given values go to all four, publish_tf to riann_node only
+    # given values go to all five, publish_tf to riann_node only
     context = {**args, "nominal_rate": "200", "publish_tf": "true", "world_frame": "ned", "namespace": "robot1",
                "mag_topic": "/robot1/magnetometer"}
     for node in hl.nodes(entities, context):
@@ -109,7 +109,7 @@ def test_side_by_side_launch_overrides_only_what_is_given(load_launch):
 
 
 def test_launch_file_starts_every_node_executable_with_its_config():
-    """Without launch_ros: the launch file's node list = the four console scripts, each with its YAML."""
+    """Without launch_ros: the launch file's node list = the five console scripts, each with its YAML."""
     tree = ast.parse(LAUNCH_FILE.read_text())
     consts = {t.id: ast.literal_eval(n.value) for n in tree.body if isinstance(n, ast.Assign)
               for t in n.targets if isinstance(t, ast.Name) and t.id in ("NODES", "PACKAGE", "INPUT_TOPIC")}
@@ -144,7 +144,7 @@ def test_launch_description_when_launch_ros_is_present(tmp_path, monkeypatch):
     args = [e for e in ld.entities if isinstance(e, DeclareLaunchArgument)]
     assert {a.name for a in args} == {"input_topic", "mag_topic", "namespace", "nominal_rate", "world_frame",
                                       "fixed_frame", "publish_tf", "publish_rpy"}
-    assert len([e for e in ld.entities if isinstance(e, OpaqueFunction)]) == 1  # the four nodes
+    assert len([e for e in ld.entities if isinstance(e, OpaqueFunction)]) == 1  # the five nodes
 
 
 def test_riann_launch_description_when_launch_ros_is_present(tmp_path, monkeypatch):

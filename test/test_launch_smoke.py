@@ -4,7 +4,7 @@ installable here: test/helpers_launch.py), start the real executables, checked o
 * ``riann.launch.py namespace:=robot1 mag_topic:=/robot1/magnetometer``: the node lives in /robot1, reads the
   remapped magnetometer and publishes under /robot1;
 * ``side_by_side.launch.py`` with no arguments keeps what the parameter files say (a nominal_rate of 250 in
-  riann.yaml is not replaced by a launch default); with ``namespace`` and ``mag_topic`` all four nodes follow.
+  riann.yaml is not replaced by a launch default); with ``namespace`` and ``mag_topic`` all five nodes follow.
 """
 
 from __future__ import annotations
@@ -91,13 +91,14 @@ def test_side_by_side_launch_keeps_the_files_values_and_follows_namespace_and_ma
         wait_for(lambda n=node: "parameters:" in n.output(), 90, f"{name} to start ({node.output()})")
     # no launch default over the files: riann.yaml's 250, the others' default 100 (their files have none)
     assert "nominal_rate=250.0" in nodes["riann_node"].output()
-    for name in ("madgwick_node", "mahony_node", "vqf_node"):
+    for name in ("madgwick_node", "mahony_node", "vqf_node", "consensus_node"):
         assert "nominal_rate=100.0" in nodes[name].output(), name
         assert "magnetometer on '/robot2/magnetometer'" in nodes[name].output()
     pub_imu = ros.publisher(Imu, "/robot2/imu/data_raw")
     pub_mag = ros.publisher(MagneticField, "/robot2/magnetometer")
     att = [ros.collect(QuaternionStamped, f"/robot2/{t}") for t in
-           ("imu/attitude", "imu/madgwick/attitude", "imu/mahony/attitude", "imu/vqf/attitude")]
-    wait_matched([pub_imu, pub_mag], att, "the four nodes in /robot2", n_subs=4)
+           ("imu/attitude", "imu/madgwick/attitude", "imu/mahony/attitude", "imu/vqf/attitude",
+            "imu/consensus/attitude")]
+    wait_matched([pub_imu, pub_mag], att, "the five nodes in /robot2", n_subs=5)
     send(pub_imu, pub_mag, 200, att)
     ros.destroy(pub_imu, pub_mag, *att)

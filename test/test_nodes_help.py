@@ -18,8 +18,8 @@ from riann_ros.nodes.usage import _default, help_requested
 NODES = re.findall(r'"(\w+_node) = riann_ros\.nodes\.\w+:main"', (ROOT / "setup.py").read_text())
 
 
-def test_setup_py_installs_the_four_nodes():
-    assert sorted(NODES) == ["madgwick_node", "mahony_node", "riann_node", "vqf_node"]
+def test_setup_py_installs_the_five_nodes():
+    assert sorted(NODES) == ["consensus_node", "madgwick_node", "mahony_node", "riann_node", "vqf_node"]
 
 
 def test_help_is_asked_outside_the_ros_arguments_only():

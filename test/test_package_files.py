@@ -15,6 +15,7 @@ import pytest
 
 from conftest import ROOT
 from riann_ros.estimators import estimator_class
+from riann_ros.nodes.consensus_node import ConsensusNode
 from riann_ros.nodes.madgwick_node import MadgwickNode
 from riann_ros.nodes.mahony_node import MahonyNode
 from riann_ros.nodes.outputs import rpy_topic
@@ -25,7 +26,8 @@ from riann_ros.params import ParamSpec
 
 DOC = ROOT / "docs" / "node.md"
 LAYOUT = ROOT / "config" / "foxglove_side_by_side.json"
-NODE_CLASSES = {"riann": RiannNode, "madgwick": MadgwickNode, "mahony": MahonyNode, "vqf": VqfNode}
+NODE_CLASSES = {"riann": RiannNode, "madgwick": MadgwickNode, "mahony": MahonyNode, "vqf": VqfNode,
+                "consensus": ConsensusNode}
 TABLE_BEGIN = "<!-- node-params:begin (generated from NODE_PARAMS by test/test_package_files.py) -->"
 TABLE_END = "<!-- node-params:end -->"
 
@@ -94,7 +96,7 @@ def test_docs_name_the_topics_diagnostics_and_bad_input_reasons():
 
 
 # -- Foxglove layout -----------------------------------------------------------------------------------------
-def test_foxglove_layout_plots_roll_and_pitch_of_the_four_nodes():
+def test_foxglove_layout_plots_roll_and_pitch_of_the_five_nodes():
     layout = json.loads(LAYOUT.read_text())
     assert set(layout) >= {"configById", "layout", "globalVariables", "userNodes", "playbackConfig"}
     panels = layout["configById"]

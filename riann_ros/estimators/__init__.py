@@ -17,6 +17,7 @@ REGISTRY: dict[str, str] = {
     "madgwick": "riann_ros.estimators.madgwick:MadgwickEstimator",
     "mahony": "riann_ros.estimators.mahony:MahonyEstimator",
     "vqf": "riann_ros.estimators.vqf_estimator:VqfEstimator",
+    "consensus": "riann_ros.estimators.consensus:ConsensusEstimator",
 }
 
 

@@ -31,6 +31,8 @@ The C++ implementation of the ``vqf`` package (MIT) does the work; this class on
   same numbers as per-sample ``update`` calls.
 * **degenerate input** — a zero (or non-finite) accelerometer sample is skipped by VQF (gyro-only
   step); a non-finite gyro sample counts as zero rate; non-finite or negative dt counts as 0.
+* **σ** — ``sigma_model`` 'constant' (default): the documented inclination σ; 'state': per sample from VQF's state
+  (its bias estimate's σ, the motion, the time since it started: :mod:`~.vqf_sigma`), the attitude unchanged.
 * **parameters** — ``tau_acc`` (VQF ``tauAcc``), ``motion_bias_est`` (``motionBiasEstEnabled``),
   ``rest_bias_est`` (``restBiasEstEnabled``) and ``bias_clip`` (``biasClip``, °/s), defaults from
   ``vqf.VQF().params``; all but ``bias_clip`` can change at run time through VQF's own setters
@@ -42,13 +44,14 @@ The C++ implementation of the ``vqf`` package (MIT) does the work; this class on
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from vqf import VQF
 
 from riann_ros import defaults
 from riann_ros.estimators.base import Array, ParamSpec
 from riann_ros.estimators.classical import Batch, ClassicalFilter
 from riann_ros.estimators.common import BIAS_KEY, bias_text, cut_at
+from riann_ros.estimators.vqf_sigma import VqfStateSigma
 from riann_ros.magcal.changes import field_disagrees
 from riann_ros.magcal.input import MAG_CAL_PARAMS
 
@@ -117,6 +120,14 @@ class VqfEstimator(ClassicalFilter):
             "with the gyro while disturbed (VQF magDistRejectionEnabled; 9D only). Default true = vqf default.",
             runtime=True,
         ),
+        ParamSpec(
+            "sigma_model",
+            "constant",
+            "Inclination sigma reported per sample: 'constant' (the documented 2 deg) or 'state' (from VQF's state: "
+            "its bias estimate's sigma, the motion, the time since its start; riann_ros/estimators/vqf_sigma.py). The "
+            "attitude is the same either way.",
+            choices=("constant", "state"),
+        ),
         *MAG_CAL_PARAMS,
     )
 
@@ -124,6 +135,9 @@ class VqfEstimator(ClassicalFilter):
         self._vqf: VQF | None = None
         self._ts: float | None = None
         self._mag_used = False
+        self._state_sigma: VqfStateSigma | None = None
+        if self.params["sigma_model"] == "state":
+            self._state_sigma = VqfStateSigma(float(self.params["tau_acc"]))
 
     def heading_observed(self) -> bool:
         return self._mag_used and self._vqf is not None and not self._vqf.getMagDistDetected()
@@ -171,10 +185,14 @@ class VqfEstimator(ClassicalFilter):
         self._mag_used = bool(m.any())
         if b.realign:
             self._restart_heading(b.realign[0].sd_rad, m)
+        gs = np.ascontiguousarray(g[0] * (h[0] / ts))
         if self._mag_used:
-            v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]), m)
+            v.update(gs, np.ascontiguousarray(a[0]), m)
         else:
-            v.update(np.ascontiguousarray(g[0] * (h[0] / ts)), np.ascontiguousarray(a[0]))
+            v.update(gs, np.ascontiguousarray(a[0]))
+        if self._state_sigma is not None:
+            b, sd = v.getBiasEstimate()
+            self._state_sigma.take(a, gs[None, :], h, np.asarray(b)[None, :], np.array([sd]))
         return np.asarray(v.getQuat9D(), dtype=float).copy()
 
     def _run(self, batch: Batch) -> Array:
@@ -186,13 +204,25 @@ class VqfEstimator(ClassicalFilter):
         g = np.ascontiguousarray(g * (h / ts)[:, None])  # zero rows: VQF skips updateMag
         self._mag_used = bool(m[-1].any())
         a = np.ascontiguousarray(a)
-        out = []
+        out, bias, bias_sd = [], [], []
         for i, j, sd in cut_at(batch.realign, len(a)):
             if sd is not None:
                 self._restart_heading(sd, m[i])
-            out.append(v.updateBatch(np.ascontiguousarray(g[i:j]), np.ascontiguousarray(a[i:j]),
-                                     np.ascontiguousarray(m[i:j]))["quat9D"])
+            r = v.updateBatch(np.ascontiguousarray(g[i:j]), np.ascontiguousarray(a[i:j]), np.ascontiguousarray(m[i:j]))
+            out.append(r["quat9D"])
+            bias.append(r["bias"])
+            bias_sd.append(r["biasSigma"])
+        if self._state_sigma is not None:
+            self._state_sigma.take(a, g, h, np.concatenate(bias), np.concatenate(bias_sd))
         return np.array(np.concatenate(out), dtype=float)
+
+    def sigma(self, fields: NDArray[np.bool_]) -> Array:
+        """With ``sigma_model`` 'state' the inclination's σ from VQF's state (:mod:`~.vqf_sigma`), else the constant;
+        the heading's as :meth:`ClassicalFilter.sigma`."""
+        out = super().sigma(fields)
+        if self._state_sigma is not None:
+            out[:, 0] = self._state_sigma.last(len(out))
+        return out
 
     def _restart_heading(self, sd_rad: float, m_ut: Array) -> None:
         """VQF's realign event: the online calibration changed the calibration the field gets (``m_ut`` the row's

@@ -155,6 +155,7 @@ _NO_GAIN = {
     "riann": "riann_node has no gain to tune (RIANN is a trained network); madgwick_node runs a Madgwick filter",
     "mahony": "mahony_node's gains are kp and ki (a Mahony filter)",
     "vqf": "vqf_node's time constants are tau_acc and tau_mag",
+    "consensus": "consensus_node has no gain to tune (RIANN's network and VQF's tau_acc in consensus)",
     "madgwick": "",
 }
 

@@ -146,6 +146,7 @@ class RiannEstimator(AttitudeEstimator):
             self._build()
         self.samples = 0  # input samples taken since reset
         self.last = _NONE  # stage 8's record of the last call
+        self.records: UncertaintyIn | None = None  # what the stages output in the last call (stage 8's input)
 
     def on_gap(self) -> None:
         """A stamp gap longer than the gate's ``max_dt``: each stage does what :data:`~.stage.RESTARTS` says for a
@@ -204,7 +205,8 @@ class RiannEstimator(AttitudeEstimator):
         c = self.carry.run(CarryIn(g, b, n))
         h = self.handover.run(HandoverIn(s, g, c))
         q = self.heading.run(HeadingIn(s, c, h))
-        self.last = self.uncertainty.run(UncertaintyIn(s, g, b, n, h, q))
+        self.records = UncertaintyIn(s, g, b, n, h, q)
+        self.last = self.uncertainty.run(self.records)
         return q.q
 
     def _rows(self, s: Samples) -> GridBlock:
