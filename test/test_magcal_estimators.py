@@ -219,3 +219,28 @@ def test_a_saved_calibration_20_ut_off_is_covered_from_the_first_second(name, ca
     first = ok & (t >= 1.0) & (t < 20.0)
     assert np.abs(err[first]).max() > 10.0  # the file is wrong enough to matter
     assert np.mean(np.abs(err[first]) <= 1.96 * sig[first]) >= 0.9
+
+
+@pytest.mark.parametrize("name", ["riann", "vqf"])
+def test_a_saved_calibration_from_another_run_is_covered_while_the_hard_iron_moved(name):
+    """A file saved on another run of the same sensor, whose fit says ±0.5 µT, while the hard iron has moved by 2 µT
+    since (as much as it moves between two BROAD runs, bench/mag_run_to_run.py): the file's doubt is widened by the
+    run-to-run figure at load, so the heading's σ covers the error over the whole run and in every stretch of it."""
+    rec, _ = robot(turns=6)
+    raw = distort(rec.quat_ref, H_TRUE_UT * UT, noise_t=0.4e-6, seed=3)
+    moved = tuple(float(v) for v in (H_TRUE_UT + np.array([1.2, -1.0, 1.2])) * UT)  # |2.0| µT
+    saved = MagCalibration(hard_iron_t=moved, soft_iron=IDENTITY_9,  # type: ignore[arg-type]
+                           covariance=tuple(float(v) for v in np.diag([1e-6] * 9 + [(0.5 * UT) ** 2] * 3).ravel()),
+                           state=CALIBRATED, windows=200, converged_after_s=30.0, soft_iron_model="full")
+    prior = MagCalPrior.from_calibration(saved)
+    assert np.sqrt(np.diag(np.reshape(prior.covariance, (12, 12)))[9:]).min() > 1.2 * UT
+    s = EstimatorStream(create(name), GateConfig(nominal_rate=100.0), MagConfig(), prior)
+    q, ok = s.process_batch(rec.stamps_ns, rec.acc, rec.gyr, raw)
+    err = np.abs(heading_error_deg(rec.quat_ref, q))
+    sig = np.degrees(s.batch_sigma[:, 1])
+    t = (rec.stamps_ns - rec.stamps_ns[0]) * 1e-9
+    inside = ok & (t >= 1.0)
+    assert np.mean(err[inside] <= 1.96 * sig[inside]) >= 0.9
+    for start in np.arange(1.0, t[-1] - 10.0, 10.0):  # every 10 s stretch
+        part = inside & (t >= start) & (t < start + 10.0)
+        assert np.mean(err[part] <= 1.96 * sig[part]) >= 0.8, start

@@ -92,7 +92,20 @@ def refresh(cal: Calibrator) -> None:
     s.sd.su = _upper(su)
     s.sd.field_sd_ut = math.sqrt(max(float(np.linalg.eigvalsh(su)[-1]), 0.0))
     if s.test.saved is not None:
-        s.sd.su0 = _upper(cal.model.field_covariance(m, cal.model.with_floor(s.test.saved)))
+        s.sd.su0 = _upper(cal.model.field_covariance(m, saved_covariance(cal)))
+
+
+def saved_covariance(cal: Calibrator) -> np.ndarray:
+    """A saved calibration's covariance as this run knows it while it holds: the file's (its fit, widened by how far
+    a hard iron moves between runs, :meth:`~.records.MagCalPrior.from_calibration`) fused with what this run's
+    windows say, ``S − S (S + C₁)⁻¹ S`` (``C₁`` the estimate's covariance, :attr:`h1_covariance`: the windows'
+    information; the broad prior it also holds is orders of magnitude weaker); with the hard iron's floor. At the start
+    it is the file's; as the windows confirm the file it narrows to what they add."""
+    saved = cal.s.test.saved
+    assert saved is not None
+    c1 = cal.h1_covariance
+    fused = saved - saved @ np.linalg.solve(saved + c1, saved)
+    return cal.model.with_floor(0.5 * (fused + fused.T))
 
 
 def _upper(su: np.ndarray) -> tuple[float, ...]:

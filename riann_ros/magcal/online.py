@@ -221,10 +221,11 @@ class OnlineMagCalibrator:
 
     @property
     def covariance(self) -> Array:
-        """The covariance of the calibration in use (:attr:`in_use`): a saved prior's while it is used, else ``Λ⁻¹``
-        scaled up by the variance of unit weight above 1; with the hard iron's floor (``SYSTEMATIC_SD_UT``)."""
+        """The covariance of the calibration in use (:attr:`in_use`): a saved prior's while it is used (as this run's
+        windows confirm it, :func:`.knowledge.saved_covariance`), else ``Λ⁻¹`` scaled up by the variance of unit weight
+        above 1; with the hard iron's floor (``SYSTEMATIC_SD_UT``)."""
         if self.trusted and self.s.test.saved is not None:
-            return self.model.with_floor(self.s.test.saved)
+            return knowledge.saved_covariance(self)
         return self.h1_covariance
 
     @property

@@ -37,6 +37,12 @@ FIELD_CHANGE_RATE_UT_S = 1.0
 #: non-uniformity over the space the sensor moves in (a µT per metre over half a metre) biases every window alike,
 #: so it does not average out. The reported covariance's floor (not the estimate's).
 SYSTEMATIC_SD_UT = 0.5
+#: µT; per axis, how far a hard iron moves between two runs of one sensor (temperature, the magnetisation the sensor's
+#: and the robot's steel take between power-ups, a cable rerouted): a saved calibration is the prior of a later run
+#: with this much more doubt on its hard iron than its own fit had. Measured on the BROAD trials of one sensor
+#: (``bench/mag_run_to_run.py``: the offline fit of each trial whose motion observes the hard iron, the RMS of its
+#: difference between every two trials, per axis, pooled: 1.2 µT; the fits' own σ is 0.5 µT).
+RUN_TO_RUN_HARD_IRON_SD_UT = 1.2
 #: rad/s; the gyro bias left after the bias front end (VQF's rest and motion estimate, RIANN's stage 3): a few
 #: tenths of °/s while it converges.
 GYRO_BIAS_RESIDUAL_SD_RAD_S = 0.3 * DEG
@@ -143,8 +149,13 @@ class MagCalPrior:
 
     @classmethod
     def from_calibration(cls, cal: MagCalibration) -> MagCalPrior:
-        """A saved calibration as the prior of the next run (it starts where that one ended)."""
-        return cls(hard_iron_t=cal.hard_iron_t, soft_iron=cal.soft_iron, covariance=cal.covariance,
+        """A saved calibration as the prior of the next run (it starts where that one ended): its covariance, with
+        the hard iron's variance widened by how much a hard iron moves between runs
+        (:data:`RUN_TO_RUN_HARD_IRON_SD_UT` per axis, the file's fit knows only its own run)."""
+        cov = list(cal.covariance)
+        for i in range(9, 12):
+            cov[i * 12 + i] += (RUN_TO_RUN_HARD_IRON_SD_UT * UT) ** 2
+        return cls(hard_iron_t=cal.hard_iron_t, soft_iron=cal.soft_iron, covariance=tuple(cov),
                    windows=cal.windows, converged_after_s=cal.converged_after_s)
 
 
