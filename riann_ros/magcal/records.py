@@ -41,7 +41,7 @@ SYSTEMATIC_SD_UT = 0.5
 #: and the robot's steel take between power-ups, a cable rerouted): a saved calibration is the prior of a later run
 #: with this much more doubt on its hard iron than its own fit had. Measured on the BROAD trials of one sensor
 #: (``bench/mag_run_to_run.py``: the offline fit of each trial whose motion observes the hard iron, the RMS of its
-#: difference between every two trials, per axis, pooled: 1.2 µT; the fits' own σ is 0.5 µT).
+#: difference between every two trials, per axis, pooled: 1.2 µT; the fits' own σ is 0.55 µT).
 RUN_TO_RUN_HARD_IRON_SD_UT = 1.2
 #: rad/s; the gyro bias left after the bias front end (VQF's rest and motion estimate, RIANN's stage 3): a few
 #: tenths of °/s while it converges.
