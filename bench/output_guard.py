@@ -4,7 +4,8 @@ not move one number (a redesign, a faster network call).
 Usage::
 
     .venv/bin/python bench/output_guard.py record DIR [--jobs 2] [--trials 02,07] [--skip-existing]
-    .venv/bin/python bench/output_guard.py check DIR [--jobs 2] [--tol 1e-6] [--trials 02,07]
+    .venv/bin/python bench/output_guard.py check DIR [--jobs 2] [--tol 1e-6] [--trials 02,07] [--modes 6d]
+        [--conditions none,dropout:0.1-0.6s@10s] [--rates 25]
 
 The code it runs is the riann_ros Python imports: the checkout whose ``.venv`` runs it (``make setup`` installs
 that checkout), or another one with ``PYTHONPATH=<checkout>``; the first line it prints names it.
@@ -19,9 +20,10 @@ its resampled rates; 9D runs the recorded field and the three magnetometer calib
 under the stream's timing faults (:data:`CONDITIONS_9D`). ``record`` writes every output quaternion and its σ
 (float32: its round-off, 6e-8, is far below any tolerance used) to ``DIR/<trial>-<6d|9d>.npz``, keyed
 ``scenario|condition|rate|estimator`` (the σ under ``…|sigma``); ``check`` recomputes them and prints the largest
-difference per component per file, exiting 1 when one exceeds ``--tol``. The files are derived from BROAD and stay
-outside the repository (``test/test_output_guard.py`` reads them from ``$RIANN_OUTPUT_GUARD`` and skips without
-them).
+difference per file and every run (outputs, or σ) that differs by more than ``--tol``, exiting 1 when one does.
+``--conditions`` and ``--rates`` check (or record) a subset, compared on the runs it holds. The files are derived
+from BROAD and stay outside the repository (``test/test_output_guard.py`` reads them from ``$RIANN_OUTPUT_GUARD``
+and skips without them).
 """
 
 from __future__ import annotations
@@ -123,32 +125,37 @@ def _no_arena() -> None:
     ort.SessionOptions = Options  # type: ignore[misc]
 
 
-def _job(args: tuple[str, str, str, str, str]) -> tuple[str, float, str]:
+def _difference(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest absolute difference of two recorded runs (inf: other shapes or NaN at other places)."""
+    if a.shape != b.shape or not np.array_equal(np.isnan(a), np.isnan(b)):
+        return float("inf")
+    return float(np.nanmax(np.abs(a - b))) if a.size else 0.0
+
+
+def _job(args: tuple[str, str, str, str, str, tuple[str, ...] | None, str | None, float]) -> tuple[str, float, str]:
     import os
 
     os.environ["OMP_NUM_THREADS"] = "1"
     _no_arena()
-    action, trial, mode, out_dir, estimators = args
-    out = outputs(trial, MODES[mode], CONDITIONS_9D if mode == "9d" else CONDITIONS, RATES if mode == "6d" else "",
-                  estimators)
+    action, trial, mode, out_dir, estimators, conditions, rates, tol = args
+    out = outputs(trial, MODES[mode], conditions or (CONDITIONS_9D if mode == "9d" else CONDITIONS),
+                  rates if rates is not None else (RATES if mode == "6d" else ""), estimators)
     path = Path(out_dir) / _file(Path(trial), mode)
     if action == "record":
         np.savez_compressed(path, **out)
         return path.name, 0.0, f"{len(out)} runs, {sum(len(v) for v in out.values())} outputs"
     ref = np.load(path)
-    if set(ref.files) != set(out):
-        return path.name, float("inf"), f"runs differ: {sorted(set(ref.files) ^ set(out))}"
-    worst, where = 0.0, ""
-    for k in ref.files:
-        a, b = ref[k].astype(np.float64), out[k].astype(np.float64)
-        if a.shape != b.shape:
-            return path.name, float("inf"), f"{k}: {a.shape} vs {b.shape}"
-        d = float(np.nanmax(np.abs(a - b))) if len(a) else 0.0
-        if np.isnan(a).any() != np.isnan(b).any() or not np.array_equal(np.isnan(a), np.isnan(b)):
-            d = float("inf")
-        if d > worst:
-            worst, where = d, k
-    return path.name, worst, where
+    subset = conditions is not None or rates is not None
+    missing = sorted(set(out) - set(ref.files)) + ([] if subset else sorted(set(ref.files) - set(out)))
+    if missing:
+        return path.name, float("inf"), f"runs differ: {missing}"
+    worst, lines = 0.0, []
+    for k in sorted(out):
+        d = _difference(ref[k].astype(np.float64), out[k].astype(np.float64))
+        worst = max(worst, d)
+        if d > tol:
+            lines.append(f"\n    {k}: {d:.3g}")
+    return path.name, worst, f"over {len(out)} runs" + "".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -161,6 +168,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--modes", default="6d,9d")
     ap.add_argument("--estimators", default=ESTIMATORS)
     ap.add_argument("--skip-existing", action="store_true", help="record: keep the files already there")
+    ap.add_argument("--conditions", default=None, help="comma-separated conditions (default: all of the mode's)")
+    ap.add_argument("--rates", default=None, help="comma-separated resampled rates (default: 6D's all, 9D none)")
     args = ap.parse_args(argv)
     # the code under test is the riann_ros Python imports: the checkout its .venv installed, or PYTHONPATH=<checkout>
     print(f"{args.action}: riann_ros from {Path(riann_ros.__file__).parent}", file=sys.stderr)
@@ -170,7 +179,9 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     trials = [p for p in broad_files(d) if not args.trials or p.name[:2] in args.trials.split(",")]
     args.dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(args.action, str(t), m, str(args.dir), args.estimators) for t in trials for m in args.modes.split(",")
+    conditions = tuple(args.conditions.split(",")) if args.conditions else None
+    jobs = [(args.action, str(t), m, str(args.dir), args.estimators, conditions, args.rates, args.tol)
+            for t in trials for m in args.modes.split(",")
             if not (args.skip_existing and args.action == "record" and (args.dir / _file(t, m)).is_file())]
     # a fresh process per trial: ONNX Runtime's arenas of many sessions would otherwise add up to GBs per worker
     with mp.get_context("forkserver").Pool(args.jobs, maxtasksperchild=1) as pool:
