@@ -5,7 +5,7 @@ Usage::
 
     .venv/bin/python bench/output_guard.py record DIR [--jobs 2] [--trials 02,07] [--skip-existing]
     .venv/bin/python bench/output_guard.py check DIR [--jobs 2] [--tol 1e-6] [--trials 02,07] [--modes 6d]
-        [--conditions none,dropout:0.1-0.6s@10s] [--rates 25]
+        [--condition none --condition bias:3,3,0] [--rates 25]
 
 The code it runs is the riann_ros Python imports: the checkout whose ``.venv`` runs it (``make setup`` installs
 that checkout), or another one with ``PYTHONPATH=<checkout>``; the first line it prints names it.
@@ -21,9 +21,9 @@ under the stream's timing faults (:data:`CONDITIONS_9D`). ``record`` writes ever
 (float32: its round-off, 6e-8, is far below any tolerance used) to ``DIR/<trial>-<6d|9d>.npz``, keyed
 ``scenario|condition|rate|estimator`` (the σ under ``…|sigma``); ``check`` recomputes them and prints the largest
 difference per file and every run (outputs, or σ) that differs by more than ``--tol``, exiting 1 when one does.
-``--conditions`` and ``--rates`` check (or record) a subset, compared on the runs it holds. The files are derived
-from BROAD and stay outside the repository (``test/test_output_guard.py`` reads them from ``$RIANN_OUTPUT_GUARD``
-and skips without them).
+``--condition`` (repeated) and ``--rates`` check (or record) a subset, compared on the runs it holds. The files are
+derived from BROAD and stay outside the repository (``test/test_output_guard.py`` reads them from
+``$RIANN_OUTPUT_GUARD`` and skips without them).
 """
 
 from __future__ import annotations
@@ -168,7 +168,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--modes", default="6d,9d")
     ap.add_argument("--estimators", default=ESTIMATORS)
     ap.add_argument("--skip-existing", action="store_true", help="record: keep the files already there")
-    ap.add_argument("--conditions", default=None, help="comma-separated conditions (default: all of the mode's)")
+    ap.add_argument("--condition", action="append", default=None,
+                    help="a condition to check (repeat it; default: all of the mode's)")
     ap.add_argument("--rates", default=None, help="comma-separated resampled rates (default: 6D's all, 9D none)")
     args = ap.parse_args(argv)
     # the code under test is the riann_ros Python imports: the checkout its .venv installed, or PYTHONPATH=<checkout>
@@ -179,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     trials = [p for p in broad_files(d) if not args.trials or p.name[:2] in args.trials.split(",")]
     args.dir.mkdir(parents=True, exist_ok=True)
-    conditions = tuple(args.conditions.split(",")) if args.conditions else None
+    conditions = tuple(args.condition) if args.condition else None
     jobs = [(args.action, str(t), m, str(args.dir), args.estimators, conditions, args.rates, args.tol)
             for t in trials for m in args.modes.split(",")
             if not (args.skip_existing and args.action == "record" and (args.dir / _file(t, m)).is_file())]
