@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from evo_example import TABLES as EVO_TABLES  # the evo example of docs/evaluation.md (bench/evo_example.py)
+from trust_tables import lag_table, nocal_table, recorded_table  # BENCHMARKS "Never confidently wrong"
 
 from riann_ros.estimators.riann.s1_timeline import SAMPLE_DELAY
 
@@ -725,6 +726,9 @@ TABLES: dict[str, Callable[[], str]] = {
     "magcal": magcal_table,
     "magcal-uncertainty": magcal_uncertainty,
     "magcal-saved": magcal_saved,
+    "trust-lag": lambda: lag_table(load),
+    "trust-nocal": lambda: nocal_table(load),
+    "trust-recorded": lambda: recorded_table(load),
     "cluster-held-out": cluster_held_out,
     "cluster-many": cluster_many,
     "cluster-ratio": cluster_ratio,
