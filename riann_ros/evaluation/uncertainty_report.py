@@ -98,7 +98,7 @@ def _formatter(g: dict[str, float | None]) -> Callable[..., str]:
 
 def reference_text(reference_sd_deg: float) -> str:
     """What the scores take as the reference's own error (``--reference-sd``), for the tables' headings."""
-    return f"reference σ {reference_sd_deg:g}° per axis added (--reference-sd)"
+    return f"reference σ {reference_sd_deg:g}° per axis added, --reference-sd"
 
 
 def reference_line(reference_sd_deg: float) -> str:
