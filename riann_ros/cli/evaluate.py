@@ -20,6 +20,7 @@ runner of ``--live``: :mod:`riann_ros.cli.eval_executor`.
 from __future__ import annotations
 
 import argparse
+import math
 import shlex
 import sys
 import time
@@ -65,6 +66,8 @@ def _settings(args: argparse.Namespace, warnings: list[str] | None = None) -> ev
     _check_resume(args)
     if not 0 <= args.offset_steps <= 50:
         raise ValueError("--offset-steps must be 0 (no search) to 50")
+    if not (math.isfinite(args.reference_sd) and args.reference_sd >= 0.0):
+        raise ValueError(f"--reference-sd must be a finite angle of at least 0 (degrees), got {args.reference_sd:g}")
     have = ev.available_estimators()
     spec_text = args.estimators or ",".join(n for n in DEFAULT_ESTIMATORS.split(",") if n in have)
     only_recorded = spec_text.strip().lower() == "none"
@@ -88,6 +91,7 @@ def _settings(args: argparse.Namespace, warnings: list[str] | None = None) -> ev
         offset_steps=args.offset_steps,
         salvage=args.salvage,
         score_from_s=args.score_from,
+        reference_sd_deg=args.reference_sd,
         input_warnings=input_warnings,
     )
     eval_inputs.check_recorded(settings)
@@ -162,7 +166,7 @@ def _print_summary(rep: report.Report, live: bool) -> None:
             print("\n" + table)
     for note in rep.timing_notes:
         print(f"\ntiming: {note}")
-    unc = format_uncertainty_table(rep.rows)
+    unc = format_uncertainty_table(rep.rows, reference_sd_deg=rep.settings.reference_sd_deg)
     if unc:
         print("\n" + unc)
     rows = rep.rows

@@ -21,7 +21,7 @@ SETTING_OPTIONS = {
     "series_for": "--plot-sequence, --no-plots", "series_conditions": "--plot-perturb",
     "keep_estimates": "--write-estimates", "rest": "--rest", "offset_steps": "--offset-steps", "salvage": "--salvage",
     "topics": "--imu-topic, --ground-truth-topic, --estimate-topic, --estimate-file, --t-offset, --max-gap",
-    "tune": "--tune", "tune_scenario": "--tune-scenario",
+    "tune": "--tune", "tune_scenario": "--tune-scenario", "reference_sd_deg": "--reference-sd",
 }
 
 
@@ -169,6 +169,11 @@ def _conditions(p: argparse.ArgumentParser) -> None:
     p.add_argument("--score-from", type=float, default=0.0, metavar="SECONDS",
                    help="score every metric only from SECONDS after each sequence's first sample (e.g. the heading "
                         "after a magnetometer calibration has converged); recorded in results.json")
+    p.add_argument("--reference-sd", type=float, default=0.0, metavar="DEG",
+                   help="the reference's own error per axis (1σ, degrees; default 0: the reference taken as exact), "
+                   "e.g. an optical system's marker and alignment error, which no estimator's σ should carry: the "
+                   "uncertainty scores (95 %% coverage, NEES, inclination and heading) are taken against "
+                   "σ² = σ_estimator² + σ_ref² per axis; shown in the uncertainty tables, recorded in results.json")
     p.add_argument("--seed", type=int, default=0, help="seed of the random gyro bias (per sequence: seed + name)")
     p.add_argument("--rates", default=None,
                    help="comma-separated sampling rates (Hz) to resample to (FFT), e.g. 50,100,200,500; 'native' "

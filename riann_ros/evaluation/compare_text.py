@@ -27,7 +27,8 @@ from riann_ros.evaluation.uncertainty_report import format_uncertainty_compariso
 
 #: results.json settings that change every score of a run: said when A's and B's differ
 SCORE_SETTINGS = {"seed": "seed", "rest": "initial rest (--rest)", "score_from_s": "--score-from",
-                  "offset_steps": "--offset-steps", "bias_std_dps": "the scenarios' gyro bias σ (°/s)"}
+                  "offset_steps": "--offset-steps", "bias_std_dps": "the scenarios' gyro bias σ (°/s)",
+                  "reference_sd_deg": "--reference-sd (the uncertainty scores)"}
 
 
 def setting_differences(a: Saved, b: Saved) -> list[str]:

@@ -181,6 +181,7 @@ class Report:
             "rest_definition": REST_DEFINITION,
             "offset_steps": s.offset_steps,
             "score_from_s": s.score_from_s,
+            "reference_sd_deg": s.reference_sd_deg,
             "perturbation_definition": PERTURB_DEFINITIONS,
             "metric": METRIC,
             "input_warnings": s.input_warnings,

@@ -30,7 +30,7 @@ from riann_ros.evaluation.seq_tables import (
     per_sequence_markdown,
 )
 from riann_ros.evaluation.uncertainty_report import NOTE as UNCERTAINTY_NOTE
-from riann_ros.evaluation.uncertainty_report import format_uncertainty_table, plot_error_vs_sigma
+from riann_ros.evaluation.uncertainty_report import format_uncertainty_table, plot_error_vs_sigma, reference_line
 
 
 def write_csv(path: Path, rows: Sequence[ResultRow]) -> None:
@@ -116,9 +116,11 @@ def markdown(report: Report, plots: Sequence[Path]) -> str:
         lines += ["## Heading (9D runs: estimators that used the magnetometer)", "",
                   "Heading and total error as BROAD defines them (error quaternion in the earth frame); the heading "
                   "of a 9D estimate is absolute (magnetic north), so it is scored as it is.", "", nine, ""]
-    unc = format_uncertainty_table(report.rows, markdown_table=True)
+    ref_sd = report.settings.reference_sd_deg
+    unc = format_uncertainty_table(report.rows, markdown_table=True, reference_sd_deg=ref_sd)
     if unc:
-        lines += ["## Uncertainty (the σ each estimator reports)", "", UNCERTAINTY_NOTE, "", unc, ""]
+        lines += [f"## Uncertainty (the σ each estimator reports; reference σ {ref_sd:g}°)", "", UNCERTAINTY_NOTE, "",
+                  reference_line(ref_sd), "", unc, ""]
     if report.tuning:
         lines += ["## Tuning (grid search on these sequences)", ""]
         for t in report.tuning:

@@ -44,6 +44,7 @@ class EvalSettings:
     offset_steps: int = OFFSET_STEPS  # search the e_α-minimising time offset within ± this many steps (0: not)
     salvage: bool = False  # score the readable part of a bag cut off by a crash (a repaired copy, bagio.repair)
     score_from_s: float = 0.0  # score every metric only from this long after the sequence's first sample (s)
+    reference_sd_deg: float = 0.0  # the reference's own error per axis (1σ, °), added to σ in the uncertainty scores
     input_warnings: list[str] = field(default_factory=list)  # found while matching the inputs (estimate files)
 
     @property

@@ -53,7 +53,7 @@ class ScenarioRun:
         self.transforms: list[Transform] = condition.start(rngs)
         rate = plan.gate.nominal_rate
         self.gate = GateConfig.for_rate(condition.nominal_rate(rate)) if condition.parts else plan.gate
-        self.acc = [Accumulator(settings.with_heading) for _ in self.specs]
+        self.acc = [Accumulator(settings.with_heading, settings.reference_sd_deg) for _ in self.specs]
         self.score_from_ns = plan.first_stamp + round(settings.score_from_s * 1e9)  # scored from this stamp on
         # the time offset that minimises e_α (one scenario per sequence × condition × rate: see run._plan_runs)
         self.offsets = (OffsetSearch(len(self.specs), 1.0 / self.gate.nominal_rate, settings.offset_steps)

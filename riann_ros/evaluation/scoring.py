@@ -159,11 +159,13 @@ class Score:
 class Accumulator:
     """Running sums for the scores over the chunks of one scenario × estimator run."""
 
-    def __init__(self, with_heading: bool = False) -> None:
+    def __init__(self, with_heading: bool = False, reference_sd_deg: float = 0.0) -> None:
+        """``reference_sd_deg``: the reference's own error per axis (1σ, °), added to the estimator's σ where the
+        uncertainty is scored (:class:`~riann_ros.evaluation.uncertainty.UncertaintySums`)."""
         self.with_heading = with_heading
         self.n = self.n_scored = self.n_unest = self.n_base = 0
         self.errors = {e: ErrorStats() for e in ERRORS}
-        self.unc = UncertaintySums()
+        self.unc = UncertaintySums(math.radians(reference_sd_deg))
         self.yaw0: float | None = None  # rad, the heading offset at the first scored sample (heading drift)
 
     def add(self, quat_ref: NDArray[np.float64] | None, mask: NDArray[np.bool_], q: NDArray[np.float64],

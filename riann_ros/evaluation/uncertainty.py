@@ -15,7 +15,13 @@ unobservable 180°, split into those corrected by a field and those held by the 
 absent): by the state the estimator reports with its σ
 (:meth:`~riann_ros.estimators.base.AttitudeEstimator.heading_state`, run in process), else by the σ (at most
 :data:`FIELD_USED_SD_DEG`: corrected; larger: held), as for the classical filters and a covariance read from a bag.
-Samples without a σ (NaN) are not counted. The tables, ``--compare`` lines and the plot:
+Samples without a σ (NaN) are not counted.
+
+The reference has an error of its own (an optical system's marker and alignment error), which no estimator σ should
+carry: with ``σ_ref`` (rad per axis, ``riann-bag-eval --reference-sd``) coverage and NEES are scored against
+``σ² = σ_est² + σ_ref²`` on each axis (both tilt axes, the heading's). The split of the heading samples and the
+σ histogram (sharpness, the plot) stay on the estimator's own σ. With ``σ_ref = 0`` the estimator's σ is used as it
+is. The tables, ``--compare`` lines and the plot:
 :mod:`riann_ros.evaluation.uncertainty_report`.
 """
 
@@ -47,7 +53,8 @@ KEYS = ("nees", "cover95_pct", "err_bottom_decile_deg", "err_top_decile_deg", "y
 class UncertaintySums:
     """Running sums of the uncertainty scores of one scenario × estimator run."""
 
-    def __init__(self) -> None:
+    def __init__(self, reference_sd: float = 0.0) -> None:
+        self.reference_sd = reference_sd  # rad per axis: the reference's own error, added in quadrature to σ
         self.n = self.inside = 0
         self.nees = 0.0
         self.hist_n = np.zeros(len(BINS) + 1)
@@ -62,7 +69,8 @@ class UncertaintySums:
         if not ok.any():
             return
         e, ey, s = e[ok], e_yaw[ok], sigma[ok]
-        r = (e / s[:, 0]) ** 2
+        total = self._with_reference(s[:, :2])  # σ of the error against the reference: coverage and NEES
+        r = (e / total[:, 0]) ** 2
         self.n += len(r)
         self.inside += int(np.sum(r <= CHI2_2_95))
         self.nees += float(np.sum(r)) / 2.0
@@ -77,10 +85,15 @@ class UncertaintySums:
             held = np.where(said, known & (s[:, 2] == HEADING_HELD), held)
         for key, sel in (("mag", mag), ("held", held)):
             if sel.any():
-                ry = (ey[sel] / s[sel, 1]) ** 2
+                ry = (ey[sel] / total[sel, 1]) ** 2
                 self.yaw[key][0] += int(sel.sum())
                 self.yaw[key][1] += int(np.sum(ry <= CHI2_1_95))
                 self.yaw_nees += float(np.sum(ry))
+
+    def _with_reference(self, s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """σ per axis (inclination, heading) with the reference's own error added in quadrature; as it is when the
+        reference is taken as exact (no rounding: the same numbers as without it)."""
+        return np.hypot(s, self.reference_sd) if self.reference_sd > 0.0 else s
 
     def result(self) -> dict[str, Any]:
         """The scores (None where no sample had a σ); keys :data:`KEYS` and ``sigma_hist`` (:func:`histogram`)."""

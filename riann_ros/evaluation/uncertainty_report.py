@@ -25,6 +25,7 @@ NOTE = ("Roll and pitch errors as a 2-D Gaussian with the reported σ per axis: 
         "calibration's share).")
 TABLE_HEADERS = ["scenario", "perturbation", "rate", "estimator", "n", "cover95 %", "cover95 min–max %", "NEES/DOF",
                  "err top/bottom σ decile", "yaw cover95 % field used", "yaw cover95 % held", "yaw NEES"]
+DATASET_HEADERS = ["dataset", "sensors", "estimator", "sequences", "cover95 %", "NEES/DOF"]
 
 
 def _pooled(values: list[float | None], weights: list[float]) -> float | None:
@@ -95,16 +96,66 @@ def _formatter(g: dict[str, float | None]) -> Callable[..., str]:
     return f
 
 
-def format_uncertainty_table(rows: Sequence[ResultRow], markdown_table: bool = False) -> str:
-    """The uncertainty table (empty string when no run reported a σ)."""
+def reference_text(reference_sd_deg: float) -> str:
+    """What the scores take as the reference's own error (``--reference-sd``), for the tables' headings."""
+    return f"reference σ {reference_sd_deg:g}° per axis added, --reference-sd"
+
+
+def reference_line(reference_sd_deg: float) -> str:
+    """report.md's line on the reference's own error the coverage and NEES are scored with."""
+    return (f"Coverage and NEES (inclination and heading) against σ² = σ_estimator² + σ_ref² per axis, with the "
+            f"reference's own error σ_ref = {reference_sd_deg:g}° (`--reference-sd`; 0: the reference taken as exact; "
+            "an optical reference's marker and alignment error is no estimator's). Sharpness and the plot use the "
+            "estimator's own σ.")
+
+
+def format_uncertainty_table(rows: Sequence[ResultRow], markdown_table: bool = False,
+                             reference_sd_deg: float = 0.0) -> str:
+    """The uncertainty table (empty string when no run reported a σ), and where the rows hold more than one dataset
+    the table per dataset (:func:`format_dataset_table`); ``reference_sd_deg``: the run's ``--reference-sd``, named
+    in the heading of the printed table (report.md says it in :func:`reference_line`)."""
     cells = uncertainty_rows(rows)
     if not cells:
         return ""
+    per_dataset = format_dataset_table(rows, markdown_table)
     if markdown_table:
         return "\n".join(["| " + " | ".join(TABLE_HEADERS) + " |", "|---|---|---:|---|" + "---:|" * 8]
-                         + ["| " + " | ".join(c) + " |" for c in cells])
-    return "\n".join(["uncertainty (the σ each estimator reports): 95 % coverage, NEES per DOF, sharpness",
-                      *aligned(TABLE_HEADERS, cells)])
+                         + ["| " + " | ".join(c) + " |" for c in cells] + (["", per_dataset] if per_dataset else []))
+    return "\n".join([f"uncertainty (the σ each estimator reports; {reference_text(reference_sd_deg)}): 95 % "
+                      "coverage, NEES per DOF, sharpness", *aligned(TABLE_HEADERS, cells),
+                      *(["", per_dataset] if per_dataset else [])])
+
+
+def dataset_rows(rows: Sequence[ResultRow]) -> list[list[str]]:
+    """Cells of the table per dataset: per dataset × sensors (6D/9D) × estimator, coverage and NEES pooled over the
+    scored samples of all its rows (every scenario, perturbation and rate), and how many sequences; empty when the
+    rows with a σ hold only one dataset × sensors."""
+    scored = [r for r in rows if r.score.cover95_pct is not None]
+    keys = dict.fromkeys((r.dataset, r.sensors, r.estimator) for r in scored)
+    if len({k[:2] for k in keys}) < 2:
+        return []
+    out = []
+    for key in keys:
+        grp = [r for r in scored if (r.dataset, r.sensors, r.estimator) == key]
+        n = [float(r.score.n_scored) for r in grp]
+        f = _formatter({"cover": _pooled([r.score.cover95_pct for r in grp], n),
+                        "nees": _pooled([r.score.nees for r in grp], n)})
+        out.append([key[0], key[1], key[2], str(len({r.sequence for r in grp})), f("cover"), f("nees", ".2f")])
+    return out
+
+
+def format_dataset_table(rows: Sequence[ResultRow], markdown_table: bool = False) -> str:
+    """The inclination's coverage and NEES per dataset × sensors × estimator (:func:`dataset_rows`); empty string
+    with one dataset: a σ that holds on one sensor may not on another, and each dataset has its own reference."""
+    cells = dataset_rows(rows)
+    if not cells:
+        return ""
+    title = "uncertainty per dataset: 95 % coverage and NEES per DOF pooled over its sequences, scenarios, " \
+            "perturbations and rates"
+    if markdown_table:
+        return "\n".join([title[0].upper() + title[1:] + ":", "", "| " + " | ".join(DATASET_HEADERS) + " |",
+                          "|---|---|---|---:|---:|---:|"] + ["| " + " | ".join(c) + " |" for c in cells])
+    return "\n".join([title, *aligned(DATASET_HEADERS, cells)])
 
 
 def format_uncertainty_comparison(pairs: Sequence[tuple[ResultRow, ResultRow]]) -> list[str]:
