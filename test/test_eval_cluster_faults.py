@@ -1,20 +1,24 @@
 """riann-bag-eval on a Dask cluster under faults (riann_ros.evaluation.dask_cluster), with a real ``dask scheduler``
 and ``dask worker`` over TCP on localhost (test/helpers_dask.py): the scheduler killed mid-run is one line on
 stderr naming it and ``--resume``, exit status 1, no library traceback (Dask's log in ``OUT/dask.log``), the inputs
-finished kept; Ctrl-C cancels the run's tasks, so none keeps running on a worker, exit status 130 with one line."""
+finished kept; every worker lost is named, then the same; Ctrl-C cancels the run's tasks, so none keeps running on a
+worker, exit status 130 with one line."""
 
 from __future__ import annotations
 
 import os
 import signal
 import subprocess
+import threading
 from pathlib import Path
 
 import pytest
 
 from conftest import executable, wait_for
 from riann_ros import bagio
+from riann_ros.cli.evaluate import main
 from riann_ros.datasets.synthetic import generate
+from riann_ros.evaluation import dask_cluster
 
 pytest.importorskip("distributed")
 from helpers_dask import DaskProcesses, start_cluster
@@ -82,3 +86,29 @@ def test_ctrl_c_cancels_the_runs_tasks_so_no_worker_keeps_running_one(long_bags,
     (line,) = [ln for ln in stderr.splitlines() if ln.strip()]
     assert "interrupted" in line and "Traceback" not in stderr, stderr
     assert not (out / "results.csv").exists()
+
+
+@pytest.mark.slow
+def test_every_worker_lost_is_named_then_the_run_stops_with_resume(long_bags, tmp_path, monkeypatch, capsys):
+    """The one worker killed mid-run: a warning naming it; none joins within WORKER_WAIT_S (3 s here): the run stops
+    with one line naming the lost worker and --resume, exit status 1."""
+    monkeypatch.setattr(dask_cluster, "WORKER_WAIT_S", 3.0)
+    cluster = start_cluster(tmp_path, tmp_path, workers=1)
+    out = tmp_path / "out"
+    rc: list[int] = []
+    try:
+        run = threading.Thread(target=lambda: rc.append(main([*map(str, long_bags), *ARGS[:-1], "--scheduler",
+                                                             cluster.address, "--out", str(out)])))
+        run.start()
+        wait_for(lambda: not run.is_alive() or bool(_run_tasks(cluster)), 300, "a worker running a task", period=0.2)
+        assert run.is_alive(), "the run finished before its worker could be killed"
+        cluster.kill("w1")
+        run.join(120)
+    finally:
+        cluster.close()
+    err = capsys.readouterr().err
+    assert rc == [1], err
+    assert "warning: Dask worker w1 (tcp://127.0.0.1:" in err and "left the cluster mid-run" in err
+    last = err.strip().splitlines()[-1]
+    assert f"every Dask worker of the scheduler at {cluster.address} left mid-run (w1)" in last, err
+    assert "--resume" in last and "Traceback" not in err
