@@ -149,7 +149,7 @@ class DaskCluster(AbstractContextManager["DaskCluster"]):
             self.close()
             raise EvalError(f"Dask workers with another riann_ros than this one ({__version__}): "
                             + ", ".join(f"{w} {v}" for w, v in other.items()))
-        self._names()
+        self.learn_names()
         link = self.client.dashboard_link if self._dashboard() else "none (pip install bokeh)"
         self.note(f"Dask cluster {self.address}: {len(versions)} worker(s); dashboard {link}")
 
@@ -159,7 +159,7 @@ class DaskCluster(AbstractContextManager["DaskCluster"]):
         except Exception:
             return False
 
-    def _names(self) -> None:
+    def learn_names(self) -> None:
         """The names of the workers there now (kept for those that leave)."""
         info = self.client.scheduler_info().get("workers", {})
         self.workers.update({addr: str(w.get("name", addr)) for addr, w in info.items()})
@@ -280,7 +280,7 @@ class _Watch:
         except Exception:  # the scheduler going away: the futures say so
             return
         if now - self.seen:
-            c._names()
+            c.learn_names()
         for addr in sorted(self.seen - now):
             c.note(f"warning: Dask worker {c.workers.get(addr, addr)} ({addr}) left the cluster mid-run: the "
                    "scheduler runs its input again on another worker")
