@@ -1,7 +1,7 @@
 """A run over many inputs (riann_ros.evaluation.fleet): 1 000 inputs listed in a file (--inputs-from) on a local Dask
 cluster, with the client's memory bounded by the per-input summaries (its peak resident set measured by the operating
 system) and a progress bar with counts and ETA. ``make test`` runs it with 100 inputs (more than the cluster
-executor keeps in flight, executors.MIN_WINDOW); the 1 000 (minutes on 2 shared cores) are marked ``scale``:
+executor keeps in flight, dask_cluster.MIN_WINDOW); the 1 000 (minutes on 2 shared cores) are marked ``scale``:
 ``make test-scale``."""
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from bench_cluster import CLIENT
 
 from riann_ros import bagio
 from riann_ros.datasets.synthetic import generate
-from riann_ros.evaluation import executors, store
+from riann_ros.evaluation import dask_cluster, store
 
 pytest.importorskip("distributed")
 
@@ -30,7 +30,7 @@ CLIENT_LIMIT_MB = 500
 @pytest.mark.slow
 @pytest.mark.parametrize("n_inputs", [100, pytest.param(1000, marks=pytest.mark.scale)])
 def test_listed_inputs_on_a_cluster_with_bounded_client_memory_and_progress(tmp_path, n_inputs):
-    assert n_inputs > executors.MIN_WINDOW  # inputs wait for a place on the cluster
+    assert n_inputs > dask_cluster.MIN_WINDOW  # inputs wait for a place on the cluster
     tiny = bagio.write_recording(tmp_path / "tiny.mcap", generate(rate=100, duration=10, seed=1, start_s=1.0))
     corpus = tmp_path / "corpus"
     corpus.mkdir()

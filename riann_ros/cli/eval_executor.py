@@ -5,12 +5,14 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from contextlib import AbstractContextManager, nullcontext
 
 from riann_ros import evaluation as ev
 from riann_ros.evaluation import executors
 from riann_ros.evaluation.live import LiveRunner
 from riann_ros.evaluation.runners import Runner
+from riann_ros.replay import ReplayError
 
 # why --live runs in this process, whatever else is asked
 LIVE_IN_PROCESS = ("--live replays each input over DDS from this process to the estimator nodes it started, one "
@@ -44,8 +46,8 @@ def executor_setting(args: argparse.Namespace) -> executors.ExecutorSetting:
 
 def runner(args: argparse.Namespace) -> AbstractContextManager[Runner | None]:
     """The runner of --live: the evaluator's :class:`~riann_ros.evaluation.live.LiveRunner` over the ROS layer's
-    :class:`~riann_ros.ros.dds_replay.DdsReplay` (ev.EvalError without ROS); else none (each input's own in-process
-    runs)."""
+    :class:`~riann_ros.ros.dds_replay.DdsReplay` (ev.EvalError without ROS, or for a topic ROS does not take), its
+    warnings and (unless -q) its progress on stderr; else none (each input's own in-process runs)."""
     if not args.live:
         return nullcontext()
     try:
@@ -53,4 +55,13 @@ def runner(args: argparse.Namespace) -> AbstractContextManager[Runner | None]:
     except ImportError as exc:
         raise ev.EvalError(f"--live needs rclpy and the ROS message packages: {exc}") from exc
     topics = args.live_topics.split(",") if args.live_topics else None
-    return LiveRunner(DdsReplay(speed=args.speed, input_topic=args.live_input, topics=topics, use_mag=args.use_mag))
+    try:
+        replay = DdsReplay(speed=args.speed, input_topic=args.live_input, topics=topics, use_mag=args.use_mag,
+                           mag_topic=args.live_mag, warn=lambda text: _err(f"warning: {text}"))
+    except ReplayError as exc:
+        raise ev.EvalError(f"--live: {exc}") from exc
+    return LiveRunner(replay, note=None if args.quiet else _err)
+
+
+def _err(text: str) -> None:
+    print(f"riann-bag-eval: {text}", file=sys.stderr, flush=True)

@@ -191,8 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with quiet_when_reader_leaves():
             return _main(argv)
-    except KeyboardInterrupt:
-        _err("interrupted; no result files written")
+    except KeyboardInterrupt as exc:  # its text: what the run kept (_evaluate)
+        _err(str(exc) or "interrupted; no result files written")
         return 130
 
 
@@ -274,7 +274,8 @@ def _evaluate(args: argparse.Namespace, run: session.EvalRun) -> report.Report |
         _err(f"the run stopped: {exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "") + kept)
     except KeyboardInterrupt:
         if args.out and (args.out / store.SHARDS).is_dir():
-            _err(f"the inputs finished so far are kept in {args.out / store.SHARDS}: add --resume to continue")
+            raise KeyboardInterrupt(f"interrupted; no result files written; the inputs finished so far are kept in "
+                                    f"{args.out / store.SHARDS}: add --resume to continue") from None
         raise
     return None
 

@@ -235,8 +235,12 @@ def _live(p: argparse.ArgumentParser) -> None:
                    "with --live-topics) instead of running them in-process; reports messages lost")
     p.add_argument("--speed", type=float, default=1.0, help="--live replay speed factor (0: as fast as the nodes go)")
     p.add_argument("--live-input", default=None,
-                   help="--live: IMU topic to publish on (default /riann_eval/imu/data_raw)")
+                   help="--live: IMU topic to publish on (sensor_msgs/Imu; default /riann_eval/imu/data_raw)")
+    p.add_argument("--live-mag", default=None,
+                   help="--live: magnetometer topic to publish an input's field on (sensor_msgs/MagneticField at the "
+                   "samples' stamps, unless --use-mag false; default /riann_eval/imu/mag)")
     p.add_argument("--live-topics", default=None,
                    help="--live with nodes already running: their attitude topics, comma-separated, in --estimators "
-                   "order (they must subscribe to --live-input)")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+                   "order (they must subscribe to --live-input, and to --live-mag for the field); a topic without "
+                   "its node after 10 s stops the run, naming it")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar (nor --live's progress lines)")

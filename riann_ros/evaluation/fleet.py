@@ -18,8 +18,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from riann_ros.evaluation.dask_cluster import ClusterLost, DaskCluster
+from riann_ros.evaluation.errors import RunStopped
 from riann_ros.evaluation.executors import (
-    DaskCluster,
     Executor,
     ExecutorKind,
     ExecutorSetting,
@@ -32,6 +33,7 @@ from riann_ros.evaluation.runners import Runner
 from riann_ros.evaluation.store import NEW, RESUME, ShardStore, fingerprint
 
 Note = Callable[[str], None]
+DASK_LOG = "dask.log"  # Dask's log in the output folder, while a run is on a cluster
 
 
 @dataclass(frozen=True)
@@ -91,7 +93,8 @@ class Fleet(AbstractContextManager["Fleet"]):
         fp = fingerprint(settings, tune, tune_scenario)
         self.store = ShardStore(scale.out, fp, scale.mode, self.sources) if scale.out is not None else None
         dask = scale.executor.scheduler if scale.executor.kind is ExecutorKind.DASK else None
-        self.cluster = DaskCluster(dask, self.note) if dask is not None else None
+        log = scale.out / DASK_LOG if scale.out is not None else None
+        self.cluster = DaskCluster(dask, self.note, log) if dask is not None else None
 
     def executor(self, n_inputs: int) -> Executor:
         """The executor for a pass over ``n_inputs`` inputs (the cluster, a pool, or this process)."""
@@ -109,8 +112,13 @@ class Fleet(AbstractContextManager["Fleet"]):
         """Every input not finished yet (``progress(n)``: the callback of a pass over n inputs); all results in
         input order."""
         if self.store is None:
-            return evaluate_sources(self.sources, settings, self.executor(len(self.sources)),
-                                    progress(len(self.sources)), self.runner)
+            try:
+                return evaluate_sources(self.sources, settings, self.executor(len(self.sources)),
+                                        progress(len(self.sources)), self.runner)
+            except ClusterLost as exc:
+                log = self.cluster.log_path if self.cluster else "-"
+                raise RunStopped(f"{exc}: nothing is kept without --out; run the command again once the cluster is "
+                                 f"back, with --out to keep each input as it finishes (Dask's log: {log})") from exc
         kept = _Kept(len(self.sources), settings.series_for, self.store)
         earlier = self.store.load() if self.scale.mode == RESUME else {}
         for i in sorted(earlier):
@@ -120,8 +128,14 @@ class Fleet(AbstractContextManager["Fleet"]):
         if self.scale.mode == RESUME:
             self.note(f"resuming {self.scale.out}: {len(self.sources) - len(todo)} of {len(self.sources)} input(s) "
                       f"finished earlier; evaluating {len(todo)}")
-        map_inputs(evaluate_source, todo, settings, self.executor(len(todo)), kept.add,
-                   progress(len(todo)) if todo else None, self.runner)
+        try:
+            map_inputs(evaluate_source, todo, settings, self.executor(len(todo)), kept.add,
+                       progress(len(todo)) if todo else None, self.runner)
+        except ClusterLost as exc:
+            done = sum(r is not None for r in kept.results)
+            raise RunStopped(f"{exc}: the {done} input(s) finished are kept in {self.store.dir}; run the same command "
+                             f"with --resume (same --out) to evaluate the other {len(self.sources) - done} once the "
+                             f"cluster is back (Dask's log: {self.cluster.log_path if self.cluster else '-'})") from exc
         return [r for r in kept.results if r is not None]
 
     def close(self) -> None:

@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
-from riann_ros.evaluation.errors import EvalError
+from riann_ros.evaluation.errors import EvalError, RunStopped
 from riann_ros.evaluation.executors import Executor, InProcess, map_inputs
 from riann_ros.evaluation.first_pass import Summary, summarise
 from riann_ros.evaluation.health import StreamHealth
@@ -153,7 +153,8 @@ def _warn(res: SequenceResult, text: str) -> None:
 
 def evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, runner: Runner | None = None,
                     recording: Recording | None = None) -> SequenceResult:
-    """Every rate × scenario × estimator on one input; any problem ends up in ``result.error`` naming it.
+    """Every rate × scenario × estimator on one input; any problem ends up in ``result.error`` naming it, except
+    one no input can get past (:class:`~riann_ros.evaluation.errors.RunStopped`), which stops the run.
 
     ``source`` is a bag (``.mcap``, ``.db3``, a bag directory) or a BROAD trial file. Bags at their own
     rate are read chunk by chunk; BROAD files, and inputs that are also resampled (``settings.rates``),
@@ -216,6 +217,8 @@ def _evaluate_source(source: str | os.PathLike[str], settings: EvalSettings, run
         for rate in settings.rates:
             src = open_source(source, rate, base, settings.chunk, settings.topics)
             _evaluate_rate(src, rate, settings, runner, res, native_rest)
+    except RunStopped:  # no input can get past it: the run stops
+        raise
     except EvalError as exc:
         res = SequenceResult(source=str(source), error=str(exc))
     except Exception as exc:  # an estimator crash must not take the other inputs down

@@ -35,7 +35,10 @@ class Runner(Protocol):
     mode: str
     interleaved: bool  # whether several runs may be fed alternately (one pass serves all scenarios)
 
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig) -> Run: ...
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, what: str = "") -> Run:
+        """A run of ``specs`` behind ``gate``; ``what``: the input and scenario it is, for a runner that reports its
+        runs as they go (the live replay's progress)."""
+        ...
 
 
 class _OfflineRun:
@@ -97,7 +100,7 @@ class OfflineRunner:
     def __init__(self, use_mag: str = "auto") -> None:
         self.use_mag = use_mag
 
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig) -> Run:
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, what: str = "") -> Run:
         return _OfflineRun(specs, gate, self.use_mag)
 
 
@@ -127,7 +130,7 @@ class RecordedRunner:
     mode = RECORDED
     interleaved = True
 
-    def start(self, specs: list[EstimatorSpec], gate: GateConfig) -> Run:
+    def start(self, specs: list[EstimatorSpec], gate: GateConfig, what: str = "") -> Run:
         return _RecordedRun(specs)
 
 

@@ -60,6 +60,7 @@ class ScenarioRun:
                         if offsets and settings.offset_steps > 0 and not free else None)
         self.agreement = Agreement([s.label for s in self.specs], plan.first_stamp) if free else None
         self.run: Run | None = None
+        self.what = f"{name} {plan.scenario}" + (f" {condition.label}" if condition.parts else "")  # for progress
         self.fed = 0  # samples fed so far
         length = plan.length * (condition.nominal_rate(rate) / rate if condition.parts else 1.0)
         self.step = settings.series_step if settings.series_step > 0 else max(1, -(-int(length) // SERIES_POINTS))
@@ -78,7 +79,7 @@ class ScenarioRun:
         return self.agreement is not None
 
     def begin(self, runner: Runner) -> None:
-        runs = [runner.start(self.own, self.gate)] if self.own else []
+        runs = [runner.start(self.own, self.gate, self.what)] if self.own else []
         runs += [RecordedRunner().start(self.recorded, self.gate)] if self.recorded else []
         self.run = runs[0] if len(runs) == 1 else Joined(runs)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import tempfile
 import threading
 import time
@@ -29,11 +30,14 @@ from riann_ros import stamps
 from riann_ros.magcal.input import UseMag
 from riann_ros.recording import Recording
 from riann_ros.replay import NodeSpec, PieceOutputs, ReplayError, SequenceCounts
+from riann_ros.ros.live_graph import Wanted, crowded, domain_text, missing
 from riann_ros.ros.started_nodes import LIVE_INPUT_TOPIC, LIVE_MAG_TOPIC, StartedNodes, output_topic
 
 LIVE_GAP_NS = 2_000_000_000  # stamp gap between sequences (> the nodes' max_dt), besides the ~/restart call
 IDLE_S = 5.0  # give up waiting for outputs after this long without a new one
 MAG_LEAD = 2  # a sample's field is published this many IMU messages ahead of it (there when its IMU message is)
+START_S = 60.0  # nodes the replay started: how long their start (RIANN loads its network) and discovery may take
+CONNECT_S = 6.0  # nodes already running (--live-topics): how long their topics may take to show up
 
 # stamp_ns, w, x, y, z and the orientation variances about x, y, z (rad²; NaN: the topic carries no covariance)
 Output = tuple[float, ...]
@@ -50,28 +54,44 @@ class DdsReplay:
     freshly built, as offline (``~/reset`` would keep the robot's magnetometer calibration and latency fit from the
     sequences before); sequences are also separated by a stamp gap larger than the nodes' ``max_dt`` (all that
     separates them for external nodes). With a magnetometer in the sequence (and ``use_mag`` not ``false``, passed
-    to the started nodes), the field paired with each sample is published on ``/riann_eval/imu/mag`` at the
-    sample's stamp (NaN where none is fresh), so the started nodes pair each sample with the field the offline run
-    gives it. Publishing is paced at ``speed`` × real time (0: as fast as the slowest node keeps up) with at most
-    ``window`` samples in flight. One sequence at a time.
+    to the started nodes), the field paired with each sample is published as ``sensor_msgs/MagneticField`` on
+    ``mag_topic`` (``/riann_eval/imu/mag`` unless given) at the sample's stamp: to the started nodes with NaN where
+    none is fresh, so they pair each sample with the field the offline run gives it; to external nodes only the
+    finite fields, as a driver publishes them. Publishing is paced at ``speed`` × real time (0: as fast as the
+    slowest node keeps up) with at most ``window`` samples in flight. One sequence at a time.
+
+    Before the first sequence the replay waits for a node on the other side of each of its topics: a subscriber of
+    the input (and, for started nodes whose estimator uses one, of the field) and a publisher of each output, up to
+    :data:`START_S` for nodes it started and :data:`CONNECT_S` for external ones; a topic without one is a
+    ReplayError naming it. A topic with publishers besides the expected ones (another node publishing on the input,
+    two nodes on an output) is named through ``warn``, once, whenever it is seen (at the connection and at each
+    sequence's start and end).
     """
 
     def __init__(self, speed: float = 1.0, window: int = 200, input_topic: str | None = None,
-                 topics: list[str] | None = None, log_dir: Path | None = None, use_mag: str = "auto") -> None:
+                 topics: list[str] | None = None, log_dir: Path | None = None, use_mag: str = "auto",
+                 mag_topic: str | None = None, warn: Callable[[str], None] | None = None) -> None:
         self.speed = speed
         self.window = window
         self.external = topics
         self.input_topic = input_topic or LIVE_INPUT_TOPIC
+        self.mag_topic = mag_topic or LIVE_MAG_TOPIC
         self.use_mag = use_mag
+        self.warn = warn or (lambda _: None)
+        self._warned: set[str] = set()
         self.nodes = StartedNodes(log_dir or Path(tempfile.mkdtemp(prefix="riann_live_")))
         self._qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         self._ctx = rclpy.context.Context()
         rclpy.init(context=self._ctx)
-        self.node = rclpy.create_node("riann_bag_eval_live", context=self._ctx)
-        self.pub = self.node.create_publisher(Imu, self.input_topic, self._qos)
-        # the field for the started nodes (external ones subscribe to a magnetometer topic of their own)
-        self.mag_pub = (self.node.create_publisher(MagneticField, LIVE_MAG_TOPIC, self._qos)
-                        if topics is None and UseMag.parse(use_mag) is not UseMag.FALSE else None)
+        self.name = f"riann_bag_eval_live_{os.getpid()}"  # of its own: another run's replay is another node
+        self.node = rclpy.create_node(self.name, context=self._ctx)
+        try:
+            self.pub = self.node.create_publisher(Imu, self.input_topic, self._qos)
+            self.mag_pub = (self.node.create_publisher(MagneticField, self.mag_topic, self._qos)
+                            if UseMag.parse(use_mag) is not UseMag.FALSE else None)
+        except Exception as exc:  # a topic name ROS does not take
+            self._ctx.try_shutdown()
+            raise ReplayError(f"{exc}".splitlines()[0]) from exc
         self._exec = SingleThreadedExecutor(context=self._ctx)
         self._exec.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, daemon=True)
@@ -97,9 +117,17 @@ class DdsReplay:
         self._ensure_nodes(nodes, rate)
         if self.external is None:
             self.nodes.restart(self.node, nodes)
+        self.check_crowded()
         for box in self.got:
             box.clear()
         return _DdsSequence(self)
+
+    def check_crowded(self) -> None:
+        """Warn (once each) of the topics with publishers besides the expected ones."""
+        for text in crowded(self.node, self._wanted(), f"/{self.name}"):
+            if text not in self._warned:
+                self._warned.add(text)
+                self.warn(text)
 
     # -- nodes ----------------------------------------------------------------------------------
     def _subscribe(self, topics: list[str], imu: bool = False) -> None:
@@ -131,34 +159,50 @@ class DdsReplay:
             if len(self.external) != len(nodes):
                 raise ReplayError(f"{len(self.external)} attitude topics given for {len(nodes)} estimators")
             if self._started_for is None:
-                self.reads_mag = [False] * len(nodes)
                 self._subscribe(self.external)
-                self._wait_connected()
+                self._wait_connected(CONNECT_S)
+                # the field is read if anything subscribes to it (which node, the graph does not say)
+                reads = self.mag_pub is not None and self.mag_pub.get_subscription_count() > 0
+                self.reads_mag = [reads] * len(nodes)
             self._started_for = key
             return
         self.nodes.stop()
         self._started_for = None
-        self.nodes.start(nodes, rate, self.input_topic, self.use_mag)
+        self.nodes.start(nodes, rate, self.input_topic, self.use_mag, self.mag_topic)
         self._subscribe([output_topic(i) for i in range(len(nodes))], imu=True)
         self.reads_mag = [self.mag_pub is not None and node.uses_mag for node in nodes]
-        self._wait_connected(sum(self.reads_mag))
+        self._wait_connected(START_S)
         self._started_for = key
 
-    def _wait_connected(self, mag_readers: int = 0, timeout: float = 60.0) -> None:
-        """Until every node reads the input (and ``mag_readers`` of them the field) and publishes its output."""
+    def _wanted(self) -> list[Wanted]:
+        """The replay's topics and the nodes each needs on its other side."""
+        external = self.external is not None
+        out = [Wanted(self.input_topic, "the IMU input, --live-input", True, 1 if external else len(self._subs))]
+        if not external and self.mag_pub is not None and any(self.reads_mag):
+            out.append(Wanted(self.mag_topic, "the magnetic field, --live-mag", True, sum(self.reads_mag)))
+        elif external and self.mag_pub is not None:
+            out.append(Wanted(self.mag_topic, "the magnetic field, --live-mag", True, 0))  # read if a node wants it
+        outputs = self.external or [output_topic(i) for i in range(len(self._subs))]
+        role = "an estimator's attitude, --live-topics" if external else "a started node's output"
+        out += [Wanted(t, role, False) for t in outputs]
+        return out
+
+    def _wait_connected(self, timeout: float) -> None:
+        """Until each of the replay's topics has its other side (ReplayError naming those that have none by
+        ``timeout``, or when a started node ended), then the publishers besides the expected ones warned of."""
         end = time.monotonic() + timeout
-        n = len(self._subs)
-        mag_pub = self.mag_pub
-        while time.monotonic() < end:
-            if (self.pub.get_subscription_count() >= n
-                    and (mag_pub is None or mag_pub.get_subscription_count() >= mag_readers)
-                    and all(s.get_publisher_count() > 0 for s in self._subs)):
-                time.sleep(0.3)  # let discovery settle in both directions
-                return
-            if self.nodes.any_ended():
-                break
+        wanted = self._wanted()
+        lacking = missing(self.node, wanted)
+        while lacking and time.monotonic() < end and not self.nodes.any_ended():
             time.sleep(0.05)
-        raise ReplayError(f"the estimator nodes did not connect ({self.nodes.logs() or 'no logs'})")
+            lacking = missing(self.node, wanted)
+        if not lacking:
+            time.sleep(0.3)  # let discovery settle in both directions
+            self.check_crowded()
+            return
+        logs = " ".join(self.nodes.logs().split()) if self.external is None else ""
+        raise ReplayError(f"{'; '.join(lacking)} after {timeout:g} s ({domain_text()})"
+                          + (f"; the started nodes' logs: {logs}" if logs else ""))
 
 
 class _DdsSequence:
@@ -202,6 +246,7 @@ class _DdsSequence:
         pub = self.r.mag_pub
         if pub is None or rec.mag is None:
             return None
+        every = self.r.external is None  # the started nodes pair each sample: a NaN field where none is fresh
         msg = MagneticField()
         msg.header.frame_id = rec.frame_id
         mf = msg.magnetic_field
@@ -211,9 +256,12 @@ class _DdsSequence:
         def publish_to(i: int) -> None:
             nonlocal done
             for j in range(done, min(i + MAG_LEAD + 1, len(stamp_list))):
+                finite = all(map(math.isfinite, field_list[j]))
+                if not (finite or every):
+                    continue
                 stamps.set_ns(msg.header.stamp, stamp_list[j])
                 mf.x, mf.y, mf.z = field_list[j]
-                self.mag_samples += all(map(math.isfinite, field_list[j]))
+                self.mag_samples += finite
                 pub.publish(msg)
             done = max(done, i + MAG_LEAD + 1)
 
@@ -257,5 +305,6 @@ class _DdsSequence:
 
     def end(self) -> SequenceCounts:
         self.r.next_stamp = self.last_ns + LIVE_GAP_NS
+        self.r.check_crowded()
         return SequenceCounts(published=self.published, mag_samples=self.mag_samples,
                               wall_s=time.monotonic() - self.t0, reads_mag=list(self.r.reads_mag))

@@ -59,10 +59,12 @@ def output_topic(i: int) -> str:
     return f"{LIVE_NS}/e{i}/imu"
 
 
-def node_command(i: int, node: NodeSpec, rate: float, input_topic: str, use_mag: str) -> list[str]:
-    """The command line of the i-th node: its topics remapped into the replay's namespace, reliable deep queues."""
+def node_command(i: int, node: NodeSpec, rate: float, input_topic: str, use_mag: str,
+                 mag_topic: str = LIVE_MAG_TOPIC) -> list[str]:
+    """The command line of the i-th node: its topics remapped into the replay's namespace (its input and field to
+    the replay's topics), reliable deep queues."""
     att_topic, imu_topic = node_topics(node.name)
-    remaps = {"__node": f"riann_eval_{i}_{node.name}", "imu/data_raw": input_topic, "imu/mag": LIVE_MAG_TOPIC,
+    remaps = {"__node": f"riann_eval_{i}_{node.name}", "imu/data_raw": input_topic, "imu/mag": mag_topic,
               att_topic: f"{LIVE_NS}/e{i}/attitude", imu_topic: output_topic(i)}
     params = {"input_qos": "reliable", "input_depth": 1000, "output_depth": 1000, "nominal_rate": float(rate),
               "use_mag": use_mag, **dict(node.params)}
@@ -78,11 +80,12 @@ class StartedNodes:
         self.log_dir = log_dir
         self.procs: list[subprocess.Popen] = []
 
-    def start(self, nodes: Sequence[NodeSpec], rate: float, input_topic: str, use_mag: str) -> None:
+    def start(self, nodes: Sequence[NodeSpec], rate: float, input_topic: str, use_mag: str,
+              mag_topic: str = LIVE_MAG_TOPIC) -> None:
         for i, node in enumerate(nodes):
             with open(self.log_dir / f"node_{i}_{node.name}.log", "w") as log:  # the child keeps its own fd
-                self.procs.append(subprocess.Popen(node_command(i, node, rate, input_topic, use_mag), stdout=log,
-                                                   stderr=subprocess.STDOUT))
+                cmd = node_command(i, node, rate, input_topic, use_mag, mag_topic)
+                self.procs.append(subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT))
 
     def any_ended(self) -> bool:
         return any(p.poll() is not None for p in self.procs)

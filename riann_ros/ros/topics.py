@@ -13,6 +13,8 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from riann_ros.ros.live_graph import domain_text
+
 GIVEN_WAIT_S = 2.0  # with a type given: how long to look for the topic in the graph before subscribing anyway
 
 
@@ -77,7 +79,7 @@ class TopicTool:
             if given is not None and waited >= min(timeout, GIVEN_WAIT_S):
                 return given
             if waited >= timeout:
-                raise TopicError(f"no topic {topic} after {timeout:g} s ({_domain_text()}); riann-topic list shows "
+                raise TopicError(f"no topic {topic} after {timeout:g} s ({domain_text()}); riann-topic list shows "
                                  "what there is")
             self.spin_for(0.1)
 
@@ -106,7 +108,3 @@ class TopicTool:
 def _short(type_name: str) -> str:
     return type_name.split("/")[-1]
 
-
-def _domain_text() -> str:
-    return (f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0 (unset)')}, ROS_AUTOMATIC_DISCOVERY_RANGE="
-            f"{os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '(unset)')}")
