@@ -49,6 +49,7 @@ from numpy.typing import ArrayLike
 
 from riann_ros.constants import DEG
 from riann_ros.estimators.base import Array, AttitudeEstimator, ParamSpec
+from riann_ros.estimators.consensus_lag import LAG_TAUS, RelativeLag
 from riann_ros.estimators.consensus_rows import DEFAULT_TAU_ACC, VqfRows
 from riann_ros.estimators.riann.estimator import RiannEstimator
 from riann_ros.estimators.riann.s6_handover import S_FLOOR, FreshNetwork, bridge_sigma
@@ -107,6 +108,7 @@ class ConsensusEstimator(AttitudeEstimator):
         self.riann.reset()
         self.vqf.restart(Cause.RESET)
         self.vqf_sigma.reset()
+        self.lag = RelativeLag()  # how far VQF's opinion lags RIANN's (kept through a gap: the same sensor)
         self._after_gap = False
         self.scale, self._lp_d2, self._lp_model = 1.0, 0.0, 0.0  # the own errors' scale and its low-passes
         self._span_lp, self._w_prev = 0.0, (0.0, 0.0, 0.0)  # the usual step of a sample (s), the last gyro
@@ -174,12 +176,19 @@ class ConsensusEstimator(AttitudeEstimator):
         out = np.empty((n, 4))
         sig = s_r.copy()
         terms = []
+        moved: list[Quat] = []
+        horizon = LAG_TAUS * self.vqf_sigma.tau_acc
         for i, (qr, fi) in enumerate(zip(q_r.tolist(), feats, strict=True)):
             t = self._vqf_terms(u, i, fi[3])
             terms.append(t)
-            out[i], sig[i, 0] = self._one(qr, q_v[i], float(s_r[i, 0]), fi, t, u.samples.step_s[i])
+            x, b = u.samples.x[i], u.bias.bias_rad_s[u.grid.r0[i]]
+            w = (x[3] - b[0], x[4] - b[1], x[5] - b[2])
+            qv = (float(q_v[i][0]), float(q_v[i][1]), float(q_v[i][2]), float(q_v[i][3]))
+            self.lag.step(gravity((qr[0], qr[1], qr[2], qr[3])), gravity(qv), w, u.samples.step_s[i], horizon)
+            moved.append(self.lag.move(qv, w))  # VQF at RIANN's instant (riann_ros/estimators/consensus_lag.py)
+            out[i], sig[i, 0] = self._one(qr, moved[-1], float(s_r[i, 0]), fi, t, u.samples.step_s[i])
         self._sigma = sig
-        self.last = Opinions(q_r, np.asarray(q_v, dtype=float).reshape(n, 4), np.array(terms).reshape(n, 5))
+        self.last = Opinions(q_r, np.asarray(moved, dtype=float).reshape(n, 4), np.array(terms).reshape(n, 5))
         return out
 
     def _restarts(self, u: UncertaintyIn) -> list[int]:
