@@ -216,3 +216,39 @@ def test_consensus_yaml_lists_every_estimator_parameter_with_its_default():
                 for p in ConsensusEstimator.PARAMS}
     assert params == expected
     assert all(type(params[k]) is type(v) for k, v in expected.items())
+
+
+@pytest.mark.parametrize("lag_ms", [-4.0, 3.0, 8.0])
+def test_the_relative_lag_is_fitted_from_the_two_opinions_and_moves_vqf_to_riann_s_instant(lag_ms):
+    """VQF's opinion as RIANN's of τ earlier while the sensor swings about two axes: the online fit finds τ, and VQF
+    moved by it agrees with RIANN far better than before; at rest nothing is fitted (τ stays 0)."""
+    from riann_ros.estimators.consensus_lag import RelativeLag
+    from riann_ros.rotations import gravity
+
+    rate, tau = 200.0, lag_ms * 1e-3
+    t = np.arange(0.0, 60.0, 1.0 / rate)
+
+    def attitude(tt: np.ndarray) -> np.ndarray:
+        return quat.multiply(quat.from_rotvec(np.column_stack([0.6 * np.sin(1.3 * tt), np.zeros_like(tt),
+                                                               np.zeros_like(tt)])),
+                             quat.from_rotvec(np.column_stack([np.zeros_like(tt), 0.5 * np.sin(0.7 * tt + 1.0),
+                                                               np.zeros_like(tt)])))
+
+    q_r, q_v = attitude(t), attitude(t - tau)
+    h = 1e-4  # the body rate from the attitude: ω = 2 (q⁻¹ q̇), vector part
+    dq = quat.multiply(quat.conjugate(q_r), attitude(t + h))
+    w = 2.0 * dq[:, 1:] / h
+    lag = RelativeLag()
+    before, after = [], []
+    for i in range(len(t)):
+        qr, qv, wi = tuple(q_r[i]), tuple(q_v[i]), tuple(w[i])
+        lag.step(gravity(qr), gravity(qv), wi, 1.0 / rate, 30.0)
+        if t[i] > 40.0:
+            before.append(np.linalg.norm(np.subtract(gravity(qv), gravity(qr))))
+            after.append(np.linalg.norm(np.subtract(gravity(lag.move(qv, wi)), gravity(qr))))
+    assert lag.tau_s == pytest.approx(tau, rel=0.1)
+    assert np.sqrt(np.mean(np.square(after))) < 0.2 * np.sqrt(np.mean(np.square(before)))
+    still = RelativeLag()
+    for _ in range(2000):
+        still.step((0.0, 0.0, 1.0), (0.001, 0.0, 1.0), (0.0, 0.0, 0.0), 0.005, 30.0)
+    assert still.tau_s == 0.0

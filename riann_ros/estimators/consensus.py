@@ -12,6 +12,9 @@ holes bridged), and per sample combines their gravity directions:
   the rows both read (the rotation rate times a quarter of the input step: the sample convention, points or interval
   means, is not known; :data:`TIMING_SHARE`), and
   :data:`RHO_OWN` of the rest (fitted on synthetic sensors, ``bench/fit_consensus.py``).
+* **One instant.** VQF's attitude is moved to RIANN's instant by the lag the two opinions show while the sensor
+  turns (:class:`~.consensus_lag.RelativeLag`, fitted online): a mean of two attitudes of different instants errs by
+  the turn between them.
 * **Combination.** The error of ``g = w·g_R + (1 − w)·g_V`` has the variance ``w²σ_R² + (1 − w)²σ_V² + 2w(1 − w)c``,
   least at ``w = (σ_V² − c) / (σ_R² + σ_V² − 2c)`` (with ``c = ρσ_Rσ_V``: ``(σ_V² − ρσ_Rσ_V) / (σ_R² + σ_V² −
   2ρσ_Rσ_V)``), where it is ``σ² = (σ_R²σ_V² − c²) / (σ_R² + σ_V² − 2c)``; ``w`` is kept in [0, 1] (beyond, the
