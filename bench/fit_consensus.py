@@ -16,13 +16,18 @@ Then per grade: the RMSE of RIANN, of VQF on RIANN's rows, of their plain mean a
 coverage and NEES per degree of freedom of the σ of RIANN, of VQF (fitted) and of the consensus (as it runs with the
 constants in the source: run again after changing them).
 
-    .venv/bin/python bench/fit_consensus.py [--seeds 1] [--duration 60]
+    .venv/bin/python bench/fit_consensus.py [--seeds 1] [--duration 60] [--write]
+
+``--write`` keeps the fit and the table in docs/results/consensus_synthetic.json (BENCHMARKS.md's table
+``<!-- results:consensus-synthetic -->``, written by bench/results_tables.py).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -131,9 +136,22 @@ def fit_rho(data: list[dict[str, np.ndarray]], k: Ks) -> float:
     return arg
 
 
-def scores(e: np.ndarray, s: np.ndarray) -> str:
+def scores(e: np.ndarray, s: np.ndarray) -> tuple[float, float]:
+    """The σ's 95 % coverage (%) and NEES per degree of freedom of 2-D errors ``e`` (rad)."""
     r = np.sum(e * e, axis=1) / (s * s)
-    return f"{100 * np.mean(r <= CHI2_2_95):5.1f} % / {np.mean(r) / 2:5.2f}"
+    return float(100 * np.mean(r <= CHI2_2_95)), float(np.mean(r) / 2)
+
+
+def table(rows: list[dict]) -> str:
+    """Per grade: RMSE of RIANN, VQF on its rows, their plain mean and the consensus; each σ's coverage / NEES."""
+    def cell(v: list[float]) -> str:
+        return f"{v[0]:.1f} % / {v[1]:.2f}"
+
+    lines = ["| grade | RMSE RIANN | VQF (rows) | mean | consensus | σ_R cov / NEES | σ_V (fitted) | σ consensus |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    lines += [f"| {r['grade']} | {r['rmse_r']:.2f} | {r['rmse_v']:.2f} | {r['rmse_m']:.2f} | {r['rmse_c']:.2f} | "
+              f"{cell(r['riann'])} | {cell(r['vqf'])} | {cell(r['consensus'])} |" for r in rows]
+    return "\n".join(lines)
 
 
 def rmse(e: np.ndarray) -> float:
@@ -144,6 +162,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--duration", type=float, default=60.0)
+    ap.add_argument("--write", action="store_true", help="keep the table in docs/results/consensus_synthetic.json")
     args = ap.parse_args()
     by_grade: dict[str, list[dict[str, np.ndarray]]] = {}
     for name, grade in GRADES.items():
@@ -156,14 +175,19 @@ def main() -> int:
     rho = fit_rho(data, k)
     print(f"fitted on {len(data)} synthetic recordings: K_LAG {k[0]:.3f} s, K_RATE {k[1]:.5f} s, K_ACC {k[2]:.4f}, "
           f"RHO_OWN {rho:+.2f} (in the source: {K_LAG}, {K_RATE}, {K_ACC}, {RHO_OWN:+.2f})")
-    print("\n| grade | RMSE RIANN | VQF (rows) | mean | consensus | σ_R cov / NEES | σ_V (fitted) | σ consensus |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    rows = []
     for name, ds in by_grade.items():
         cat = {key: np.concatenate([d[key] for d in ds]) for key in ds[0]}
         sv = np.sqrt(vqf_var(cat["t"], k))
-        print(f"| {name} | {np.mean([rmse(d['e_r']) for d in ds]):.2f} | {np.mean([rmse(d['e_v']) for d in ds]):.2f}"
-              f" | {np.mean([rmse(d['e_m']) for d in ds]):.2f} | {np.mean([rmse(d['e_c']) for d in ds]):.2f}"
-              f" | {scores(cat['e_r'], cat['s_r'])} | {scores(cat['e_v'], sv)} | {scores(cat['e_c'], cat['s_c'])} |")
+        rows.append({"grade": name, **{f"rmse_{e}": float(np.mean([rmse(d[f"e_{e}"]) for d in ds])) for e in "rvmc"},
+                     "riann": scores(cat["e_r"], cat["s_r"]), "vqf": scores(cat["e_v"], sv),
+                     "consensus": scores(cat["e_c"], cat["s_c"])})
+    print("\n" + table(rows))
+    if args.write:
+        out = Path(__file__).resolve().parents[1] / "docs" / "results" / "consensus_synthetic.json"
+        out.write_text(json.dumps({"command": f"bench/fit_consensus.py --seeds {args.seeds} --duration "
+                                   f"{args.duration:g} --write", "fit": [*k, rho], "rows": rows}, indent=1) + "\n")
+        print(f"wrote {out}", file=sys.stderr)
     return 0
 
 

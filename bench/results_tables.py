@@ -413,6 +413,13 @@ def consensus_figures() -> str:
             f"of {len(met)} conditions, the worst trial within 1.05× RIANN's in {sum(m[1] == 'yes' for m in met)}")
 
 
+def consensus_synthetic() -> str:
+    """The synthetic sensor grades of bench/fit_consensus.py (docs/results/consensus_synthetic.json)."""
+    from fit_consensus import table
+
+    return table(json.loads((RESULTS / "consensus_synthetic.json").read_text())["rows"])
+
+
 def _pct(v: float | None) -> str:
     return "–" if v is None else f"{v:.1f}"
 
@@ -722,6 +729,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "consensus-9d": consensus_9d,
     "consensus-uncertainty": consensus_uncertainty,
     "readme-consensus": consensus_figures,
+    "consensus-synthetic": consensus_synthetic,
     "uncertainty-heading": uncertainty_heading,
     "magcal": magcal_table,
     "magcal-uncertainty": magcal_uncertainty,
