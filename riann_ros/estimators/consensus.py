@@ -151,6 +151,7 @@ class ConsensusEstimator(AttitudeEstimator):
             out["consensus weight on RIANN"] = f"{self.weight:.2f}"
             out["RIANN-VQF disagreement (deg)"] = f"{self.disagreement / DEG:.2f}"
             out["consensus sigma scale"] = f"{self.scale:.2f}"
+            out["VQF's lag behind RIANN (ms, compensated)"] = f"{self.lag.tau_s * 1e3:.2f}"
         return out
 
     def sigma(self, fields: np.ndarray) -> Array:
