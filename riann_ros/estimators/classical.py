@@ -79,7 +79,7 @@ class ClassicalFilter(AttitudeEstimator):
             return Batch(a, g, h, None, m, ())
         lists = (a.tolist(), g.tolist(), h.tolist())
         rows = front.rows(*lists, [None] * len(a) if m is None else m)
-        self._cal_sd = rows.sd_rad
+        self._cal_sd = np.hypot(rows.sd_rad, rows.timing_sd_rad)  # the σ's share (the filter weighs without it)
         return Batch(a, g, h, lists, rows.field, rows.realign)
 
     def sigma(self, fields: NDArray[np.bool_]) -> Array:

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from riann_ros.magcal.changes import ChangeFollower, Realign
 from riann_ros.magcal.lag import RESOLUTION_S, LagScan
-from riann_ros.magcal.latency import MAX_DELAY, DelayHistory, LatencyEstimator
+from riann_ros.magcal.latency import DelayHistory, LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
 from riann_ros.magcal.records import (
     DELAY_SD_S,
@@ -98,11 +98,13 @@ class FieldOut(NamedTuple):
 class FieldRows(NamedTuple):
     """:meth:`MagFrontEnd.rows`' output: per row the calibrated field (None: no field, and none while the
     calibration says the field's heading is unknown: the filter's gyro holds it) and the heading σ the calibration
-    adds (rad; 0 while the configured calibration holds), and the rows where the filter checks its heading."""
+    adds (rad; 0 while the configured calibration holds), the rows where the filter checks its heading, and per row the
+    doubt of the field's timing the reported σ carries."""
 
     field: list[Vec | None]
     sd_rad: NDArray[np.float64]
     realign: tuple[Realign, ...]
+    timing_sd_rad: NDArray[np.float64]  # the doubt of the field's timing (MagFrontEnd.timing_sd): for the σ only
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,6 +119,7 @@ class FrontEndState:
     seen: bool
     follower: ChangeFollower
     trusted: bool
+    scanned: float | None  # the lag the calibration's windows are taken at (None: the latency fit's)
 
 
 class MagFrontEnd:
@@ -161,6 +164,8 @@ class MagFrontEnd:
         """Start the calibration anew from ``prior`` (a saved calibration's covariance widens the test's tolerance);
         its hard iron's σ should it be wrong is the config's. Nothing else of the state changes."""
         prior = dataclasses.replace(prior, hard_iron_sd_t=self.config.hard_iron_sd_t)
+        self.prior = prior
+        self.scanned = self.lag.late(RESOLUTION_S)  # the lag the calibration's windows are taken at (None: fit's)
         cfg = self.config
         on = cfg.calibrate or cfg.test
         self.cal = OnlineMagCalibrator(prior, cfg.soft_iron_model, fixed=not cfg.calibrate) if on else None
@@ -184,8 +189,9 @@ class MagFrontEnd:
 
     @property
     def late_s(self) -> float | None:
-        """s; the lag of a field the lag scan finds late (beyond the latency fit's range), else None."""
-        return self.lag.late_s
+        """s; the lag of a field the lag scan finds late (beyond its resolution: the scan compensates it, exactly,
+        for every estimator), else None."""
+        return self.lag.late(RESOLUTION_S)
 
     # -- restarts and state ------------------------------------------------------------------------------------
     def restart(self) -> None:
@@ -203,12 +209,12 @@ class MagFrontEnd:
     def snapshot(self) -> FrontEndState:
         """The whole state, as a record independent of this front end (:meth:`restore` takes it back)."""
         return copy.deepcopy(FrontEndState(self.cal, self.latency, self.delays, self.lag, self.tilt.q, self.seen,
-                                           self.follower, self.trusted))
+                                           self.follower, self.trusted, self.scanned))
 
     def restore(self, state: FrontEndState) -> None:
         s = copy.deepcopy(state)
         self.cal, self.latency, self.delays, self.lag, self.tilt.q = s.cal, s.latency, s.delays, s.lag, s.tilt
-        self.seen, self.follower, self.trusted = s.seen, s.follower, s.trusted
+        self.seen, self.follower, self.trusted, self.scanned = s.seen, s.follower, s.trusted, s.scanned
 
     # -- per sample --------------------------------------------------------------------------------------------
     def _sample(self, delta: Quat, rv: Vec, dt: float, raw: Vec | None, q: Quat | None,
@@ -216,14 +222,18 @@ class MagFrontEnd:
         """The kernel of both ways in: the raw reading through the calibration (the windows end at the latency
         estimate), then this sample into the latency fit (with the field where ``undisturbed``)."""
         lat = self.latency
-        late = self.lag.late_s
+        late = self.late_s
+        if moved(self.scanned, late) and self.cal is not None:  # windows taken at another lag: the calibration
+            self.set_prior(self.prior)  # anew, and the filters check their heading against the field now compensated
+            self.follower.pending = True
         u = raw
         if self.cal is not None:
             delay = lat.delay(self.latency_settings.start_s) if late is None else late
             u = self.cal.update(delta, dt, raw, delay, q, lat.sd(DELAY_SD_S))
         if self.latency_settings.estimate or self.cal is not None:
             lat.add(delta, rv, dt, u if undisturbed else None)
-        self.lag.add(delta, dt, u)
+        self.lag.add(delta, dt, raw if self.cal is None else configured(self.prior, raw))
+        self.lag.track_doubt(q, dt)
         return u
 
     def step(self, delta: Quat, rv: Vec, dt: float, raw: Vec | None, q: Quat, undisturbed: bool) -> FieldOut:
@@ -239,21 +249,26 @@ class MagFrontEnd:
         ls = self.latency_settings
         if ls.compensate and (ls.estimate or ls.start_s > 0.0):
             r = self.delays.rotation(delta, dt, self.delay_s)
-            if u is not None and self.lag.late_s is None:
+            if u is not None and self.late_s is None:
                 u = rotate((r[0], -r[1], -r[2], -r[3]), u)
         return FieldOut(self._late(u), switched)
 
     def _late(self, u: Vec | None) -> Vec | None:
-        """A field the lag scan finds later than the estimator compensates itself, rotated back over the scanned lag
-        (:mod:`.lag`); else ``u``."""
-        covered = MAX_DELAY if self.latency_settings.compensate else RESOLUTION_S
-        late = self.lag.late(covered)
+        """A field the lag scan finds late (beyond its resolution), rotated back over the scanned lag (:mod:`.lag`,
+        exact; the latency fit is first order and sees a few tens of ms); else ``u``."""
+        late = self.late_s
         return u if late is None or u is None else self.lag.compensated(u, late)
 
     def heading_sd(self, q: Quat, field_world_t: Vec) -> float:
         """rad; the σ the calibration adds to the heading of this sample's field (``q`` its attitude,
         ``field_world_t`` the calibrated field in the world frame, T); 0 without the online calibration."""
         return self.cal.heading_sd_rad(q, field_world_t) if self.cal is not None else 0.0
+
+    @property
+    def timing_sd(self) -> float:
+        """rad; the heading's doubt from the field's timing while the lag scan had not resolved it
+        (:attr:`.lag.LagScan.doubt_sd`): the reported σ carries it; the estimators weigh the field without it."""
+        return self.lag.doubt_sd
 
     def field_sd_t(self) -> float:
         """T; the calibrated field's σ in its worst direction (0 while the configured calibration is used, and
@@ -273,6 +288,7 @@ class MagFrontEnd:
         assert cal is not None
         out: list[Vec | None] = []
         sd: list[float] = []
+        timing: list[float] = []
         realign: list[Realign] = []
         for i, ((ax, ay, az), (gx, gy, gz), h, m) in enumerate(zip(acc, gyr, dt, mag, strict=True)):
             field = None if m is None or not (m[0] or m[1] or m[2]) else (m[0], m[1], m[2])
@@ -280,12 +296,14 @@ class MagFrontEnd:
             if not self.seen:  # nothing before the first field (a filter fed one sample at a time does not call it)
                 out.append(None)
                 sd.append(0.0)
+                timing.append(self.lag.doubt_sd)
                 continue
             rv = (gx * h, gy * h, gz * h)
             if not math.isfinite(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]):
                 cal.restart()  # a turn no window can hold (a degenerate gyro sample): the open window goes
                 out.append(None)
                 sd.append(0.0)
+                timing.append(self.lag.doubt_sd)
                 continue
             delta = from_rotvec(*rv)
             q = self.tilt.step(delta, h, ax, ay, az)
@@ -298,4 +316,24 @@ class MagFrontEnd:
                 realign.append(event)
             out.append(u)
             sd.append(s)
-        return FieldRows(out, np.asarray(sd, dtype=float), tuple(realign))
+            timing.append(self.lag.doubt_sd)
+        return FieldRows(out, np.asarray(sd, dtype=float), tuple(realign), np.asarray(timing, dtype=float))
+
+
+def configured(prior: MagCalPrior, raw: Vec | None) -> Vec | None:
+    """The raw field (T) through the configured (or saved) calibration, ``S (m − h)``: what the lag scan reads, so
+    that an online estimate taken at a wrong lag never blurs the scan that finds the lag."""
+    if raw is None:
+        return None
+    h, s = prior.hard_iron_t, prior.soft_iron
+    d = (raw[0] - h[0], raw[1] - h[1], raw[2] - h[2])
+    return (s[0] * d[0] + s[1] * d[1] + s[2] * d[2], s[3] * d[0] + s[4] * d[1] + s[5] * d[2],
+            s[6] * d[0] + s[7] * d[1] + s[8] * d[2])
+
+
+def moved(before: float | None, now: float | None) -> bool:
+    """Whether the lag the calibration's windows are taken at moved by more than the scan's resolution (or between
+    the latency fit's and the scan's): its windows then hold fields of another instant."""
+    if before is None or now is None:
+        return before is not now
+    return abs(now - before) > RESOLUTION_S

@@ -12,7 +12,14 @@ estimate; the field is *late* — beyond what the latency fit can see and compen
 least residual of the lags the latency fit covers. The front end then rotates the field back over the scanned lag (the
 gyro's rotation over it, exact) for every estimator, and the calibration's windows take their ends there; the
 magnetometer's monitor warns. A hard iron left in the field adds the same kind of term to every lag's residual, so it
-blurs the minimum without moving it much; the front end scans the field as calibrated (before the compensation).
+blurs the minimum without moving it much; the front end scans the field through the configured (or saved)
+calibration, so that an online estimate taken at a wrong lag cannot blur it.
+
+Until the scan has resolved the lag the field's timing is unknown within 0 … ``max_lag_s``, and a field read ``τ``
+late turns the heading by the rotation about the vertical over ``τ``: ``|ω_v| · max_lag_s / √3`` (``τ`` uniform over
+the range; 0 at rest, where a lag does nothing). A heading filter keeps what such a field taught it for about its
+field time constant, so the doubt (:attr:`LagScan.doubt_sd`, which the heading's σ carries) is the largest of these
+since, decaying with :data:`DOUBT_TAU_S`, also after the scan has resolved the lag and the compensation begins.
 """
 
 from __future__ import annotations
@@ -37,6 +44,9 @@ MIN_WINDOWS = 8
 CLEAR = 0.5
 #: s; a lag the scan tells from none: three steps of its grid (the sensor's own latency, BROAD's 10 ms, is not one)
 RESOLUTION_S = 3 * STEP_S
+#: s; the heading filters' field time constant (VQF's tauMag 9 s; RIANN's heading stage corrects over seconds): how
+#: long a heading keeps what a field of unknown timing taught it
+DOUBT_TAU_S = 10.0
 _COS_MIN_TURN = math.cos(math.radians(MIN_TURN_DEG) / 2.0)
 
 
@@ -56,10 +66,15 @@ class LagScan:
         self.sums = [0.0] * len(self.lags)
         self.windows = 0.0  # forgotten count
         self.lag_s: float | None = None  # the lag of the least sum (None: too few windows)
+        self.rate: Vec = (0.0, 0.0, 0.0)  # rad/s, the last sample's rotation rate (sensor frame)
+        self.doubt_sd = 0.0  # rad; the heading's doubt from the field's unknown timing (track_doubt)
         self._late: dict[float, float | None] = {}  # late_s per range, since the last window
 
     def add(self, delta: Quat, dt: float, mag: Vec | None) -> None:
         """One sample: its gyro increment over ``dt`` s, its field (any unit; None: none)."""
+        if dt > 0.0:  # the rotation rate (rad/s, sensor frame), from the increment's vector part
+            k = 2.0 / dt if delta[0] >= 0.0 else -2.0 / dt
+            self.rate = (delta[1] * k, delta[2] * k, delta[3] * k)
         self.t += dt
         self.q = normalized(qmul(self.q, delta))
         self._ts.append(self.t)
@@ -101,6 +116,17 @@ class LagScan:
             k = min(range(len(self.lags)), key=self.sums.__getitem__)
             self.lag_s = self.lags[k]
         self._late = {}
+
+    def track_doubt(self, q: Quat | None, dt: float) -> None:
+        """Once per sample, after :meth:`add`: the heading's doubt from the field's unknown timing at the attitude
+        ``q`` (sensor → world; None: not yet known, the sensor's z taken as up) while the scan has not resolved the
+        lag, kept as the largest since, decaying with :data:`DOUBT_TAU_S` (module docstring)."""
+        now = 0.0
+        if self.lag_s is None:
+            up = (0.0, 0.0, 1.0) if q is None else rotate((q[0], -q[1], -q[2], -q[3]), (0.0, 0.0, 1.0))
+            w_v = self.rate[0] * up[0] + self.rate[1] * up[1] + self.rate[2] * up[2]
+            now = min(abs(w_v) * self.lags[-1] / math.sqrt(3.0), 0.5 * math.pi)
+        self.doubt_sd = max(now, self.doubt_sd * math.exp(-dt / DOUBT_TAU_S))
 
     @property
     def late_s(self) -> float | None:

@@ -86,7 +86,7 @@ class Heading:
             self.psi = math.remainder(self.psi + self.mag.step(qo, delta, dt, mag, tilt_sd), math.tau)
             gain[i] = self.mag.gain
             dip[i] = self.mag.ref_dip
-            self._cal_sd[i], self._doubt_sd[i] = self.mag.s.cal_sd, self.mag.s.doubt_sd
+            self._cal_sd[i], self._doubt_sd[i] = self.mag.s.cal_sd, self.mag.doubt_sd()
         w, x, y, z = qmul(about_z(self.psi), qc)
         n = math.sqrt(w * w + x * x + y * y + z * z)
         if w < 0.0:  # sign convention: w >= 0
@@ -143,7 +143,7 @@ class Heading:
             psi += step(qo, delta[i], dt[i], None if mag is None else mag[i], tilt_sd[i])
             gain[first + i] = self.mag.gain
             dip[first + i] = self.mag.ref_dip
-            self._cal_sd[first + i], self._doubt_sd[first + i] = self.mag.s.cal_sd, self.mag.s.doubt_sd
+            self._cal_sd[first + i], self._doubt_sd[first + i] = self.mag.s.cal_sd, self.mag.doubt_sd()
             out[i] = psi
         return out
 

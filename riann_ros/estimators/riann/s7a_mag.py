@@ -195,6 +195,12 @@ class MagHeading:
             s.cal_sd, s.switch = 0.0, True
         return out.field_t
 
+    def doubt_sd(self) -> float:
+        """rad; the heading's doubt stage 8 reports beside the calibration's: the configured calibration's while it
+        is used (:attr:`HeadingState.doubt_sd`) and the field's timing while the lag scan had not resolved it
+        (:attr:`~riann_ros.magcal.frontend.MagFrontEnd.timing_sd`); the heading weighs the field without them."""
+        return math.hypot(self.s.doubt_sd, self.front.timing_sd)
+
     def _weight(self, q: Quat, mw: Vec) -> float:
         """This field heading's weight relative to a calibrated one's, ``σ_m²/(σ_m² + σ_c²)`` (1 while the
         configured calibration holds, or without the online calibration; the σ its doubt leaves then goes to
