@@ -113,7 +113,8 @@ def test_a_right_configured_calibration_is_used_as_it_is(name):
 
 def test_the_heading_sigma_says_the_configured_calibration_is_not_yet_tested():
     """At rest nothing tests the configured calibration: the heading uses it, and its σ says it is unverified; the
-    first turns that agree with it bring the σ down to a calibrated field's."""
+    first turns that agree with it bring the σ down to a calibrated field's (once the doubt of the field's timing,
+    which turns too slow for the lag scan leave, has decayed: magcal/lag.py)."""
     rec, _ = robot(turns=2)
     raw = distort(rec.quat_ref, np.zeros(3), noise_t=0.4e-6, seed=2)
     s = stream_of("riann")
@@ -121,7 +122,7 @@ def test_the_heading_sigma_says_the_configured_calibration_is_not_yet_tested():
     sig = np.degrees(s.batch_sigma[:, 1])
     t = (rec.stamps_ns - rec.stamps_ns[0]) * 1e-9
     assert np.all(sig[(t > 1.0) & (t < 3.0)] > 20.0)  # the initial rest: unverified
-    assert np.all(sig[t > 30.0] < 3.5)  # verified: the field heading's own σ (2.5°) and the tilt's share
+    assert np.all(sig[t > t[-1] - 5.0] < 3.5)  # verified: the field heading's own σ (2.5°) and the tilt's share
     assert s.mag_cal_status().prior_holds
 
 

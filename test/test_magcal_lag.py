@@ -1,6 +1,6 @@
-"""The magnetometer's lag scanned over 0 … mag_timeout (riann_ros.magcal.lag): a field 300 ms late is found and
-rotated back over its lag for every estimator (the heading right again), a lag the latency fit covers changes
-nothing, and the lag monitor says so."""
+"""The magnetometer's lag scanned over 0 … mag_timeout (riann_ros.magcal.lag): a field 100 or 300 ms late is found and
+rotated back over its lag for every estimator (the heading right again), a lag within the scan's resolution changes
+nothing, the heading σ carries the field's timing until the scan has resolved it, and the lag monitor says so."""
 
 from __future__ import annotations
 
@@ -35,7 +35,30 @@ def test_a_field_300_ms_late_is_found_and_compensated(name):
     assert lag.level == Level.WARN and "300 ms" in lag.message
 
 
-def test_a_lag_the_latency_fit_covers_changes_nothing():
+@pytest.mark.parametrize("name", ["riann", "vqf"])
+def test_a_field_100_ms_late_is_compensated_exactly(name):
+    """100 ms is inside the latency fit's range, but the fit is first order: the scan's exact compensation takes it."""
+    s, rms = _run(name, 100)
+    assert s.front is not None and s.front.late_s == pytest.approx(0.1, abs=0.015)
+    assert rms < 3.0
+
+
+def test_until_the_lag_is_resolved_the_heading_sigma_carries_the_field_timing():
+    """A field 300 ms late, from the first reading: before the scan has its windows the heading learns from a field of
+    the wrong instant, and the σ it reports covers that error (the doubt decays once the lag is resolved)."""
+    rec = moving(duration=40.0, seed=3)
+    mag = delayed_field(rec, round(0.3 * rec.rate_hz))
+    s = EstimatorStream(create("vqf"), GateConfig(nominal_rate=rec.rate_hz))
+    q, ok = s.process_batch(rec.stamps_ns, rec.acc, rec.gyr, mag)
+    err = np.degrees(np.abs(quat.heading_error(rec.quat_ref, q)))
+    sig = np.degrees(s.batch_sigma[:, 1])
+    assert s.front is not None and s.front.lag.doubt_sd < 0.1  # resolved, and decayed by the end
+    wrong = ok & (err > 5.0)  # where the field's wrong instant mattered
+    assert wrong.sum() > 50
+    assert np.mean(err[wrong] <= 1.96 * sig[wrong]) >= 0.9  # there σ says so
+
+
+def test_a_lag_within_the_scan_s_resolution_changes_nothing():
     s, _ = _run("vqf", 30, seconds=30.0)
     assert s.front is not None and s.front.late_s is None
     assert s.front.lag.lag_s == pytest.approx(0.03, abs=0.015)
