@@ -7,13 +7,14 @@ any lag up to ``mag_timeout``, exactly: a field fixed in the world satisfies ``R
 readings ``m₀``, ``m₁`` taken ``τ`` before their stamps ``t₀``, ``t₁`` and the gyro's attitude ``R``. Over windows of
 :data:`WINDOW_S` with at least :data:`MIN_TURN_DEG` of rotation, each lag of a grid (:data:`STEP_S`) gets the residual
 ``|m₁ − R(t₁ − τ)ᵀ R(t₀ − τ) m₀|² / |m₀|²``, summed with forgetting (:data:`TAU_S`). The lag with the least sum is the
-estimate; the field is *late* — beyond what the latency fit can see and compensate — when that lag is above
-:data:`~.latency.MAX_DELAY`, after :data:`MIN_WINDOWS` windows, and its residual is below :data:`CLEAR` times the
-least residual of the lags the latency fit covers. The front end then rotates the field back over the scanned lag (the
-gyro's rotation over it, exact) for every estimator, and the calibration's windows take their ends there; the
-magnetometer's monitor warns. A hard iron left in the field adds the same kind of term to every lag's residual, so it
-blurs the minimum without moving it much; the front end scans the field through the configured (or saved)
-calibration, so that an online estimate taken at a wrong lag cannot blur it.
+estimate; the field is *late* when that lag, after :data:`MIN_WINDOWS` windows, is beyond a range ``covered``
+(:meth:`LagScan.late`; the front end asks beyond the scan's resolution, :data:`RESOLUTION_S`: the latency fit sees up to
+:data:`~.latency.MAX_DELAY` but to first order) and its residual is below :data:`CLEAR` times the least residual
+within that range. The front end then rotates the field back over the scanned lag (the gyro's rotation over it,
+exact) for every estimator, and the calibration's windows take their ends there; the magnetometer's monitor warns.
+A hard iron left in the field adds the same kind of term to every lag's residual, so it blurs the minimum without
+moving it much; the front end scans the field through the configured (or saved) calibration, so that an online
+estimate taken at a wrong lag cannot blur it.
 
 Until the scan has resolved the lag the field's timing is unknown within 0 … ``max_lag_s``, and a field read ``τ``
 late turns the heading by the rotation about the vertical over ``τ``: ``|ω_v| · max_lag_s / √3`` (``τ`` uniform over
