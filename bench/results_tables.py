@@ -405,9 +405,9 @@ def consensus_uncertainty() -> str:
 def consensus_figures() -> str:
     """README: as recorded, and how many conditions meet the acceptance."""
     rows = _with_consensus("perturbed", "consensus", scenario="as-recorded", perturbation="none")
+    run = load("consensus")  # the scenarios and conditions the consensus ran
     met = [_met(_with_consensus("perturbed", "consensus", scenario=s, perturbation=c))
-           for s in ("as-recorded", "realistic")
-           for c in _with_consensus("perturbed", "consensus", scenario=s).ordered("perturbation")]
+           for s in run.ordered("scenario") for c in run.where(scenario=s).ordered("perturbation")]
     return (f"as recorded {rows.mean_max('consensus')}° (RIANN {rows.mean_max('riann')}°, VQF "
             f"{rows.mean_max('vqf')}°); the mean at most the better of the two in {sum(m[0] == 'yes' for m in met)} "
             f"of {len(met)} conditions, the worst trial within 1.05× RIANN's in {sum(m[1] == 'yes' for m in met)}")
