@@ -128,7 +128,8 @@ def robot_bag(tmp_path, seconds: float = 40.0):
 
 def test_lag_and_scale_through_the_command_line(tmp_path, capsys):
     """riann-bag-eval -p magnetic:lag:300ms -p gyro:scale:57.2958 on a 9D recording of a robot turning about the
-    vertical: the late field and the unit slip each turn the heading; results.json records what each did; the
+    vertical: the late field (until the lag scan compensates it) and the unit slip each turn the heading; results.json
+    records what each did; the
     --perturb help names both."""
     bag = robot_bag(tmp_path)
     out = tmp_path / "eval"
@@ -140,7 +141,8 @@ def test_lag_and_scale_through_the_command_line(tmp_path, capsys):
     rows = {r["perturbation"]: r for r in data["results"]}
     assert sorted(rows) == sorted(conditions) and all(r["sensors"] == "9D" for r in rows.values())
     base, late, slip = rows["none"], rows["magnetic:lag:300ms"], rows["gyro:scale:57.2958"]
-    assert base["heading_rmse_deg"] < 1.0 and late["heading_rmse_deg"] > base["heading_rmse_deg"] + 3.0
+    # the late field turns the heading until the lag scan has its windows and compensates it (magcal/lag.py)
+    assert base["heading_rmse_deg"] < 1.0 and late["heading_rmse_deg"] > base["heading_rmse_deg"] + 1.0
     assert abs(late["rmse_deg"] - base["rmse_deg"]) < 0.1  # the inclination does not use the field
     assert slip["heading_rmse_deg"] > 45.0  # turns about the vertical only: the slip turns the heading
     did = data["sequences"][0]["perturbations"]

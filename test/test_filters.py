@@ -59,9 +59,11 @@ def test_registry(name: str) -> None:
     assert {MadgwickEstimator, MahonyEstimator, VqfEstimator} >= {cls}
     for spec in cls.PARAMS:
         assert spec.validate(spec.default) == spec.default
-        # VQF has no setter for biasClip; the front end is set up at the first sample
+        # VQF has no setter for biasClip; the front end is set up at the first sample; VQF's σ model tracks its
+        # state from the first sample
         assert spec.runtime or spec.name in ("bias_clip", "gyro_bias_estimation", "bias_sigma_init",
-                                             "mag_calibration", "mag_hard_iron_sd", "mag_soft_iron_model")
+                                             "mag_calibration", "mag_hard_iron_sd", "mag_soft_iron_model",
+                                             "sigma_model")
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -182,6 +184,7 @@ def test_defaults() -> None:
         "bias_clip": p["biasClip"],
         "tau_mag": p["tauMag"],
         "mag_dist_rejection": p["magDistRejectionEnabled"],
+        "sigma_model": "constant",
         **magcal,
     }
 

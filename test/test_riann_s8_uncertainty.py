@@ -200,7 +200,8 @@ def test_riann_heading_sigma_after_a_hole_and_a_gap() -> None:
     assert np.allclose(est2.sigma(np.zeros(100, dtype=bool))[:, 1], math.pi)
     est2.update_batch(b.acc[200:], b.gyr[200:], b.dt[200:], b.mag[200:])
     yg = est2.last.yaw_features
-    assert yg[0, 0] == USED and (yg[:, 0] != HELD).all() and yg[0, 1] == 0.0 and yg[0, 2] == 0.0
+    # the carried share: only the doubt of the field's timing the 2° turn in the hole left (magcal/lag.py)
+    assert yg[0, 0] == USED and (yg[:, 0] != HELD).all() and yg[0, 1] == 0.0 and yg[0, 2] < math.radians(0.5)
 
 
 def test_riann_heading_sigma_stays_wide_when_the_field_returns_only_after_the_reacquisition() -> None:
