@@ -129,8 +129,7 @@ def robot_bag(tmp_path, seconds: float = 40.0):
 def test_lag_and_scale_through_the_command_line(tmp_path, capsys):
     """riann-bag-eval -p magnetic:lag:300ms -p gyro:scale:57.2958 on a 9D recording of a robot turning about the
     vertical: the late field (until the lag scan compensates it) and the unit slip each turn the heading; results.json
-    records what each did; the
-    --perturb help names both."""
+    records what each did; the --perturb help names both."""
     bag = robot_bag(tmp_path)
     out = tmp_path / "eval"
     conditions = ["none", "magnetic:lag:300ms", "gyro:scale:57.2958"]
