@@ -62,12 +62,15 @@ def nocal_table(load: Callable[[str], Any]) -> str:
     rows = load("nocal").where(sensors="9D", perturbation="magnetic:offset:20,0,-10")
     body = []
     for est in ESTIMATORS:
-        label = f"{est}:mag_calibration=false"
-        g = _heading_scores(rows.where(estimator=label))
-        body.append([NAMES[est], rows.mean_max(label, "heading_rmse_deg"), _fmt(g["yaw_mag"]), _fmt(g["yaw_held"]),
-                     _fmt(g["yaw_nees"], 2), "yes" if (g["yaw_mag"] or 0.0) >= COVER_MIN else "**no**"])
-    return _table(["estimator (`mag_calibration=false`)", "heading mean / worst °", "coverage 95 %, field used",
-                   "held", "NEES", "coverage ≥ 85 %"], body)
+        label = f"{est}(mag_calibration=False)"  # the evaluator's label of the spec
+        mine = rows.where(estimator=label)
+        g = _heading_scores(mine)
+        n_mag, n_held = sum(r["n_yaw_mag"] or 0 for r in mine.rows), sum(r["n_yaw_held"] or 0 for r in mine.rows)
+        both = ((g["yaw_mag"] or 0.0) * n_mag + (g["yaw_held"] or 0.0) * n_held) / max(n_mag + n_held, 1)
+        body.append([NAMES[est], rows.mean_max(label, "heading_rmse_deg"), _fmt(both), _fmt(g["yaw_mag"]),
+                     _fmt(g["yaw_held"]), _fmt(g["yaw_nees"], 2), "yes" if both >= COVER_MIN else "**no**"])
+    return _table(["estimator (`mag_calibration=false`)", "heading mean / worst °", "coverage 95 %, every heading",
+                   "field used", "held", "NEES", "coverage ≥ 85 %"], body)
 
 
 def recorded_table(load: Callable[[str], Any]) -> str:
