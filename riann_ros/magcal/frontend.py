@@ -165,6 +165,7 @@ class MagFrontEnd:
         its hard iron's σ should it be wrong is the config's. Nothing else of the state changes."""
         prior = dataclasses.replace(prior, hard_iron_sd_t=self.config.hard_iron_sd_t)
         self.prior = prior
+        self.relag = False  # the lag the field is compensated by moved: the next field checks the heading
         self.scanned = self.lag.late(RESOLUTION_S)  # the lag the calibration's windows are taken at (None: fit's)
         cfg = self.config
         on = cfg.calibrate or cfg.test
@@ -224,8 +225,8 @@ class MagFrontEnd:
         lat = self.latency
         late = self.late_s
         if moved(self.scanned, late) and self.cal is not None:  # windows taken at another lag: the calibration
-            self.set_prior(self.prior)  # anew, and the filters check their heading against the field now compensated
-            self.follower.pending = True
+            self.set_prior(self.prior)  # anew, and the heading is checked against the field now compensated
+            self.relag = True
         u = raw
         if self.cal is not None:
             delay = lat.delay(self.latency_settings.start_s) if late is None else late
@@ -242,7 +243,8 @@ class MagFrontEnd:
         attitude (sensor → world; only its tilt is read), ``undisturbed`` whether the estimator's disturbance test
         passed the last field."""
         u = self._sample(delta, rv, dt, raw, q, undisturbed)
-        switched = self.cal is not None and self.trusted != self.cal.trusted
+        switched = self.cal is not None and (self.trusted != self.cal.trusted or (self.relag and u is not None))
+        self.relag = self.relag and u is None
         if switched:
             assert self.cal is not None
             self.trusted = self.cal.trusted
@@ -284,8 +286,7 @@ class MagFrontEnd:
     def rows(self, acc: list, gyr: list, dt: list, mag: list) -> FieldRows:
         """The classical filters' way in: ``acc``, ``gyr`` (bias-corrected where the filter corrects it), ``dt`` and
         the raw ``mag`` rows (a zero row or None: no field), as lists of plain floats → :class:`FieldRows`."""
-        cal = self.cal
-        assert cal is not None
+        assert self.cal is not None
         out: list[Vec | None] = []
         sd: list[float] = []
         timing: list[float] = []
@@ -300,7 +301,7 @@ class MagFrontEnd:
                 continue
             rv = (gx * h, gy * h, gz * h)
             if not math.isfinite(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]):
-                cal.restart()  # a turn no window can hold (a degenerate gyro sample): the open window goes
+                self.cal.restart()  # a turn no window can hold (a degenerate gyro sample): the open window goes
                 out.append(None)
                 sd.append(0.0)
                 timing.append(self.lag.doubt_sd)
@@ -308,10 +309,13 @@ class MagFrontEnd:
             delta = from_rotvec(*rv)
             q = self.tilt.step(delta, h, ax, ay, az)
             u = self._late(self._sample(delta, rv, h, field, q, True))
+            cal = self.cal  # (the sample may have started the calibration anew: a lag the scan found moved)
             s = 0.0 if u is None or q is None else cal.heading_sd_rad(q, rotate(q, u))
             if s >= math.pi and not cal.fixed:  # the field's heading is unknown (the last window contradicted it)
                 u, s = None, 0.0
             event = self.follower.event(i, cal.changes, u is not None, s)
+            if self.relag and u is not None:  # the field's instant changed: checked against its own σ only
+                event, self.relag = Realign(i, 0.0), False
             if event is not None:
                 realign.append(event)
             out.append(u)
