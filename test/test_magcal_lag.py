@@ -71,3 +71,21 @@ def test_the_scan_needs_rotation():
     for _ in range(3000):
         scan.add((1.0, 0.0, 0.0, 0.0), 0.01, tuple(rng.normal(0.0, 1e-6, 3) + np.array([20e-6, 0.0, -40e-6])))
     assert scan.windows == 0.0 and scan.lag_s is None and scan.late_s is None
+
+
+@pytest.mark.parametrize("name", ["vqf", "madgwick", "riann"])
+def test_a_late_field_gives_the_same_outputs_in_one_batch_as_in_chunks(name):
+    """When the scan finds the lag the calibration starts anew mid-batch: every later row reads the new calibrator,
+    so one batch gives what a node's chunks give (a batch once kept the old calibrator to its end and dropped the
+    field)."""
+    rec = moving(duration=40.0, seed=3)
+    mag = delayed_field(rec, round(0.3 * rec.rate_hz))
+    whole = EstimatorStream(create(name), GateConfig(nominal_rate=rec.rate_hz))
+    q_whole, _ = whole.process_batch(rec.stamps_ns, rec.acc, rec.gyr, mag)
+    parts = EstimatorStream(create(name), GateConfig(nominal_rate=rec.rate_hz))
+    step = round(rec.rate_hz)
+    q_parts = np.concatenate([parts.process_batch(rec.stamps_ns[a:a + step], rec.acc[a:a + step],
+                                                  rec.gyr[a:a + step], mag[a:a + step])[0]
+                              for a in range(0, len(rec), step)])
+    assert whole.front is not None and whole.front.late_s is not None
+    np.testing.assert_allclose(q_whole, q_parts, atol=1e-9)
