@@ -361,23 +361,10 @@ def consensus_conditions(scenario: str) -> Callable[[], str]:
     return lambda: _consensus_table(_with_consensus("perturbed", "consensus", scenario=scenario), "perturbation", str)
 
 
-def consensus_rates() -> str:
-    rows = _with_consensus("rates", "consensus_rates")
-    return _consensus_table(Rows(tuple(sorted(rows.rows, key=lambda r: r["rate"]))), "rate", lambda f: f"{f:g} Hz")
 
 
-def consensus_streams() -> str:
-    """The 200 Hz streams of the sample-delay section (the slower ones are in the perturbed tables)."""
-    rows = Rows(tuple(r for r in _with_consensus("sample_delay", "consensus_200").rows
-                      if r["perturbation"].startswith("rate:200")))
-    return _consensus_table(rows, "perturbation", str)
 
 
-def consensus_9d() -> str:
-    """9D as recorded: heading and inclination, RIANN, VQF and the consensus."""
-    rows = _with_consensus("mag9d", "consensus_9d", sensors="9D")
-    body = [[NAMES[e], rows.mean_max(e, "heading_rmse_deg"), rows.mean_max(e)] for e in CONSENSUS]
-    return _table(["estimator (9D, as recorded)", "heading mean / worst", "inclination mean / worst"], body)
 
 
 def consensus_uncertainty() -> str:
@@ -723,10 +710,6 @@ TABLES: dict[str, Callable[[], str]] = {
     "mag-trials": mag_trials,
     "uncertainty-inclination": uncertainty_inclination,
     "consensus-as-recorded": consensus_conditions("as-recorded"),
-    "consensus-realistic": consensus_conditions("realistic"),
-    "consensus-rates": consensus_rates,
-    "consensus-streams": consensus_streams,
-    "consensus-9d": consensus_9d,
     "consensus-uncertainty": consensus_uncertainty,
     "readme-consensus": consensus_figures,
     "consensus-synthetic": consensus_synthetic,
