@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from riann_ros.magcal.changes import ChangeFollower, Realign
+from riann_ros.magcal.input import calibrated
 from riann_ros.magcal.lag import RESOLUTION_S, LagScan
 from riann_ros.magcal.latency import DelayHistory, LatencyEstimator
 from riann_ros.magcal.online import OnlineMagCalibrator
@@ -234,7 +235,7 @@ class MagFrontEnd:
         if self.latency_settings.estimate or self.cal is not None:
             lat.add(delta, rv, dt, u if undisturbed else None)
         self.lag.add(delta, dt, raw if self.cal is None else configured(self.prior, raw))
-        self.lag.track_doubt(q, dt)
+        self.lag.track_doubt(q, rv, dt)
         return u
 
     def step(self, delta: Quat, rv: Vec, dt: float, raw: Vec | None, q: Quat, undisturbed: bool) -> FieldOut:
@@ -327,12 +328,7 @@ class MagFrontEnd:
 def configured(prior: MagCalPrior, raw: Vec | None) -> Vec | None:
     """The raw field (T) through the configured (or saved) calibration, ``S (m − h)``: what the lag scan reads, so
     that an online estimate taken at a wrong lag never blurs the scan that finds the lag."""
-    if raw is None:
-        return None
-    h, s = prior.hard_iron_t, prior.soft_iron
-    d = (raw[0] - h[0], raw[1] - h[1], raw[2] - h[2])
-    return (s[0] * d[0] + s[1] * d[1] + s[2] * d[2], s[3] * d[0] + s[4] * d[1] + s[5] * d[2],
-            s[6] * d[0] + s[7] * d[1] + s[8] * d[2])
+    return None if raw is None else calibrated(prior.hard_iron_t, prior.soft_iron, raw[0], raw[1], raw[2])
 
 
 def moved(before: float | None, now: float | None) -> bool:

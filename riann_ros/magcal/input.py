@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 from typing import TypeVar
@@ -202,6 +203,14 @@ def rot_z(angle_rad: float) -> NDArray[np.float64]:
     return np.array([math.cos(0.5 * angle_rad), 0.0, 0.0, math.sin(0.5 * angle_rad)])
 
 
+def calibrated(h: Sequence[float], s: Sequence[float], x: F, y: F, z: F) -> tuple[F, F, F]:
+    """``S (m − h)``: a field (floats, or columns of fields as arrays) through the hard iron ``h`` and the row-major
+    soft iron ``s`` of a calibration, as the parameters ``mag_hard_iron`` and ``mag_soft_iron`` mean them."""
+    dx, dy, dz = x - h[0], y - h[1], z - h[2]
+    return (s[0] * dx + s[1] * dy + s[2] * dz, s[3] * dx + s[4] * dy + s[5] * dz,
+            s[6] * dx + s[7] * dy + s[8] * dz)
+
+
 class MagInput:
     """What the stream does with the paired field before and after the estimator (see the module docstring).
 
@@ -228,10 +237,7 @@ class MagInput:
         c = self.config
         if self.raw or (c.mag_hard_iron == (0.0, 0.0, 0.0) and c.mag_soft_iron == IDENTITY_9):
             return x, y, z
-        h, s = c.mag_hard_iron, c.mag_soft_iron
-        dx, dy, dz = x - h[0], y - h[1], z - h[2]
-        return (s[0] * dx + s[1] * dy + s[2] * dz, s[3] * dx + s[4] * dy + s[5] * dz,
-                s[6] * dx + s[7] * dy + s[8] * dz)
+        return calibrated(c.mag_hard_iron, c.mag_soft_iron, x, y, z)
 
     def prepare_batch(self, mag: ArrayLike | None) -> NDArray[np.float64] | None:
         """Fields (N, 3) for the estimator, NaN rows = none; None when no field at all is passed (the reference of

@@ -67,15 +67,11 @@ class LagScan:
         self.sums = [0.0] * len(self.lags)
         self.windows = 0.0  # forgotten count
         self.lag_s: float | None = None  # the lag of the least sum (None: too few windows)
-        self.rate: Vec = (0.0, 0.0, 0.0)  # rad/s, the last sample's rotation rate (sensor frame)
         self.doubt_sd = 0.0  # rad; the heading's doubt from the field's unknown timing (track_doubt)
         self._late: dict[float, float | None] = {}  # late_s per range, since the last window
 
     def add(self, delta: Quat, dt: float, mag: Vec | None) -> None:
         """One sample: its gyro increment over ``dt`` s, its field (any unit; None: none)."""
-        if dt > 0.0:  # the rotation rate (rad/s, sensor frame), from the increment's vector part
-            k = 2.0 / dt if delta[0] >= 0.0 else -2.0 / dt
-            self.rate = (delta[1] * k, delta[2] * k, delta[3] * k)
         self.t += dt
         self.q = normalized(qmul(self.q, delta))
         self._ts.append(self.t)
@@ -118,14 +114,15 @@ class LagScan:
             self.lag_s = self.lags[k]
         self._late = {}
 
-    def track_doubt(self, q: Quat | None, dt: float) -> None:
+    def track_doubt(self, q: Quat | None, rv: Vec, dt: float) -> None:
         """Once per sample, after :meth:`add`: the heading's doubt from the field's unknown timing at the attitude
-        ``q`` (sensor → world; None: not yet known, the sensor's z taken as up) while the scan has not resolved the
-        lag, kept as the largest since, decaying with :data:`DOUBT_TAU_S` (module docstring)."""
+        ``q`` (sensor → world; None: not yet known, the sensor's z taken as up), the sample's rotation vector ``rv``
+        over ``dt`` s, while the scan has not resolved the lag, kept as the largest since, decaying with
+        :data:`DOUBT_TAU_S` (module docstring)."""
         now = 0.0
-        if self.lag_s is None:
+        if self.lag_s is None and dt > 0.0:
             up = (0.0, 0.0, 1.0) if q is None else rotate((q[0], -q[1], -q[2], -q[3]), (0.0, 0.0, 1.0))
-            w_v = self.rate[0] * up[0] + self.rate[1] * up[1] + self.rate[2] * up[2]
+            w_v = (rv[0] * up[0] + rv[1] * up[1] + rv[2] * up[2]) / dt
             now = min(abs(w_v) * self.lags[-1] / math.sqrt(3.0), 0.5 * math.pi)
         self.doubt_sd = max(now, self.doubt_sd * math.exp(-dt / DOUBT_TAU_S))
 
