@@ -5,10 +5,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from contextlib import AbstractContextManager, nullcontext
 
 from riann_ros import evaluation as ev
+from riann_ros.cli.eval_outputs import err
 from riann_ros.evaluation import executors
 from riann_ros.evaluation.live import LiveRunner
 from riann_ros.evaluation.runners import Runner
@@ -57,11 +57,7 @@ def runner(args: argparse.Namespace) -> AbstractContextManager[Runner | None]:
     topics = args.live_topics.split(",") if args.live_topics else None
     try:
         replay = DdsReplay(speed=args.speed, input_topic=args.live_input, topics=topics, use_mag=args.use_mag,
-                           mag_topic=args.live_mag, warn=lambda text: _err(f"warning: {text}"))
+                           mag_topic=args.live_mag, warn=lambda text: err(f"warning: {text}"))
     except ReplayError as exc:
         raise ev.EvalError(f"--live: {exc}") from exc
-    return LiveRunner(replay, note=None if args.quiet else _err)
-
-
-def _err(text: str) -> None:
-    print(f"riann-bag-eval: {text}", file=sys.stderr, flush=True)
+    return LiveRunner(replay, note=None if args.quiet else err)

@@ -22,8 +22,9 @@ from riann_ros.evaluation.results import REFERENCE
 from riann_ros.evaluation.scenarios import AS_RECORDED
 
 
-def _err(msg: str) -> None:
-    print(f"riann-bag-eval: {msg}", file=sys.stderr)
+def err(msg: str) -> None:
+    """One line of riann-bag-eval's on stderr (an error, a warning, a note), named after the command."""
+    print(f"riann-bag-eval: {msg}", file=sys.stderr, flush=True)
 
 
 def check(args: argparse.Namespace, inputs: list[str], settings: ev.EvalSettings) -> None:
@@ -103,17 +104,17 @@ def write_out(args: argparse.Namespace, rep: report.Report) -> bool:
     try:
         written = report_files.write_results(args.out, rep, plots=not args.no_plots, replace=args.force or args.resume)
     except outdir.OutputExists as exc:  # written meanwhile by someone else
-        _err(str(exc))
+        err(str(exc))
         return False
     except OSError as exc:
         shards = args.out / store.SHARDS
         kept = f"; the finished inputs are kept in {shards}: --resume writes them once it can" if shards.is_dir() \
             else ""
-        _err(f"--out {args.out}: cannot write the results: {exc.strerror or exc}"
+        err(f"--out {args.out}: cannot write the results: {exc.strerror or exc}"
              + (f" ({exc.filename})" if exc.filename else "") + kept)
         return False
     for problem in written.problems:
-        _err(f"--out {args.out}: {problem}")
+        err(f"--out {args.out}: {problem}")
     print(f"wrote {args.out}/results.csv, results.json, report.md"
           + (f" and {len(written.figures)} plot files" if written.figures else ""))
     return not written.problems

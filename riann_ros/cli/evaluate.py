@@ -51,10 +51,6 @@ def parse_rates(text: str | None) -> list[float | None]:
     return out or [None]
 
 
-def _err(msg: str) -> None:
-    print(f"riann-bag-eval: {msg}", file=sys.stderr)
-
-
 def _settings(args: argparse.Namespace, warnings: list[str] | None = None) -> ev.EvalSettings:
     """The evaluation settings of the command line (ValueError / ImportError on bad usage); ``warnings``: found in the
     inputs already (inputs given twice), the first of its input warnings."""
@@ -124,16 +120,16 @@ def _hooks(args: argparse.Namespace, n_sources: int) -> session.Hooks:
 
     def tuning(text: str) -> None:
         if not args.quiet:
-            _err(f"tuning {text} on {n_sources} input(s), {args.tune_scenario}")
+            eval_outputs.err(f"tuning {text} on {n_sources} input(s), {args.tune_scenario}")
 
     def tuned(best: dict) -> None:
         b = best["best"]
-        _err(f"tuned {best['estimator']} on {args.tune_scenario}: {b['label']} mean {b['mean']:.2f}° "
+        eval_outputs.err(f"tuned {best['estimator']} on {args.tune_scenario}: {b['label']} mean {b['mean']:.2f}° "
              f"max {b['max']:.2f}°")
 
     def note(text: str) -> None:
         if not args.quiet:
-            _err(text)
+            eval_outputs.err(text)
 
     return session.Hooks(tuning=tuning, tuned=tuned, progress=lambda n: Progress(n, enabled=not args.quiet),
                          note=note)
@@ -192,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         with quiet_when_reader_leaves():
             return _main(argv)
     except KeyboardInterrupt as exc:  # its text: what the run kept (_evaluate)
-        _err(str(exc) or "interrupted; no result files written")
+        eval_outputs.err(str(exc) or "interrupted; no result files written")
         return 130
 
 
@@ -218,16 +214,16 @@ def _check_out(args: argparse.Namespace, run: session.EvalRun | None = None) -> 
 def _print_messages(rep: report.Report) -> None:
     """Warnings and failures on stderr, then the summary table on stdout."""
     if rep.settings.series_for not in (None, "*", "all") and not any(r.series for r in rep.results):
-        _err(f"--plot-sequence {rep.settings.series_for!r} matches no evaluated sequence")
+        eval_outputs.err(f"--plot-sequence {rep.settings.series_for!r} matches no evaluated sequence")
     for w in rep.settings.input_warnings:
-        _err(f"warning: {w}")
+        eval_outputs.err(f"warning: {w}")
     for res in rep.results:
         for w in res.warnings if not res.error else []:
-            _err(f"warning: {w}")
+            eval_outputs.err(f"warning: {w}")
     for w in coverage.warnings(rep.rows):
-        _err(f"warning: {w}")
+        eval_outputs.err(f"warning: {w}")
     for f in rep.failures:
-        _err(f"FAILED {f['error']}")
+        eval_outputs.err(f"FAILED {f['error']}")
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -242,19 +238,19 @@ def _compare(args: argparse.Namespace) -> int:
         sel_b = cp.Selection(both.items + cp.parse_selection(args.select_b).items)
         metric = cp.parse_metric(args.metric)
     except ValueError as exc:
-        _err(str(exc))
+        eval_outputs.err(str(exc))
         return 2
     try:
         cmp = cp.compare(cp.load(args.compare[0]), cp.load(args.compare[1]), sel_a, sel_b, metric)
     except ev.EvalError as exc:
-        _err(str(exc))
+        eval_outputs.err(str(exc))
         return 1
     print(compare_text.format_comparison(cmp))
     if args.out:
         try:
             files = cp.write_comparison(args.out, cmp, plots=not args.no_plots, replace=args.force)
         except outdir.OutputExists as exc:
-            _err(str(exc))
+            eval_outputs.err(str(exc))
             return 1
         print(f"wrote {', '.join(str(f) for f in files)}")
     return 0
@@ -268,10 +264,11 @@ def _evaluate(args: argparse.Namespace, run: session.EvalRun) -> report.Report |
         with eval_executor.runner(args) as runner:
             return session.evaluate(run, runner, _hooks(args, len(run.sources)), started)
     except ev.EvalError as exc:
-        _err(str(exc))
+        eval_outputs.err(str(exc))
     except OSError as exc:  # the shards of --out no longer writable, say
         kept = f"; the inputs finished so far are kept in {args.out / store.SHARDS}" if args.out else ""
-        _err(f"the run stopped: {exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "") + kept)
+        where = f" ({exc.filename})" if exc.filename else ""
+        eval_outputs.err(f"the run stopped: {exc.strerror or exc}{where}{kept}")
     except KeyboardInterrupt:
         if args.out and (args.out / store.SHARDS).is_dir():
             raise KeyboardInterrupt(f"interrupted; no result files written; the inputs finished so far are kept in "
@@ -291,7 +288,7 @@ def _main(argv: list[str] | None) -> int:
     try:
         given = [*map(str, args.inputs), *input_lists.inputs_from(args.inputs_from)]
     except ValueError as exc:
-        _err(str(exc))
+        eval_outputs.err(str(exc))
         return 2
     inputs, twice = input_lists.deduplicated(given)
     args.inputs = inputs
@@ -305,11 +302,11 @@ def _main(argv: list[str] | None) -> int:
                               "riann-bag-eval " + shlex.join(argv_list), scale)
         _check_out(args, run)
     except (ValueError, ImportError) as exc:
-        _err(str(exc))
+        eval_outputs.err(str(exc))
         return 2
     if args.resume:
         for src, why in store.stale(args.out, inputs):
-            _err(f"warning: {src} changed since the earlier run in {args.out} ({why}): evaluated again")
+            eval_outputs.err(f"warning: {src} changed since the earlier run in {args.out} ({why}): evaluated again")
     rep = _evaluate(args, run)
     return 1 if rep is None else _finish(args, rep)
 
@@ -322,7 +319,7 @@ def _finish(args: argparse.Namespace, rep: report.Report) -> int:
     written = eval_outputs.write_out(args, rep) if args.out else True
     problems = eval_outputs.write_estimate_outputs(rep.results, args) if args.write_estimates else []
     for p in problems:
-        _err(p)
+        eval_outputs.err(p)
     return 1 if rep.failures or problems or not written else 0
 
 
