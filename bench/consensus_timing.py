@@ -23,7 +23,7 @@ from riann_ros import quaternion as quat
 from riann_ros.datasets import read_any
 from riann_ros.datasets.broad import broad_files, find_broad_dir
 from riann_ros.estimators import create
-from riann_ros.estimators.consensus_rows import gravity_rows
+from riann_ros.estimators.riann.s4a_ensemble import gravity_rows
 from riann_ros.evaluation.perturb import parse_condition
 
 BLOCK = 200  # samples per update_batch call (the consensus keeps the two opinions of the last call)

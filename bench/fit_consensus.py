@@ -35,7 +35,7 @@ from scipy.optimize import minimize
 
 from riann_ros.datasets.synthetic import generate
 from riann_ros.estimators.consensus import RHO_OWN, ConsensusEstimator
-from riann_ros.estimators.consensus_rows import gravity_rows
+from riann_ros.estimators.riann.s4a_ensemble import gravity_rows
 from riann_ros.estimators.riann.s8_uncertainty import K_BIAS
 from riann_ros.estimators.vqf_sigma import K_ACC, K_LAG, K_RATE
 

@@ -14,7 +14,7 @@ from riann_ros import quaternion as quat
 from riann_ros.datasets.synthetic import generate
 from riann_ros.estimators import create
 from riann_ros.estimators.consensus import ConsensusEstimator, _weigh
-from riann_ros.estimators.consensus_rows import gravity_rows
+from riann_ros.estimators.riann.s4a_ensemble import gravity_rows
 from riann_ros.estimators.vqf_sigma import VqfSigma, VqfTerms
 from riann_ros.stream import EstimatorStream, GateConfig
 

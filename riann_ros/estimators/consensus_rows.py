@@ -91,10 +91,4 @@ class VqfRows:
         return np.asarray(v.updateBatch(g, np.ascontiguousarray(x[:, 0:3]))["quat6D"])
 
 
-def gravity_rows(q: Array) -> Array:
-    """World up in the sensor frame (N, 3) of sensor-to-world quaternions (N, 4)."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return np.column_stack([2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)])
-
-
-__all__ = ["DEFAULT_TAU_ACC", "VqfRows", "gravity_rows"]
+__all__ = ["DEFAULT_TAU_ACC", "VqfRows"]
