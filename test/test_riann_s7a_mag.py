@@ -196,3 +196,28 @@ def test_riann_heading_after_holes_weighs_bridge_and_field_broad(broad_trial) ->
             e = quat.heading_error(holes.quat_ref[mask], q[mask])
             rmse[weighted].append(float(np.degrees(np.sqrt(np.mean(e ** 2)))))
     assert np.mean(rmse[True]) < 0.95 * np.mean(rmse[False])
+
+
+@pytest.mark.parametrize(("off_deg", "anew"), [(60.0, True), (2.0, False)])
+def test_a_restored_calibration_sets_a_heading_it_contradicts_anew(off_deg: float, anew: bool) -> None:
+    """The configured calibration restored (the windows found it the more probable again) under a heading that fields
+    of the discarded estimate taught: where the heading and the field, now calibrated as configured, differ by more
+    than the classical filters' realign rule allows (3 × the field heading's σ and the calibration's doubt), the field
+    sets the heading anew; a heading the restored field agrees with carries on at the usual gain. (The heading once
+    carried such an error, 57° on BROAD 01 with a late field, for 40 s under a σ of 7°.)"""
+    front = MagFrontEnd(FrontEndConfig(calibrate=False, test=False),  # no doubt about the configured values (as
+                        latency=LatencySettings(0.0, estimate=False, compensate=True))  # once windows confirmed them)
+    h = MagHeading(tau_mag=9.0, reject=True, front=front)
+    level = (1.0, 0.0, 0.0, 0.0)
+    for _ in range(2000):
+        h.step(level, level, 0.01, (0.0, 20e-6, -40e-6))
+    assert h.front.trusted and h.started
+    h.s.switch = True  # what the front end's "switched" event sets: here, the configured calibration restored
+    half = math.radians(off_deg) / 2.0
+    q = (math.cos(half), 0.0, 0.0, math.sin(half))  # the heading off_deg away from the field's
+    err = math.atan2(*(quat.rotate(np.array(q), np.array([0.0, 20e-6, -40e-6]))[:2]))
+    corr = h.step(q, level, 0.01, (0.0, 20e-6, -40e-6))
+    if anew:
+        assert corr == pytest.approx(err, rel=1e-12) and h.gain == 1.0
+    else:
+        assert 0.0 < h.gain < 0.01 and abs(corr) < abs(err) * 0.01

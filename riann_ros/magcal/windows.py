@@ -143,6 +143,8 @@ class Windower:
             self.hist.append((self.t, self.q))
             while len(self.hist) > 2 and self.hist[1][0] < self.t - max(MAX_DELAY_S, delay_s):
                 self.hist.popleft()
+            if self.hist[0][0] > self.t - delay_s:  # the reading saw an attitude before the history (the first
+                mag_ut = None  # samples, after a hole, or a calibration restarted at a late field's lag): unknown
         if not self.open:
             if mag_ut is not None:
                 self._start(mag_ut, delta, dt, delay_s)

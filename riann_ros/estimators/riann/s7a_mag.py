@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from riann_ros.constants import DEG
 from riann_ros.defaults import MAG_HEADING_SD_DEG
 from riann_ros.estimators.riann.s7c_disturbance import ReferenceState, disturbance
+from riann_ros.magcal.changes import field_disagrees
 from riann_ros.magcal.frontend import MagFrontEnd
 from riann_ros.magcal.heading import heading_angle
 from riann_ros.magcal.records import GYRO_BIAS_RESIDUAL_SD_RAD_S
@@ -159,7 +160,7 @@ class MagHeading:
         err = heading_angle(mw[0], mw[1])
         dip = -math.asin(max(-1.0, min(1.0, mw[2] / mn)))
         scale = self._weight(q, mw)
-        if not s.started or (s.switch and self._switched(mn, dip)):
+        if not s.started or (s.switch and self._switched(mn, dip, q, mag)):
             self._begin(mn, dip, scale)
             return err
         s.t += dt
@@ -215,17 +216,21 @@ class MagHeading:
         s.cal_sd = front.heading_sd(q, mw)
         return MAG_SD * MAG_SD / (MAG_SD * MAG_SD + s.cal_sd * s.cal_sd)
 
-    def _switched(self, norm: float, dip: float) -> bool:
+    def _switched(self, norm: float, dip: float, q: Quat, mag: Vec) -> bool:
         """The configured calibration was just rejected, or restored; ``norm``, ``dip``: the first field calibrated
-        anew. If the field was being rejected as disturbed and the newly calibrated one fits the field reference
-        again, the magnetic situation changed under a heading the gyro held (a magnet attached, or taken off): that
-        heading bridges to the new fields, its σ the field heading's at the last accepted field plus the residual
-        gyro bias over the time rejected (returns False: carry on). Otherwise, after a rejection, the heading and the
-        reference came from fields calibrated wrongly: this field sets both anew (returns True)."""
+        anew (``mag``, sensor frame, at the attitude ``q``). If the field was being rejected as disturbed and the
+        newly calibrated one fits the field reference again, the magnetic situation changed under a heading the gyro
+        held (a magnet attached, or taken off): that heading bridges to the new fields, its σ the field heading's at
+        the last accepted field plus the residual gyro bias over the time rejected (returns False: carry on).
+        Otherwise, after a rejection, the heading and the reference came from fields calibrated wrongly: this field
+        sets both anew (returns True); after a restore, from fields the discarded estimate calibrated: this field
+        sets both anew where the heading disagrees with it by more than the classical filters' realign rule allows
+        (:func:`~riann_ros.magcal.changes.field_disagrees`, the restored calibration's doubt and the field heading's
+        σ), else the heading carries on (an estimate close to the configured values taught it nothing wrong)."""
         s = self.s
         s.switch = False  # (the bands as for a calibrated field: the new calibration is one, or nothing fits)
         if not (s.started and s.ref.disturbed and s.ref.fits(norm, dip)):
-            return not self.front.trusted
+            return not self.front.trusted or field_disagrees(q, mag, s.doubt_sd)
         bridge_deg = math.hypot(MAG_HEADING_SD_DEG, GYRO_BIAS_RESIDUAL_SD_RAD_S / DEG * s.ref.reject_t)
         s.t, s.reacq, s.gate = 0.0, True, True
         s.weight = 1.0 / (bridge_deg * bridge_deg)
