@@ -14,7 +14,8 @@ Every classical filter runs a batch the same way (:meth:`ClassicalFilter.update_
    restarted).
 
 The heading's σ (:meth:`ClassicalFilter.sigma`) is the documented constant with a field, with the calibration's
-share added in quadrature (capped at the σ of a free heading).
+share and the error the filter's disagreement with its own field shows (:mod:`.heading_consistency`) added in
+quadrature (capped at the σ of a free heading).
 """
 
 from __future__ import annotations
@@ -28,7 +29,10 @@ from numpy.typing import ArrayLike, NDArray
 from riann_ros.defaults import INCLINATION_SD_DEG, MAG_HEADING_SD_DEG, YAW_FREE_SD_DEG
 from riann_ros.estimators.base import Array, AttitudeEstimator
 from riann_ros.estimators.common import sanitize_arrays, sanitize_mag
+from riann_ros.estimators.heading_consistency import HeadingConsistency
 from riann_ros.magcal.changes import Realign
+
+_MAG_SD = float(np.radians(MAG_HEADING_SD_DEG))  # rad; a calibrated field heading's σ
 
 
 class Batch(NamedTuple):
@@ -56,7 +60,16 @@ class ClassicalFilter(AttitudeEstimator):
 
     def __init__(self, **params: Any) -> None:
         self._cal_sd: NDArray[np.float64] = np.zeros(0)  # the calibration's heading σ per row of its last batch
+        self._seen_sd: NDArray[np.float64] = np.zeros(0)  # the heading σ the field's disagreement shows, per row
         super().__init__(**params)
+
+    def reset(self) -> None:
+        self._consistency = HeadingConsistency()
+        self._reset_filter()
+
+    @abstractmethod
+    def _reset_filter(self) -> None:
+        """Forget the filter's own state (:meth:`reset` also starts the heading's consistency anew)."""
 
     def _debiased(self, acc: Array, gyr: Array, dt: Array) -> Array:
         """The gyro as the filter integrates it (default: as it is)."""
@@ -67,13 +80,19 @@ class ClassicalFilter(AttitudeEstimator):
         """The filter over a batch: (n, 4) attitudes."""
 
     def update_batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None = None) -> Array:
-        return self._run(self._batch(acc, gyr, dt, mag))
+        batch = self._batch(acc, gyr, dt, mag)
+        q = self._run(batch)
+        if batch.mag is not None:
+            cal = self._cal_sd if len(self._cal_sd) == len(q) else np.zeros(len(q))
+            self._seen_sd = self._consistency.run(q, batch.mag, batch.dt, np.hypot(_MAG_SD, cal))
+        return q
 
     def _batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None) -> Batch:
         """Steps 1–3 of the skeleton (module docstring)."""
         a, g, h = sanitize_arrays(acc, gyr, dt)
         g = self._debiased(a, g, h)
         m = None if mag is None else sanitize_mag(mag, len(a))
+        self._cal_sd = self._seen_sd = np.zeros(0)
         front = self.front
         if front is None or not front.takes(mag):
             return Batch(a, g, h, None, m, ())
@@ -86,10 +105,12 @@ class ClassicalFilter(AttitudeEstimator):
         """The documented constants, the heading's with a field widened by the calibration's share (the module
         docstring)."""
         f = np.asarray(fields, dtype=bool)
-        mag_sd = np.radians(MAG_HEADING_SD_DEG)
+        mag_sd = np.full(len(f), _MAG_SD)
         cal = self._cal_sd if self.front is not None and self.front.calibrating else None
         if cal is not None and len(cal) == len(f) and cal.any():  # the calibration's share (0 while trusted)
-            mag_sd = np.minimum(np.hypot(mag_sd, cal), np.radians(YAW_FREE_SD_DEG))
-        yaw = np.where(f, mag_sd, np.radians(YAW_FREE_SD_DEG))
+            mag_sd = np.hypot(mag_sd, cal)
+        if len(self._seen_sd) == len(f):  # the error the disagreement with the field shows
+            mag_sd = np.hypot(mag_sd, self._seen_sd)
+        yaw = np.where(f, np.minimum(mag_sd, np.radians(YAW_FREE_SD_DEG)), np.radians(YAW_FREE_SD_DEG))
         return np.column_stack([np.full(len(f), np.radians(INCLINATION_SD_DEG)), yaw])
 

@@ -169,7 +169,7 @@ class MadgwickEstimator(ClassicalFilter):
         *front_end_params(False, "the filter"),
     )
 
-    def reset(self) -> None:
+    def _reset_filter(self) -> None:
         self._q: Quat | None = None  # sensor → ENU, the last output
         # (ENU state, the same attitude in NWU) as the last 9D call left them: the NWU value continues exactly
         self._marg: tuple[Quat, Quat] | None = None

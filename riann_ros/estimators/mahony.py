@@ -131,7 +131,7 @@ class MahonyEstimator(ClassicalFilter):
         *front_end_params(False, "the filter (its own integral term then tracks what is left)"),
     )
 
-    def reset(self) -> None:
+    def _reset_filter(self) -> None:
         self._q: Quat | None = None
         self._b: Vec = (0.0, 0.0, 0.0)
         self._observed = False

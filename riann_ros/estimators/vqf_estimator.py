@@ -131,7 +131,7 @@ class VqfEstimator(ClassicalFilter):
         *MAG_CAL_PARAMS,
     )
 
-    def reset(self) -> None:
+    def _reset_filter(self) -> None:
         self._vqf: VQF | None = None
         self._ts: float | None = None
         self._mag_used = False
