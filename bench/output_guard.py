@@ -20,7 +20,8 @@ its resampled rates; 9D runs the recorded field and the three magnetometer calib
 under the stream's timing faults (:data:`CONDITIONS_9D`). ``record`` writes every output quaternion and its σ
 (float32: its round-off, 6e-8, is far below any tolerance used) to ``DIR/<trial>-<6d|9d>.npz``, keyed
 ``scenario|condition|rate|estimator`` (the σ under ``…|sigma``); ``check`` recomputes them and prints the largest
-difference per file and every run (outputs, or σ) that differs by more than ``--tol``, exiting 1 when one does.
+difference per file (and of its outputs alone) and every run (outputs, or σ, then per column: inclination, heading)
+that differs by more than ``--tol``, exiting 1 when one does.
 ``--condition`` (repeated) and ``--rates`` check (or record) a subset, compared on the runs it holds. The files are
 derived from BROAD and stay outside the repository (``test/test_output_guard.py`` reads them from
 ``$RIANN_OUTPUT_GUARD`` and skips without them).
@@ -129,7 +130,8 @@ def _difference(a: np.ndarray, b: np.ndarray) -> float:
     """The largest absolute difference of two recorded runs (inf: other shapes or NaN at other places)."""
     if a.shape != b.shape or not np.array_equal(np.isnan(a), np.isnan(b)):
         return float("inf")
-    return float(np.nanmax(np.abs(a - b))) if a.size else 0.0
+    d = np.abs(a - b)
+    return float(np.nanmax(d)) if np.isfinite(d).any() else 0.0  # (no value, or NaN at the same places only)
 
 
 def _job(args: tuple[str, str, str, str, str, tuple[str, ...] | None, str | None, float]) -> tuple[str, float, str]:
@@ -149,13 +151,25 @@ def _job(args: tuple[str, str, str, str, str, tuple[str, ...] | None, str | None
     missing = sorted(set(out) - set(ref.files)) + ([] if subset else sorted(set(ref.files) - set(out)))
     if missing:
         return path.name, float("inf"), f"runs differ: {missing}"
-    worst, lines = 0.0, []
+    worst, lines, outs = 0.0, [], 0.0
     for k in sorted(out):
-        d = _difference(ref[k].astype(np.float64), out[k].astype(np.float64))
+        a, b = ref[k].astype(np.float64), out[k].astype(np.float64)
+        d = _difference(a, b)
         worst = max(worst, d)
+        if not k.endswith("|sigma"):
+            outs = max(outs, d)
         if d > tol:
-            lines.append(f"\n    {k}: {d:.3g}")
-    return path.name, worst, f"over {len(out)} runs" + "".join(lines)
+            lines.append(f"\n    {k}: {d:.3g}{_by_column(a, b) if k.endswith('|sigma') else ''}")
+    return path.name, worst, f"over {len(out)} runs (outputs alone: {outs:.3g})" + "".join(lines)
+
+
+def _by_column(a: np.ndarray, b: np.ndarray) -> str:
+    """A σ run's difference per column: the inclination's and the heading's (where the shapes agree)."""
+    if a.shape != b.shape or a.ndim != 2:
+        return ""
+    names = ("inclination", "heading", "heading state")
+    return " (" + ", ".join(f"{names[j] if j < len(names) else j}: {_difference(a[:, j], b[:, j]):.3g}"
+                            for j in range(a.shape[1])) + ")"
 
 
 def main(argv: list[str] | None = None) -> int:
