@@ -102,8 +102,8 @@ class ClassicalFilter(AttitudeEstimator):
         return Batch(a, g, h, lists, rows.field, rows.realign)
 
     def sigma(self, fields: NDArray[np.bool_]) -> Array:
-        """The documented constants, the heading's with a field widened by the calibration's share (the module
-        docstring)."""
+        """The documented constants, the heading's with a field widened by the calibration's share and by the error
+        the filter's disagreement with its own field shows (the module docstring)."""
         f = np.asarray(fields, dtype=bool)
         mag_sd = np.full(len(f), _MAG_SD)
         cal = self._cal_sd if self.front is not None and self.front.calibrating else None

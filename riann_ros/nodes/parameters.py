@@ -43,7 +43,8 @@ NODE_ONLY_PARAMS: tuple[ParamSpec, ...] = (
               "slow subscriber are dropped once more than this many are queued.", min=1, max=100000),
     ParamSpec("orientation_covariance", "model", "Orientation covariance of imu/data: 'model' = the estimator's "
               "per-sample standard deviations (RIANN: its uncertainty model; Madgwick, Mahony, VQF: documented "
-              "constants), 'constant' = roll_pitch_stddev_deg, yaw_stddev_deg and mag_yaw_stddev_deg.",
+              "constants, the heading's widened by the calibration's doubt and by the filter's disagreement with "
+              "its own field), 'constant' = roll_pitch_stddev_deg, yaw_stddev_deg and mag_yaw_stddev_deg.",
               choices=("model", "constant"), runtime=True),
     ParamSpec("roll_pitch_stddev_deg", INCLINATION_SD_DEG, "deg; with orientation_covariance: constant, the standard "
               "deviation written to the roll and pitch entries of the orientation covariance of imu/data.", min=0.0,
