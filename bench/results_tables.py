@@ -361,12 +361,6 @@ def consensus_conditions(scenario: str) -> Callable[[], str]:
     return lambda: _consensus_table(_with_consensus("perturbed", "consensus", scenario=scenario), "perturbation", str)
 
 
-
-
-
-
-
-
 def consensus_uncertainty() -> str:
     """The consensus's inclination σ per condition (docs/results/consensus.json, 6D: the inclination is the same in
     9D), pooled over the 12 trials."""

@@ -59,8 +59,10 @@ class ClassicalFilter(AttitudeEstimator):
     USES_MAG = True
 
     def __init__(self, **params: Any) -> None:
-        self._cal_sd: NDArray[np.float64] = np.zeros(0)  # the calibration's heading σ per row of its last batch
-        self._seen_sd: NDArray[np.float64] = np.zeros(0)  # the heading σ the field's disagreement shows, per row
+        # per row of the last batch: the field heading's σ with the calibration's share, and the heading σ the
+        # field's disagreement shows
+        self._field_sd: NDArray[np.float64] = np.zeros(0)
+        self._seen_sd: NDArray[np.float64] = np.zeros(0)
         super().__init__(**params)
 
     def reset(self) -> None:
@@ -83,8 +85,7 @@ class ClassicalFilter(AttitudeEstimator):
         batch = self._batch(acc, gyr, dt, mag)
         q = self._run(batch)
         if batch.mag is not None:
-            cal = self._cal_sd if len(self._cal_sd) == len(q) else np.zeros(len(q))
-            self._seen_sd = self._consistency.run(q, batch.mag, batch.dt, np.hypot(_MAG_SD, cal))
+            self._seen_sd = self._consistency.run(q, batch.mag, batch.dt, self._field_sd)
         return q
 
     def _batch(self, acc: ArrayLike, gyr: ArrayLike, dt: ArrayLike, mag: ArrayLike | None) -> Batch:
@@ -92,23 +93,21 @@ class ClassicalFilter(AttitudeEstimator):
         a, g, h = sanitize_arrays(acc, gyr, dt)
         g = self._debiased(a, g, h)
         m = None if mag is None else sanitize_mag(mag, len(a))
-        self._cal_sd = self._seen_sd = np.zeros(0)
+        self._field_sd, self._seen_sd = np.full(len(a), _MAG_SD), np.zeros(0)
         front = self.front
         if front is None or not front.takes(mag):
             return Batch(a, g, h, None, m, ())
         lists = (a.tolist(), g.tolist(), h.tolist())
         rows = front.rows(*lists, [None] * len(a) if m is None else m)
-        self._cal_sd = np.hypot(rows.sd_rad, rows.timing_sd_rad)  # the σ's share (the filter weighs without it)
+        # the calibration's share (the filter weighs the field without it)
+        self._field_sd = np.hypot(_MAG_SD, np.hypot(rows.sd_rad, rows.timing_sd_rad))
         return Batch(a, g, h, lists, rows.field, rows.realign)
 
     def sigma(self, fields: NDArray[np.bool_]) -> Array:
         """The documented constants, the heading's with a field widened by the calibration's share and by the error
         the filter's disagreement with its own field shows (the module docstring)."""
         f = np.asarray(fields, dtype=bool)
-        mag_sd = np.full(len(f), _MAG_SD)
-        cal = self._cal_sd if self.front is not None and self.front.calibrating else None
-        if cal is not None and len(cal) == len(f) and cal.any():  # the calibration's share (0 while trusted)
-            mag_sd = np.hypot(mag_sd, cal)
+        mag_sd = self._field_sd if len(self._field_sd) == len(f) else np.full(len(f), _MAG_SD)
         if len(self._seen_sd) == len(f):  # the error the disagreement with the field shows
             mag_sd = np.hypot(mag_sd, self._seen_sd)
         yaw = np.where(f, np.minimum(mag_sd, np.radians(YAW_FREE_SD_DEG)), np.radians(YAW_FREE_SD_DEG))

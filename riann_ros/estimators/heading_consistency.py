@@ -47,7 +47,7 @@ class HeadingConsistency:
         ms = self.mean_square
         sd2 = (np.asarray(field_sd, dtype=float) ** 2).tolist() if n else []
         for i, (qi, m, h) in enumerate(zip(q.tolist(), field, np.asarray(dt, dtype=float).tolist(), strict=True)):
-            psi = None if m is None or not (m[0] or m[1] or m[2]) else field_heading(tuple(qi), tuple(m))
+            psi = None if m is None else field_heading(tuple(qi), tuple(m))  # (None for a zero row too)
             if psi is not None:
                 nu2 = psi * psi
                 ms = nu2 if ms is None else ms + min(h / TAU_S, 1.0) * (nu2 - ms)
